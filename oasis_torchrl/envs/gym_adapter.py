@@ -1,0 +1,112 @@
+"""A single-session Gymnasium env with the reference env's interface, for Stable-Baselines3 users.
+
+It is a one-row :class:`~oasis_torchrl.envs.OasisEnv` underneath, so rewards, seeding, session
+recovery and the embedded server behave exactly as in the batched env.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+from tensordict import TensorDict, TensorDictBase
+
+from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv
+from oasis_torchrl.envs.specs import CHUNK
+
+
+class OasisGymEnv(gym.Env):
+    """One Oasis session as a ``gymnasium.Env``: Box ``(4, 2)`` actions, Dict of camera frames.
+
+    Args:
+        endpoint: ``"local"`` or an A2V endpoint (see :class:`OasisEnv`).
+        prompt: the scene prompt of every episode.
+        reward: reward module or callable (see :class:`OasisEnv`).
+        max_steps: steps before truncation (512, as the reference env).
+        render_mode: ``"rgb_array"`` returns the front camera's last frame.
+        **env_kwargs: further :class:`OasisEnv` arguments (``server``, ``frame_size``, ...).
+
+    Example:
+        >>> from oasis_torchrl.sim.config import ServerConfig
+        >>> env = OasisGymEnv(prompt="rural road", server=ServerConfig(width=96, height=64))
+        >>> obs, info = env.reset(seed=0)
+        >>> obs["front"].shape
+        (64, 96, 3)
+        >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        >>> env.close()
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        endpoint: str = LOCAL,
+        prompt: str = "urban street",
+        *,
+        reward: Any = None,
+        max_steps: int = 512,
+        render_mode: str | None = None,
+        **env_kwargs: Any,
+    ) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self._env = OasisEnv(
+            endpoint, 1, prompt, reward=reward, max_steps=max_steps, **env_kwargs
+        )
+        height, width = self._env.layout.frame_size
+        self.action_space = spaces.Box(-1.0, 1.0, (CHUNK, 2), dtype=np.float32)
+        self.observation_space = spaces.Dict(
+            {
+                camera: spaces.Box(0, 255, (height, width, 3), dtype=np.uint8)
+                for camera in self._env.layout.cameras
+            }
+        )
+        self._last: dict[str, np.ndarray] | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        if seed is not None:
+            self._env.set_seed(seed)
+        td = self._env.reset()
+        return self._observe(td), self._info(td)
+
+    def step(
+        self, action: np.ndarray
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        chunk = torch.as_tensor(np.asarray(action, dtype=np.float32)).unsqueeze(0)
+        td = self._env.step(TensorDict(action=chunk, batch_size=[1]))["next"]
+        return (
+            self._observe(td),
+            float(td["reward"].item()),
+            bool(td["terminated"].item()),
+            bool(td["truncated"].item()),
+            self._info(td),
+        )
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array" or self._last is None:
+            return None
+        return self._last["front"]
+
+    def close(self) -> None:
+        if not self._env.is_closed:
+            self._env.close()
+
+    def _observe(self, td: TensorDictBase) -> dict[str, np.ndarray]:
+        self._last = {camera: td["pixels", camera][0].numpy() for camera in self._env.layout.cameras}
+        return self._last
+
+    @staticmethod
+    def _info(td: TensorDictBase) -> dict[str, Any]:
+        info: dict[str, Any] = {}
+        for group in ("truth", "reward_terms"):
+            if group in td.keys():
+                info[group] = {k: v[0].numpy() for k, v in td[group].items()}
+        info["session_restarts"] = int(td["info", "session_restarts"].item())
+        return info

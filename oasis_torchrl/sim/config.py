@@ -1,0 +1,175 @@
+"""Configuration of the embedded A2V server (one frozen, picklable dataclass)."""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
+
+#: Environment variable read when a config names no API keys (comma-separated keys).
+API_KEYS_ENV_VAR = "OASIS_SERVER_API_KEYS"
+
+# Keys travel as gRPC metadata (printable ASCII) and in a comma-separated variable.
+_API_KEY_PATTERN = re.compile(r"[\x21-\x2b\x2d-\x7e]{1,256}")
+
+
+def keys_from_env(environ: dict[str, str] | None = None) -> tuple[str, ...]:
+    """API keys listed (comma-separated) in ``OASIS_SERVER_API_KEYS``.
+
+    Example:
+        >>> keys_from_env({"OASIS_SERVER_API_KEYS": "alpha, beta,,"})
+        ('alpha', 'beta')
+    """
+    raw = (os.environ if environ is None else environ).get(API_KEYS_ENV_VAR, "")
+    return tuple(key.strip() for key in raw.split(",") if key.strip())
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """Everything the embedded A2V server needs; validated on construction.
+
+    When ``api_keys`` is empty the keys come from ``OASIS_SERVER_API_KEYS``. A server with no
+    key at all refuses to start unless ``allow_any_key`` is set (then any non-empty key works).
+
+    Example:
+        >>> config = ServerConfig(width=96, height=64, api_keys=("secret",))
+        >>> config.address_to_bind, config.tls_enabled
+        ('127.0.0.1:0', False)
+        >>> ServerConfig(width=95)
+        Traceback (most recent call last):
+        ...
+        ValueError: width must be an even integer in [16, 4096], got 95
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 0  # 0: the OS picks a free port
+    width: int = 768
+    height: int = 512
+    fps: float = 20.0
+    api_keys: tuple[str, ...] = ()
+    allow_any_key: bool = False
+    latency_ms: float = 0.0  # added to every Infer, emulating a GPU world model
+    failure_rate: float = 0.0  # probability of an injected UNAVAILABLE per A2V call
+    failure_seed: int = 0
+    idle_timeout_s: float = 300.0
+    max_sessions: int = 64
+    max_sessions_per_key: int = 32
+    max_prompt_chars: int = 2000
+    max_message_bytes: int = 64 * 1024  # receive limit per request
+    tls_cert: str | None = None
+    tls_key: str | None = None
+    workers: int = 32  # gRPC handler threads
+    encode_workers: int = 0  # threads encoding streams, shared by all sessions; 0: automatic
+    formats: tuple[int, ...] = field(default=SUPPORTED_FORMATS)  # allowed, in preference order
+    vp9_cpu_used: int = 8
+    vp9_bit_rate: int | None = None  # None: scales with the frame size
+    vp9_threads: int = 1
+    jpeg_quality: int = 90
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "api_keys", tuple(self.api_keys) or keys_from_env())
+        object.__setattr__(self, "formats", tuple(self.formats))
+        self._validate_network()
+        self._validate_video()
+        self._validate_limits()
+        self._validate_keys()
+
+    @property
+    def tls_enabled(self) -> bool:
+        """Whether the server listens with TLS (both ``tls_cert`` and ``tls_key`` given)."""
+        return self.tls_cert is not None
+
+    @property
+    def address_to_bind(self) -> str:
+        """``host:port`` as handed to gRPC (IPv6 hosts in brackets)."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{host}:{self.port}"
+
+    @property
+    def resolved_encode_workers(self) -> int:
+        """Encoder threads to run: the configured number, or one per stream per CPU."""
+        return self.encode_workers or max(3, os.cpu_count() or 1)
+
+    def encoder_settings(self) -> dict[str, Any]:
+        """Keyword arguments for :func:`oasis_torchrl.sim.encoding.make_encoder`."""
+        return {
+            "vp9_cpu_used": self.vp9_cpu_used,
+            "vp9_bit_rate": self.vp9_bit_rate,
+            "vp9_threads": self.vp9_threads,
+            "jpeg_quality": self.jpeg_quality,
+        }
+
+    def redacted(self) -> dict[str, Any]:
+        """The config as a dict fit for logs: API keys replaced by their count."""
+        values = asdict(self)
+        values["api_keys"] = f"<{len(self.api_keys)} key(s)>"
+        return values
+
+    def _validate_network(self) -> None:
+        if not self.host:
+            raise ValueError("host must be a non-empty host name or address")
+        _require_int("port", self.port, 0, 65535)
+        _require_int("workers", self.workers, 1, 1024)
+        _require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError(
+                "tls_cert and tls_key must be given together, got "
+                f"tls_cert={self.tls_cert!r}, tls_key={self.tls_key!r}"
+            )
+
+    def _validate_video(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if not _is_int(value) or value % 2 or not 16 <= value <= 4096:
+                raise ValueError(f"{name} must be an even integer in [16, 4096], got {value!r}")
+        _require_float("fps", self.fps, 1.0, 240.0)
+        _require_int("vp9_cpu_used", self.vp9_cpu_used, 0, 8)
+        _require_int("vp9_threads", self.vp9_threads, 1, 64)
+        _require_int("jpeg_quality", self.jpeg_quality, 1, 100)
+        if self.vp9_bit_rate is not None:
+            _require_int("vp9_bit_rate", self.vp9_bit_rate, 1000, 1 << 31)
+        if not self.formats:
+            raise ValueError("formats must name at least one frame format")
+        for frame_format in self.formats:
+            if frame_format not in SUPPORTED_FORMATS:
+                supported = ", ".join(format_name(f) for f in SUPPORTED_FORMATS)
+                raise ValueError(
+                    f"formats contains {format_name(frame_format)}; supported: {supported}"
+                )
+
+    def _validate_limits(self) -> None:
+        _require_float("latency_ms", self.latency_ms, 0.0, 600_000.0)
+        _require_float("failure_rate", self.failure_rate, 0.0, 1.0)
+        _require_int("failure_seed", self.failure_seed, 0, (1 << 64) - 1)
+        _require_float("idle_timeout_s", self.idle_timeout_s, 0.001, math.inf)
+        _require_int("max_sessions", self.max_sessions, 1, 1 << 20)
+        _require_int("max_sessions_per_key", self.max_sessions_per_key, 1, 1 << 20)
+        _require_int("max_prompt_chars", self.max_prompt_chars, 1, 1 << 20)
+        _require_int("encode_workers", self.encode_workers, 0, 1024)
+
+    def _validate_keys(self) -> None:
+        for index, key in enumerate(self.api_keys):
+            if not isinstance(key, str) or not _API_KEY_PATTERN.fullmatch(key):
+                raise ValueError(
+                    f"api_keys[{index}] must be 1-256 printable ASCII characters without "
+                    "spaces or commas"
+                )
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _require_int(name: str, value: object, low: int, high: int) -> None:
+    if not _is_int(value) or not low <= value <= high:  # type: ignore[operator]
+        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+
+
+def _require_float(name: str, value: object, low: float, high: float) -> None:
+    number_ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not number_ok or math.isnan(value) or not low <= value <= high:  # type: ignore[arg-type]
+        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
