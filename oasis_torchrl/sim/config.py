@@ -89,6 +89,25 @@ class ServerConfig:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{host}:{self.port}"
 
+    def client_address(self, port: int) -> str:
+        """``host:port`` a client on this machine dials; wildcard hosts become loopback.
+
+        Example:
+            >>> ServerConfig(host="0.0.0.0", api_keys=("k",)).client_address(50051)
+            '127.0.0.1:50051'
+        """
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::") else self.host
+        return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+    def endpoint(self, port: int) -> str:
+        """The endpoint URL clients take: ``http://`` or, with TLS, ``https://``.
+
+        Example:
+            >>> ServerConfig(api_keys=("k",)).endpoint(50051)
+            'http://127.0.0.1:50051'
+        """
+        return f"{'https' if self.tls_enabled else 'http'}://{self.client_address(port)}"
+
     @property
     def resolved_encode_workers(self) -> int:
         """Encoder threads to run: the configured number, or one per stream per CPU."""

@@ -27,9 +27,7 @@ def test_generated_modules_match_protos(tmp_path: Path) -> None:
         ],
         check=True,
     )
-    regenerated = {
-        p.name: p.read_bytes() for p in (tmp_path / "oasis_torchrl" / "proto").iterdir()
-    }
+    regenerated = {p.name: p.read_bytes() for p in (tmp_path / "oasis_torchrl" / "proto").iterdir()}
     committed = {
         p.name: p.read_bytes()
         for p in GENERATED_DIR.iterdir()

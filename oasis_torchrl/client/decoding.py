@@ -1,0 +1,193 @@
+"""Per-stream frame decoders (VP9 and JPEG) that write RGB straight into caller-owned arrays.
+
+A decoder turns one packet into one ``uint8`` RGB ``[H, W, 3]`` image written into ``out``; the
+output size is ``out``'s, so a decode-time resize costs nothing extra:
+
+- VP9: PyAV decodes the packet, then one libswscale pass converts YUV to RGB *and* scales it
+  (``VideoReformatter.reformat``, reused per decoder so the scaler context is built once). The
+  only copy is from swscale's output frame into ``out``: PyAV cannot scale into a caller buffer.
+  At the native size the pixels are exactly what ``frame.to_ndarray(format="rgb24")`` gives.
+- JPEG: PIL's ``draft`` makes libjpeg decode at 1/2, 1/4 or 1/8 scale (DCT scaling, far cheaper
+  than a full decode), then a bilinear resize covers any remaining ratio.
+
+VP9 is a stateful stream: each stream needs its own decoder fed in order, and :meth:`reset` when
+a new clip (Prompt) starts. PyAV releases the GIL while decoding and converting, so decoders of
+different streams run in parallel on a thread pool.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from typing import Protocol
+
+import av
+import numpy as np
+from av.video.reformatter import Interpolation, VideoReformatter
+from PIL import Image
+
+from oasis_torchrl.client.errors import DecodeError
+from oasis_torchrl.client.types import FrameFormat
+
+# AREA averages every source pixel of a destination pixel: no aliasing when shrinking, and
+# (measured in benchmarks/decode_speed.py) faster than swscale's BILINEAR for large ratios.
+RESIZE_INTERPOLATION = Interpolation.AREA
+
+
+class FrameDecoder(Protocol):
+    """Decodes one stream's packets in order into caller-provided RGB arrays."""
+
+    stream: str
+
+    def decode_into(self, packet: bytes, out: np.ndarray) -> None:
+        """Decode ``packet`` into ``out`` (uint8 ``[H, W, 3]``), scaling to ``out``'s size."""
+        ...
+
+    def reset(self) -> None:
+        """Forget the stream's state: the next packet starts a new clip."""
+        ...
+
+
+class Vp9Decoder:
+    """Stateful VP9 decoder for one stream.
+
+    ``threads`` is libavcodec's thread count (0: automatic); a pool that decodes many streams in
+    parallel passes 1 so decoders do not fight over cores.
+
+    >>> import numpy as np
+    >>> decoder = Vp9Decoder("front")
+    >>> decoder.decode_into(b"not vp9", np.empty((64, 96, 3), np.uint8))
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.client.errors.DecodeError: cannot decode stream 'front': ...
+    """
+
+    def __init__(self, stream: str, *, threads: int = 0) -> None:
+        self.stream = stream
+        self._threads = threads
+        self._reformatter = VideoReformatter()
+        self._context = self._open()
+
+    def reset(self) -> None:
+        """Start a new clip: the next packet must be a key frame."""
+        self._context = self._open()
+
+    def decode_into(self, packet: bytes, out: np.ndarray) -> None:
+        """Decode one VP9 packet into ``out``, converting (and scaling) in one swscale pass."""
+        frame = self._decode(packet)
+        height, width = out.shape[:2]
+        scaled = (frame.height, frame.width) != (height, width)
+        rgb = self._reformatter.reformat(
+            frame,
+            width=width,
+            height=height,
+            format="rgb24",
+            interpolation=RESIZE_INTERPOLATION if scaled else None,
+        )
+        np.copyto(out, rgb.to_ndarray())
+
+    def _decode(self, packet: bytes) -> av.VideoFrame:
+        try:
+            frames = self._context.decode(av.Packet(packet))
+        except av.error.FFmpegError as error:
+            raise DecodeError(self.stream, f"VP9 decoder rejected a packet: {error}") from error
+        if not frames:
+            raise DecodeError(
+                self.stream, "VP9 packet produced no frame (lost packet or missing key frame)"
+            )
+        return frames[-1]
+
+    def _open(self) -> av.CodecContext:
+        context = av.CodecContext.create("vp9", "r")
+        context.thread_count = self._threads
+        context.open()
+        return context
+
+
+class JpegDecoder:
+    """Stateless JPEG decoder for one stream; shrinks with libjpeg's DCT scaling when asked.
+
+    >>> import io, numpy as np
+    >>> from PIL import Image
+    >>> buffer = io.BytesIO()
+    >>> Image.new("RGB", (96, 64), (200, 10, 10)).save(buffer, format="JPEG")
+    >>> out = np.empty((32, 48, 3), np.uint8)
+    >>> JpegDecoder("front").decode_into(buffer.getvalue(), out)
+    >>> bool(abs(int(out[..., 0].mean()) - 200) < 8)
+    True
+    """
+
+    def __init__(self, stream: str) -> None:
+        self.stream = stream
+
+    def reset(self) -> None:
+        """JPEG frames are independent: nothing to reset."""
+
+    def decode_into(self, packet: bytes, out: np.ndarray) -> None:
+        """Decode one JPEG image into ``out``, scaled to ``out``'s size."""
+        height, width = out.shape[:2]
+        try:
+            with Image.open(io.BytesIO(packet)) as image:
+                if image.size != (width, height):
+                    image.draft("RGB", (width, height))
+                rgb = image if image.mode == "RGB" else image.convert("RGB")
+                if rgb.size != (width, height):
+                    rgb = rgb.resize((width, height), Image.Resampling.BILINEAR)
+                np.copyto(out, np.asarray(rgb))
+        except (OSError, ValueError) as error:
+            raise DecodeError(self.stream, f"invalid JPEG image: {error}") from error
+
+
+DECODABLE_FORMATS: tuple[FrameFormat, ...] = (FrameFormat.VP9, FrameFormat.JPEG)
+
+
+def make_decoder(frame_format: int, stream: str, *, threads: int = 0) -> FrameDecoder:
+    """Create the decoder for ``frame_format`` (VP9 or JPEG) for one stream.
+
+    >>> type(make_decoder(FrameFormat.JPEG, "front")).__name__
+    'JpegDecoder'
+    """
+    if frame_format == FrameFormat.VP9:
+        return Vp9Decoder(stream, threads=threads)
+    if frame_format == FrameFormat.JPEG:
+        return JpegDecoder(stream)
+    raise ValueError(
+        f"frame_format must be one of {[f.name for f in DECODABLE_FORMATS]}, got {frame_format!r}"
+    )
+
+
+def decode_chunk(decoder: FrameDecoder, packets: Sequence[bytes], out: np.ndarray) -> None:
+    """Decode a chunk of packets in order into ``out`` (uint8 ``[frames, H, W, 3]``).
+
+    >>> import numpy as np
+    >>> decode_chunk(JpegDecoder("front"), [], np.empty((4, 8, 8, 3), np.uint8))
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.client.errors.DecodeError: cannot decode stream 'front': expected 4 frames, got 0
+    """
+    if len(packets) != len(out):
+        raise DecodeError(decoder.stream, f"expected {len(out)} frames, got {len(packets)}")
+    for packet, slot in zip(packets, out, strict=True):
+        decoder.decode_into(packet, slot)
+
+
+def validate_resize(resize: tuple[int, int] | None) -> tuple[int, int] | None:
+    """Check a decode-time ``resize``: None or ``(height, width)`` positive ints.
+
+    >>> validate_resize((128, 192))
+    (128, 192)
+    >>> validate_resize((128,))
+    Traceback (most recent call last):
+    ...
+    ValueError: resize must be None or (height, width) positive ints, got (128,)
+    """
+    if resize is None:
+        return None
+    values = tuple(resize)
+    if len(values) != 2 or not all(_is_positive_int(v) for v in values):
+        raise ValueError(f"resize must be None or (height, width) positive ints, got {resize!r}")
+    return int(values[0]), int(values[1])
+
+
+def _is_positive_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value > 0

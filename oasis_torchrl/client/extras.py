@@ -1,0 +1,125 @@
+"""Optional services beyond A2V: gRPC health (ping) and the embedded simulator's side channel.
+
+The hosted service knows none of these; every helper degrades clearly: ground truth is None
+when the server sends none, and a missing service raises :class:`UnsupportedFeatureError`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import NoReturn
+
+import grpc
+import numpy as np
+from grpc_health.v1 import health_pb2
+
+from oasis_torchrl.client.errors import TransportError, UnsupportedFeatureError
+from oasis_torchrl.proto import sim_pb2
+
+TRUTH_METADATA_KEY = "x-oasis-truth-bin"
+TRUTH_FIELDS: tuple[str, ...] = tuple(
+    field.name for field in sorted(sim_pb2.FrameTruth.DESCRIPTOR.fields, key=lambda f: f.number)
+)
+"""FrameTruth field names, in the order of the last axis of ``PoolStep.truth``."""
+
+SIM_SERVICE = "oasis_torchrl.sim.v1.SimService"
+NOT_SERVING_CODES = frozenset({grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED})
+
+
+def parse_truth(
+    trailing_metadata: Iterable[tuple[str, str | bytes]] | None,
+) -> sim_pb2.InferTruth | None:
+    """The InferTruth in an Infer's trailing metadata, or None if the server sent none.
+
+    >>> truth = sim_pb2.InferTruth(sequence_num=3)
+    >>> parse_truth([(TRUTH_METADATA_KEY, truth.SerializeToString())]).sequence_num
+    3
+    >>> parse_truth([]) is None
+    True
+    """
+    for key, value in trailing_metadata or ():
+        if key == TRUTH_METADATA_KEY:
+            return sim_pb2.InferTruth.FromString(value)
+    return None
+
+
+def truth_array(truth: sim_pb2.InferTruth) -> np.ndarray:
+    """float64 ``[frames, len(TRUTH_FIELDS)]`` of one InferTruth (booleans as 0/1).
+
+    >>> truth = sim_pb2.InferTruth(frames=[sim_pb2.FrameTruth(x=1.5, collided=True)])
+    >>> row = truth_array(truth)[0]
+    >>> row[[TRUTH_FIELDS.index("x"), TRUTH_FIELDS.index("collided")]].tolist()
+    [1.5, 1.0]
+    """
+    return np.array(
+        [[getattr(frame, name) for name in TRUTH_FIELDS] for frame in truth.frames],
+        dtype=np.float64,
+    ).reshape(len(truth.frames), len(TRUTH_FIELDS))
+
+
+def depth_maps(response: sim_pb2.DepthResponse) -> dict[str, np.ndarray]:
+    """Stream name -> float32 ``[H, W]`` metric depth from a DepthResponse (sky is +inf).
+
+    >>> import numpy as np
+    >>> raw = np.full((2, 3), 4.0, "<f2").tobytes()
+    >>> response = sim_pb2.DepthResponse(maps=[sim_pb2.DepthMap(
+    ...     name="front", height=2, width=3, depth_f16=raw)])
+    >>> depth_maps(response)["front"].dtype.name
+    'float32'
+    """
+    return {
+        depth.name: np.frombuffer(depth.depth_f16, dtype="<f2")
+        .reshape(depth.height, depth.width)
+        .astype(np.float32)
+        for depth in response.maps
+    }
+
+
+def health_request() -> health_pb2.HealthCheckRequest:
+    """A health check of the whole server (service name "").
+
+    >>> health_request().service
+    ''
+    """
+    return health_pb2.HealthCheckRequest(service="")
+
+
+def is_serving(response: health_pb2.HealthCheckResponse) -> bool:
+    """Whether a health answer says SERVING.
+
+    >>> is_serving(health_pb2.HealthCheckResponse(status=health_pb2.HealthCheckResponse.SERVING))
+    True
+    """
+    return response.status == health_pb2.HealthCheckResponse.SERVING
+
+
+def ping_outcome(error: TransportError) -> bool:
+    """Turn a failed health check into ping's answer: False if the server is unreachable.
+
+    >>> ping_outcome(TransportError(grpc.StatusCode.UNAVAILABLE, "down", method="Check"))
+    False
+    """
+    if error.code() == grpc.StatusCode.UNIMPLEMENTED:
+        raise UnsupportedFeatureError(
+            "ping needs the gRPC health service (grpc.health.v1.Health), which this server "
+            "does not implement"
+        ) from error
+    if error.code() in NOT_SERVING_CODES:
+        return False
+    raise error
+
+
+def raise_depth_error(error: TransportError) -> NoReturn:
+    """Re-raise a failed GetDepth, as UnsupportedFeatureError if SimService is missing.
+
+    >>> raise_depth_error(TransportError(grpc.StatusCode.UNIMPLEMENTED, "", method="GetDepth"))
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.client.errors.UnsupportedFeatureError: depth needs oasis_torchrl.sim.v1...
+    """
+    if error.code() == grpc.StatusCode.UNIMPLEMENTED:
+        raise UnsupportedFeatureError(
+            f"depth needs {SIM_SERVICE}, which only the embedded oasis-torchrl simulator "
+            "implements; this server does not"
+        ) from error
+    raise error

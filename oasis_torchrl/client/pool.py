@@ -1,0 +1,757 @@
+"""SessionPool: N concurrent A2V sessions stepped as one batch, with retries and recovery.
+
+Concurrency design. One ``grpc.aio`` channel on ONE asyncio event loop in a background thread
+carries every session's calls. A batch step is N unary calls in flight at once on one HTTP/2
+connection; waiting costs a coroutine per call, not a thread, so latency-bound steps scale with
+N at no extra cost and N can grow to hundreds. (A thread pool of blocking stubs would need one
+thread per in-flight call and still contend for the GIL on every response.) The blocking API
+submits one coroutine per step to the loop and waits for it, so callers stay synchronous.
+
+Decoding never runs on the loop: every (row, stream) chunk of 4 packets is decoded on a thread
+pool sized to the cores (PyAV releases the GIL while decoding and converting), in order, by that
+stream's own stateful decoder, straight into its slot of the step's preallocated output array.
+A row's next step only starts after its previous step returned, so each decoder sees its
+stream's packets in order.
+
+Faults, per row (other rows are unaffected):
+
+- transient gRPC failures are retried by the :class:`RetryPolicy` (Infer replays idempotently);
+- a sequence mismatch or an undecodable packet (desync): the row is re-prompted with its stored
+  prompt and seed and one all-zero chunk is sent; status RESTARTED;
+- the session is gone (INVALID_SESSION, ALREADY_FINISHED, server restart): re-Initialize,
+  re-prompt, zero chunk; status RESTARTED;
+- the recovery (or the call itself) still fails after retries: status LOST, frames zero; the row
+  is re-Initialized at its next step (RESTARTED) or by :meth:`SessionPool.recover`.
+
+If every selected row of a step is LOST the server is unreachable: the step raises that error
+(within the configured timeout and retry deadline, never a hang). Errors no retry can fix
+(bad key, bad request, unsupported SDK or format) raise at once with the row in ``error.row``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import weakref
+from collections.abc import Awaitable, Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any
+
+import grpc
+import numpy as np
+from grpc_health.v1 import health_pb2_grpc
+
+from oasis_torchrl.client import extras, wire
+from oasis_torchrl.client.background import EventLoopThread
+from oasis_torchrl.client.channel import TlsSetting, create_aio_channel, parse_endpoint
+from oasis_torchrl.client.decoding import FrameDecoder, decode_chunk, make_decoder, validate_resize
+from oasis_torchrl.client.errors import (
+    DecartRoboticsError,
+    DecodeError,
+    SequenceError,
+    SessionLostError,
+    TransportError,
+)
+from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
+from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
+from oasis_torchrl.client.types import (
+    DEFAULT_REQUIRED_STREAMS,
+    JPEG,
+    VP9,
+    FrameFormat,
+    PoolStep,
+    SessionStatus,
+    StreamInfo,
+)
+from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
+
+logger = logging.getLogger(__name__)
+
+FRAMES_PER_CHUNK = wire.ACTIONS_PER_CHUNK
+# Finish at close is best effort: a hung server must not hold close() for the full call timeout.
+FINISH_TIMEOUT_S = 5.0
+ZERO_CHUNK = np.zeros((FRAMES_PER_CHUNK, 2), np.float32)
+RECOVERABLE_STEP_ERRORS = (TransportError, SessionLostError, SequenceError, DecodeError)
+
+RowSlots = dict[str, np.ndarray]
+
+
+@dataclass
+class _Outcome:
+    """What one row's step produced."""
+
+    status: SessionStatus
+    error: Exception | None = None
+    sequence_num: int = -1
+    truth: np.ndarray | None = None
+
+
+class _Rpc:
+    """The pool's stubs on one aio channel, with retries, timeout and masked API key."""
+
+    def __init__(
+        self,
+        channel: grpc.aio.Channel,
+        policy: RetryPolicy,
+        timeout: float | None,
+        target: str,
+        secret: str | None,
+    ) -> None:
+        self.a2v = a2v_pb2_grpc.A2VServiceStub(channel)
+        self.sim = sim_pb2_grpc.SimServiceStub(channel)
+        self.health = health_pb2_grpc.HealthStub(channel)
+        self.policy = policy
+        self.timeout = timeout
+        self.target = target
+        self.secret = secret
+
+    async def call(
+        self,
+        method: Callable[..., Any],
+        name: str,
+        request: object,
+        metadata: wire.Metadata,
+        *,
+        policy: RetryPolicy | None = None,
+        timeout: float | None = None,
+    ) -> tuple[Any, grpc.aio.Call]:
+        """One unary call with retries; returns the response and its finished call."""
+
+        async def attempt(attempt_timeout: float | None) -> tuple[Any, grpc.aio.Call]:
+            call = method(request, timeout=attempt_timeout, metadata=metadata)
+            return await call, call
+
+        return await acall_with_retry(
+            attempt,
+            policy=policy or self.policy,
+            method=name,
+            timeout=self.timeout if timeout is None else timeout,
+            secret=self.secret,
+            target=self.target,
+        )
+
+
+@dataclass
+class _Settings:
+    """Per-session settings shared by all rows."""
+
+    api_key: str
+    sdk_version: str
+    accepted_formats: tuple[FrameFormat, ...]
+    required_streams: tuple[str, ...]
+
+
+@dataclass
+class _PoolSession:
+    """One row's A2V session: id, pinning metadata, rollout position, decoders, prompt."""
+
+    row: int
+    rpc: _Rpc
+    settings: _Settings
+    executor: ThreadPoolExecutor
+    info: wire.SessionInfo | None = None
+    metadata: wire.Metadata = ()
+    sequence_num: int = 0
+    prompt_text: str | None = None
+    seed: int | None = None
+    decoders: dict[str, FrameDecoder] = field(default_factory=dict)
+    lost_error: Exception | None = None
+
+    @property
+    def lost(self) -> bool:
+        """Whether the row must be re-Initialized before use."""
+        return self.lost_error is not None
+
+    async def open(self) -> wire.SessionInfo:
+        """Initialize a new session (finishing any previous one, best effort)."""
+        await self.finish_quietly()
+        settings = self.settings
+        request = wire.initialize_request(
+            settings.sdk_version, settings.api_key, settings.accepted_formats
+        )
+        metadata = wire.call_metadata(settings.api_key)
+        response, call = await self.rpc.call(
+            self.rpc.a2v.Initialize, "Initialize", request, metadata
+        )
+        wire.raise_if_error(response, settings.api_key)
+        info = wire.parse_session(response, await call.initial_metadata())
+        self.info, self.lost_error = info, None
+        self.metadata = wire.call_metadata(settings.api_key, info.session_target)
+        try:
+            wire.check_session(
+                info,
+                accepted_formats=settings.accepted_formats,
+                required_streams=settings.required_streams,
+            )
+        except DecartRoboticsError:
+            await self.finish_quietly()
+            raise
+        self.decoders = {
+            s.name: make_decoder(info.output_format, s.name, threads=1) for s in info.streams
+        }
+        self.sequence_num = 0
+        logger.debug("row %d: session %s opened", self.row, info.session_id[:6])
+        return info
+
+    async def prompt(self, prompt: str, seed: int | None) -> None:
+        """Set the scene; restarts the rollout (sequence 0, fresh decoders)."""
+        request = a2v_pb2.PromptRequest(session_id=self._session_id(), prompt=prompt)
+        metadata = wire.prompt_metadata(self.metadata, seed)
+        response, _ = await self.rpc.call(self.rpc.a2v.Prompt, "Prompt", request, metadata)
+        wire.raise_if_error(response, self.settings.api_key)
+        self.prompt_text, self.seed, self.sequence_num = prompt, seed, 0
+        for decoder in self.decoders.values():
+            decoder.reset()
+
+    async def infer_into(self, actions: np.ndarray, slots: RowSlots) -> _Outcome:
+        """One Infer; decodes every selected stream into ``slots`` concurrently, off the loop."""
+        request = wire.infer_request(self._session_id(), self.sequence_num, actions)
+        response, call = await self.rpc.call(self.rpc.a2v.Infer, "Infer", request, self.metadata)
+        wire.raise_if_error(response, self.settings.api_key)
+        self.sequence_num += 1
+        packets = {stream.name: stream.frames for stream in response.streams}
+        loop = asyncio.get_running_loop()
+        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
+        # or rewrite a slot that a still-running decode job is using.
+        decoded = await _gather(
+            [
+                loop.run_in_executor(
+                    self.executor, decode_chunk, self.decoders[name], packets.get(name, ()), out
+                )
+                for name, out in slots.items()
+            ]
+        )
+        _raise_any(decoded)
+        truth = extras.parse_truth(await call.trailing_metadata())
+        return _Outcome(
+            SessionStatus.OK,
+            sequence_num=response.sequence_num,
+            truth=None if truth is None else extras.truth_array(truth),
+        )
+
+    async def reprompt(self) -> None:
+        """Prompt again with the stored prompt and seed (a new clip of the same world)."""
+        if self.prompt_text is None:
+            raise DecartRoboticsError(f"session row {self.row} was never prompted")
+        await self.prompt(self.prompt_text, self.seed)
+
+    async def depth(self) -> dict[str, np.ndarray]:
+        """Depth maps of the last frame of each stream (SimService)."""
+        request = sim_pb2.DepthRequest(session_id=self._session_id())
+        try:
+            response, _ = await self.rpc.call(
+                self.rpc.sim.GetDepth, "GetDepth", request, self.metadata
+            )
+        except TransportError as error:
+            extras.raise_depth_error(error)
+        return extras.depth_maps(response)
+
+    async def finish_quietly(self) -> None:
+        """Finish the current session if any, ignoring failures (single short attempt)."""
+        if self.info is None:
+            return
+        request = a2v_pb2.FinishRequest(session_id=self.info.session_id)
+        self.info = None
+        try:
+            await self.rpc.call(
+                self.rpc.a2v.Finish,
+                "Finish",
+                request,
+                self.metadata,
+                policy=RetryPolicy.never(),
+                timeout=min(self.rpc.timeout or FINISH_TIMEOUT_S, FINISH_TIMEOUT_S),
+            )
+        except (DecartRoboticsError, grpc.RpcError) as error:
+            logger.debug("row %d: Finish failed (ignored): %s", self.row, error)
+
+    def _session_id(self) -> str:
+        if self.info is None:
+            raise DecartRoboticsError(f"session row {self.row} has no open session")
+        return self.info.session_id
+
+
+class _Runtime:
+    """Everything a started pool owns: loop thread, channel, stubs, decode threads, sessions."""
+
+    def __init__(
+        self,
+        loop: EventLoopThread,
+        channel: grpc.aio.Channel,
+        rpc: _Rpc,
+        executor: ThreadPoolExecutor,
+    ) -> None:
+        self.loop = loop
+        self.channel = channel
+        self.rpc = rpc
+        self.executor = executor
+        self.sessions: list[_PoolSession] = []
+
+    def shutdown(self) -> None:
+        """Close the channel, stop the loop and the decode threads (no Finish)."""
+        if not self.loop.loop.is_closed():
+            self.loop.run(self.channel.close())
+        self.loop.stop()
+        self.executor.shutdown(wait=True)
+
+
+class SessionPool:
+    """N concurrent A2V sessions, prompted and stepped as one batch.
+
+    Constructing a pool opens nothing (it pickles, so a worker process can open it);
+    :meth:`start` (or the first call that needs it, or ``with``) connects and Initializes all
+    sessions.
+
+    >>> pool = SessionPool("http://127.0.0.1:1", num_sessions=4, api_key="secret")
+    >>> import pickle
+    >>> pickle.loads(pickle.dumps(pool)).num_sessions
+    4
+    >>> "secret" in repr(pool)
+    False
+    """
+
+    def __init__(
+        self,
+        endpoint: str,
+        num_sessions: int,
+        *,
+        api_key: str | None = None,
+        tls: TlsSetting = None,
+        timeout: float | None = 120.0,
+        retry: RetryPolicy | None = None,
+        accepted_formats: Sequence[int] = (VP9, JPEG),
+        resize: tuple[int, int] | None = None,
+        required_streams: Sequence[str] = DEFAULT_REQUIRED_STREAMS,
+        decode_threads: int | None = None,
+        client_sdk_version: str = DEFAULT_SDK_VERSION,
+    ) -> None:
+        if isinstance(num_sessions, bool) or not isinstance(num_sessions, int) or num_sessions < 1:
+            raise ValueError(f"num_sessions must be a positive int, got {num_sessions!r}")
+        if decode_threads is not None and decode_threads < 1:
+            raise ValueError(
+                f"decode_threads must be a positive int or None, got {decode_threads!r}"
+            )
+        self.endpoint = endpoint
+        self.api_key = api_key if api_key is not None else os.getenv(wire.API_KEY_ENV_VAR)
+        self.tls = tls
+        self.timeout = timeout
+        self.retry = RetryPolicy() if retry is None else retry
+        self.accepted_formats = wire.accepted_format_list(accepted_formats)
+        self.resize = validate_resize(resize)
+        self.required_streams = tuple(required_streams)
+        self.decode_threads = decode_threads
+        self.client_sdk_version = client_sdk_version
+        self._num_sessions = num_sessions
+        self._target = parse_endpoint(endpoint, tls).address
+        self._streams: tuple[StreamInfo, ...] = ()
+        self._runtime: _Runtime | None = None
+        self._finalizer: weakref.finalize | None = None
+
+    # ----------------------------------------------------------------- properties
+
+    @property
+    def num_sessions(self) -> int:
+        """Number of rows (sessions)."""
+        return self._num_sessions
+
+    @property
+    def streams(self) -> tuple[StreamInfo, ...]:
+        """The selected streams as the server advertised them (empty before start)."""
+        return self._streams
+
+    @property
+    def stream_names(self) -> tuple[str, ...]:
+        """Names of the streams each step returns, in order (empty before start)."""
+        return tuple(stream.name for stream in self._streams)
+
+    @property
+    def frame_size(self) -> tuple[int, int]:
+        """``(height, width)`` of returned frames: ``resize`` or the streams' native size."""
+        if self.resize is not None:
+            return self.resize
+        sizes = {(stream.height, stream.width) for stream in self._require_streams()}
+        if len(sizes) != 1:
+            raise DecartRoboticsError(f"streams have different sizes {sorted(sizes)}; pass resize")
+        return sizes.pop()
+
+    @property
+    def session_ids(self) -> tuple[str | None, ...]:
+        """Each row's current session id (None if not open)."""
+        if self._runtime is None:
+            return (None,) * self._num_sessions
+        return tuple(s.info.session_id if s.info else None for s in self._runtime.sessions)
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(endpoint={self.endpoint!r}, num_sessions={self._num_sessions}, "
+            f"api_key={'***' if self.api_key else None!r}, started={self._runtime is not None})"
+        )
+
+    def __getstate__(self) -> dict[str, Any]:
+        if self._runtime is not None:
+            raise TypeError(
+                "a started SessionPool cannot be pickled; pickle it before start() and let the "
+                "receiving process start it"
+            )
+        return dict(self.__dict__)
+
+    def __enter__(self) -> SessionPool:
+        try:
+            self.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def start(self) -> tuple[StreamInfo, ...]:
+        """Connect and Initialize all sessions concurrently; idempotent. Returns the streams."""
+        if self._streams:
+            return self._streams
+        if not self.api_key:
+            raise wire.missing_api_key_error()
+        runtime = self._ensure_runtime()
+        try:
+            infos = runtime.loop.run(self._start(runtime))
+        except BaseException:
+            self.close()
+            raise
+        self._streams = self._selected_streams(infos[0].streams)
+        logger.info(
+            "pool of %d sessions on %s: streams %s, frames %s",
+            self._num_sessions,
+            self.endpoint,
+            self.stream_names,
+            self.frame_size,
+        )
+        return self._streams
+
+    def close(self) -> None:
+        """Finish all sessions (best effort, concurrently), close the channel, stop threads."""
+        runtime, self._runtime = self._runtime, None
+        self._streams = ()
+        if runtime is None:
+            return
+        if self._finalizer is not None:
+            self._finalizer.detach()
+        try:
+            runtime.loop.run(self._finish_all(runtime.sessions))
+        finally:
+            runtime.shutdown()
+
+    def ping(self) -> bool:
+        """Whether the server's gRPC health service reports SERVING (False if unreachable)."""
+        runtime = self._ensure_runtime()
+        return runtime.loop.run(self._ping(runtime.rpc))
+
+    # ---------------------------------------------------------------- batch calls
+
+    def prompt(
+        self,
+        prompts: Sequence[str],
+        seeds: Sequence[int | None] | None = None,
+        indices: Sequence[int] | None = None,
+    ) -> None:
+        """Prompt the selected rows concurrently (re-Initializing lost sessions first).
+
+        Resets those rows' sequence numbers and decoders, and remembers prompt and seed for
+        recovery. Raises the first failing row's error (``error.row``) after all rows finished.
+        """
+        runtime = self._require_started()
+        rows = self._select(indices)
+        prompts, seeds = self._prompt_args(prompts, seeds, rows)
+        sessions = [runtime.sessions[row] for row in rows]
+        coroutines = [
+            self._prompt_session(s, p, sd)
+            for s, p, sd in zip(sessions, prompts, seeds, strict=True)
+        ]
+        self._raise_first(rows, runtime.loop.run(_gather(coroutines)))
+
+    def infer(self, actions: np.ndarray, indices: Sequence[int] | None = None) -> PoolStep:
+        """Send one action chunk per selected row (float32 ``[n, 4, 2]``), all concurrently."""
+        runtime = self._require_started()
+        rows = self._select(indices)
+        chunk = wire.validate_action_batch(actions, rows)
+        unprompted = [row for row in rows if runtime.sessions[row].prompt_text is None]
+        if unprompted:
+            raise ValueError(
+                f"rows {unprompted} have no prompt yet; call prompt() or reset() first"
+            )
+        return self._run_step(runtime, rows, lambda s, j, slots: self._step(s, chunk[j], slots))
+
+    def reset(
+        self,
+        indices: Sequence[int] | None,
+        prompts: Sequence[str],
+        seeds: Sequence[int | None] | None = None,
+        actions: np.ndarray | None = None,
+    ) -> PoolStep:
+        """Prompt the selected rows and send one chunk (all-zero by default), concurrently."""
+        runtime = self._require_started()
+        rows = self._select(indices)
+        prompts, seeds = self._prompt_args(prompts, seeds, rows)
+        chunk = (
+            np.zeros((len(rows), FRAMES_PER_CHUNK, 2), np.float32)
+            if actions is None
+            else wire.validate_action_batch(actions, rows)
+        )
+        return self._run_step(
+            runtime,
+            rows,
+            lambda s, j, slots: self._reset_session(s, prompts[j], seeds[j], chunk[j], slots),
+        )
+
+    def recover(self, indices: Sequence[int]) -> None:
+        """Re-Initialize the selected rows and re-prompt them with their stored prompt and seed."""
+        runtime = self._require_started()
+        rows = self._select(indices)
+        sessions = [runtime.sessions[row] for row in rows]
+        self._raise_first(rows, runtime.loop.run(_gather([self._recover(s) for s in sessions])))
+
+    def depth(self, indices: Sequence[int] | None = None) -> dict[str, np.ndarray]:
+        """Metric depth of each selected row's last frame: stream -> float32 ``[n, H, W]``."""
+        runtime = self._require_started()
+        rows = self._select(indices)
+        sessions = [runtime.sessions[row] for row in rows]
+        results = runtime.loop.run(_gather([s.depth() for s in sessions]))
+        self._raise_first(rows, results)
+        return {name: np.stack([maps[name] for maps in results]) for name in self.stream_names}
+
+    # ------------------------------------------------------------- row coroutines
+
+    async def _step(self, session: _PoolSession, actions: np.ndarray, slots: RowSlots) -> _Outcome:
+        if session.lost:
+            return await self._restart(session, slots, session.lost_error, reopen=True)
+        try:
+            return await session.infer_into(actions, slots)
+        except (SequenceError, DecodeError) as error:
+            return await self._restart(session, slots, error, reopen=False)
+        except SessionLostError as error:
+            return await self._restart(session, slots, error, reopen=True)
+        except TransportError as error:
+            return _lose(session, error)
+
+    async def _restart(
+        self, session: _PoolSession, slots: RowSlots, cause: Exception | None, *, reopen: bool
+    ) -> _Outcome:
+        logger.info("row %d: restarting its rollout after: %s", session.row, cause)
+        try:
+            if reopen:
+                await session.open()
+            await session.reprompt()
+            outcome = await session.infer_into(ZERO_CHUNK, slots)
+        except RECOVERABLE_STEP_ERRORS as error:
+            return _lose(session, error)
+        outcome.status, outcome.error = SessionStatus.RESTARTED, cause
+        return outcome
+
+    async def _reset_session(
+        self,
+        session: _PoolSession,
+        prompt: str,
+        seed: int | None,
+        actions: np.ndarray,
+        slots: RowSlots,
+    ) -> _Outcome:
+        try:
+            await self._prompt_session(session, prompt, seed)
+        except RECOVERABLE_STEP_ERRORS as error:
+            return _lose(session, error)
+        return await self._step(session, actions, slots)
+
+    async def _prompt_session(self, session: _PoolSession, prompt: str, seed: int | None) -> None:
+        if session.lost or session.info is None:
+            await session.open()
+        try:
+            await session.prompt(prompt, seed)
+        except SessionLostError:
+            await session.open()
+            await session.prompt(prompt, seed)
+
+    async def _recover(self, session: _PoolSession) -> None:
+        await session.open()
+        if session.prompt_text is not None:
+            await session.reprompt()
+
+    async def _start(self, runtime: _Runtime) -> list[wire.SessionInfo]:
+        await self._wait_ready(runtime.channel)
+        results = await _gather([s.open() for s in runtime.sessions])
+        self._raise_first(range(self._num_sessions), results)
+        return results
+
+    async def _wait_ready(self, channel: grpc.aio.Channel) -> None:
+        try:
+            await asyncio.wait_for(channel.channel_ready(), self.timeout)
+        except asyncio.TimeoutError:
+            raise TransportError(
+                grpc.StatusCode.UNAVAILABLE,
+                f"no connection within the {self.timeout} s timeout",
+                method="connect",
+                target=self._target,
+            ) from None
+
+    @staticmethod
+    async def _finish_all(sessions: list[_PoolSession]) -> None:
+        await asyncio.gather(*(s.finish_quietly() for s in sessions))
+
+    @staticmethod
+    async def _ping(rpc: _Rpc) -> bool:
+        try:
+            response, _ = await rpc.call(
+                rpc.health.Check, "Check", extras.health_request(), (), policy=RetryPolicy.never()
+            )
+        except TransportError as error:
+            return extras.ping_outcome(error)
+        return extras.is_serving(response)
+
+    # -------------------------------------------------------------------- helpers
+
+    def _run_step(
+        self,
+        runtime: _Runtime,
+        rows: list[int],
+        row_step: Callable[[_PoolSession, int, RowSlots], Awaitable[_Outcome]],
+    ) -> PoolStep:
+        """Run ``row_step`` for every selected row concurrently into fresh output arrays."""
+        height, width = self.frame_size
+        frames = {
+            name: np.empty((len(rows), FRAMES_PER_CHUNK, height, width, 3), np.uint8)
+            for name in self.stream_names
+        }
+        coroutines = [
+            row_step(runtime.sessions[row], j, {name: out[j] for name, out in frames.items()})
+            for j, row in enumerate(rows)
+        ]
+        outcomes = runtime.loop.run(_gather(coroutines))
+        self._raise_first(rows, outcomes)
+        if all(o.status == SessionStatus.LOST for o in outcomes):
+            # No row could be served: the server is unreachable, which a caller must not miss.
+            self._raise_first(rows, [o.error for o in outcomes])
+        return _assemble(frames, outcomes)
+
+    def _ensure_runtime(self) -> _Runtime:
+        if self._runtime is None:
+            loop = EventLoopThread(f"oasis-pool-{self._target}")
+            channel = loop.run(_open_channel(self.endpoint, self.tls))
+            rpc = _Rpc(channel, self.retry, self.timeout, self._target, self.api_key)
+            executor = ThreadPoolExecutor(
+                self.decode_threads or os.cpu_count() or 1, thread_name_prefix="oasis-decode"
+            )
+            runtime = _Runtime(loop, channel, rpc, executor)
+            settings = _Settings(
+                api_key=self.api_key or "",
+                sdk_version=self.client_sdk_version,
+                accepted_formats=self.accepted_formats,
+                required_streams=self.required_streams,
+            )
+            runtime.sessions = [
+                _PoolSession(row, rpc, settings, executor) for row in range(self._num_sessions)
+            ]
+            self._runtime = runtime
+            self._finalizer = weakref.finalize(self, runtime.shutdown)
+        return self._runtime
+
+    def _require_started(self) -> _Runtime:
+        self.start()
+        assert self._runtime is not None
+        return self._runtime
+
+    def _require_streams(self) -> tuple[StreamInfo, ...]:
+        if not self._streams:
+            raise DecartRoboticsError("the pool is not started; call start() first")
+        return self._streams
+
+    def _selected_streams(self, advertised: tuple[StreamInfo, ...]) -> tuple[StreamInfo, ...]:
+        if not self.required_streams:
+            return advertised
+        by_name = {stream.name: stream for stream in advertised}
+        return tuple(by_name[name] for name in self.required_streams)
+
+    def _select(self, indices: Sequence[int] | None) -> list[int]:
+        if indices is None:
+            return list(range(self._num_sessions))
+        rows = [int(i) for i in np.asarray(indices, dtype=np.int64).reshape(-1)]
+        if len(set(rows)) != len(rows) or any(not 0 <= r < self._num_sessions for r in rows):
+            raise ValueError(
+                f"indices must be distinct ints in [0, {self._num_sessions}), got {list(indices)}"
+            )
+        return rows
+
+    @staticmethod
+    def _prompt_args(
+        prompts: Sequence[str], seeds: Sequence[int | None] | None, rows: list[int]
+    ) -> tuple[list[str], list[int | None]]:
+        prompts = [prompts] if isinstance(prompts, str) else list(prompts)
+        seeds = [None] * len(rows) if seeds is None else list(seeds)
+        if len(prompts) != len(rows) or len(seeds) != len(rows):
+            raise ValueError(
+                f"need one prompt and one seed per selected row ({len(rows)}), got "
+                f"{len(prompts)} prompts and {len(seeds)} seeds"
+            )
+        for row, prompt in zip(rows, prompts, strict=True):
+            if not isinstance(prompt, str):
+                raise TypeError(f"prompt for row {row} must be a str, got {type(prompt).__name__}")
+        return prompts, [None if s is None else wire.validate_seed(s) for s in seeds]
+
+    @staticmethod
+    def _raise_first(rows: Sequence[int], results: Sequence[object]) -> None:
+        """Raise the first row's exception (tagged with its row) if any row raised."""
+        for row, result in zip(rows, results, strict=True):
+            if isinstance(result, BaseException):
+                if isinstance(result, DecartRoboticsError):
+                    result.row = row
+                raise result
+
+
+async def _open_channel(endpoint: str, tls: TlsSetting) -> grpc.aio.Channel:
+    return create_aio_channel(endpoint, tls)
+
+
+async def _gather(coroutines: Sequence[Awaitable[Any]]) -> list[Any]:
+    """Run all coroutines to completion; exceptions are returned in place of results."""
+    return await asyncio.gather(*coroutines, return_exceptions=True)
+
+
+def _lose(session: _PoolSession, error: Exception) -> _Outcome:
+    logger.warning("row %d: session lost: %s", session.row, error)
+    session.lost_error = error
+    return _Outcome(SessionStatus.LOST, error)
+
+
+def _raise_any(results: Sequence[object]) -> None:
+    for result in results:
+        if isinstance(result, BaseException):
+            raise result
+
+
+def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolStep:
+    """Build the PoolStep; LOST rows get zero frames."""
+    status = np.array([o.status for o in outcomes], np.int8)
+    lost = status == SessionStatus.LOST
+    for out in frames.values():
+        out[lost] = 0
+    truths = [o.truth for o in outcomes]
+    truth = None
+    if any(t is not None for t in truths):
+        truth = np.full((len(outcomes), FRAMES_PER_CHUNK, len(extras.TRUTH_FIELDS)), np.nan)
+        for j, row_truth in enumerate(truths):
+            if row_truth is not None:
+                truth[j, : len(row_truth)] = row_truth[:FRAMES_PER_CHUNK]
+    return PoolStep(
+        frames=frames,
+        truth=truth,
+        status=status,
+        errors=[o.error for o in outcomes],
+        sequence_nums=np.array([o.sequence_num for o in outcomes], np.int64),
+    )

@@ -1,0 +1,123 @@
+"""Public value types of the client layer.
+
+``StreamInfo``, ``A2VResult`` and ``FrameConsumer`` have the same shapes as the official SDK's.
+``FrameFormat``, ``SessionStatus`` and ``PoolStep`` are this project's additions.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+DEFAULT_REQUIRED_STREAMS: tuple[str, ...] = ("left_forward", "front", "right_forward")
+
+
+class FrameFormat(enum.IntEnum):
+    """``decart.inference.common.FrameFormat`` as a Python enum.
+
+    >>> FrameFormat.VP9.value
+    3
+    """
+
+    UNSPECIFIED = 0
+    JPEG = 1
+    H264 = 2
+    VP9 = 3
+    VP8 = 4
+    RAW_YUV420 = 5
+
+
+VP9 = FrameFormat.VP9
+JPEG = FrameFormat.JPEG
+
+
+@dataclass(frozen=True, slots=True)
+class StreamInfo:
+    """One output stream the server advertised at Initialize.
+
+    >>> StreamInfo(name="front", sensor_type=1, height=512, width=768).width
+    768
+    """
+
+    name: str
+    sensor_type: int
+    height: int
+    width: int
+
+
+@dataclass(frozen=True, slots=True)
+class A2VResult:
+    """Decoded result of one Infer call: frames per stream, in time order.
+
+    >>> A2VResult(sequence_num=0, frames={}, streams=()).sequence_num
+    0
+    """
+
+    sequence_num: int
+    frames: dict[str, list[np.ndarray]]
+    streams: tuple[StreamInfo, ...]
+
+
+@runtime_checkable
+class FrameConsumer(Protocol):
+    """Receives generated frames as a client produces them (e.g. a live preview).
+
+    ``submit`` gets every decoded chunk, ``new_clip`` marks a new prompt. Both must return quickly.
+
+    >>> class Counter:
+    ...     def submit(self, frames): pass
+    ...     def new_clip(self): pass
+    >>> isinstance(Counter(), FrameConsumer)
+    True
+    """
+
+    def submit(self, frames: Mapping[str, Sequence[np.ndarray]]) -> None:
+        """Take one chunk of frames: stream name -> frames in time order."""
+        ...
+
+    def new_clip(self) -> None:
+        """Mark a clip boundary: the following frames belong to a new prompt."""
+        ...
+
+
+class SessionStatus(enum.IntEnum):
+    """What happened to one pool row during a step.
+
+    ``OK``: the step ran as asked. ``RESTARTED``: the row's rollout had to be restarted (re-prompt
+    with its stored prompt and seed, one all-zero chunk); its frames are the new clip's first.
+    ``LOST``: the row could not be served; its frames are zeros and its error says why.
+
+    >>> SessionStatus(1).name
+    'RESTARTED'
+    """
+
+    OK = 0
+    RESTARTED = 1
+    LOST = 2
+
+
+@dataclass
+class PoolStep:
+    """The outcome of one pool step for the selected rows (``n`` of them).
+
+    >>> import numpy as np
+    >>> step = PoolStep(frames={}, truth=None, status=np.zeros(2, np.int8), errors=[None, None],
+    ...                 sequence_nums=np.zeros(2, np.int64))
+    >>> step.status.tolist()
+    [0, 0]
+    """
+
+    frames: dict[str, np.ndarray]
+    """stream -> uint8 ``[n, 4, H, W, 3]``, one array per stream."""
+    truth: np.ndarray | None
+    """float64 ``[n, 4, K]`` ground truth in ``TRUTH_FIELDS`` order (NaN where missing), or None."""
+    status: np.ndarray
+    """int8 ``[n]`` :class:`SessionStatus` per row."""
+    errors: list[Exception | None]
+    """Per row, the error behind RESTARTED or LOST (None when OK)."""
+    sequence_nums: np.ndarray
+    """int64 ``[n]`` sequence number of each row's returned chunk (-1 when LOST)."""

@@ -1,0 +1,55 @@
+"""Batched reward modules for the Oasis TorchRL env (pure torch / TensorDict).
+
+>>> from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthDepth
+>>> reward = DepthCollisionReward(GroundTruthDepth("front"))
+"""
+
+from oasis_torchrl.rewards.base import (
+    CallableReward,
+    RewardFn,
+    RewardModule,
+    RowState,
+    as_reward_module,
+    reward_output,
+)
+from oasis_torchrl.rewards.depth_collision import (
+    DepthCollisionConfig,
+    DepthCollisionReward,
+    collision_risk,
+    forward_reward,
+    normalize_per_image,
+    straightness_penalty,
+)
+from oasis_torchrl.rewards.depth_sources import (
+    CAMERAS,
+    DEFAULT_DEPTH_MODEL,
+    CallableDepth,
+    DepthPreprocess,
+    DepthSource,
+    GroundTruthDepth,
+    MonocularDepth,
+)
+from oasis_torchrl.rewards.ground_truth import GroundTruthReward
+
+__all__ = [
+    "CAMERAS",
+    "DEFAULT_DEPTH_MODEL",
+    "CallableDepth",
+    "CallableReward",
+    "DepthCollisionConfig",
+    "DepthCollisionReward",
+    "DepthPreprocess",
+    "DepthSource",
+    "GroundTruthDepth",
+    "GroundTruthReward",
+    "MonocularDepth",
+    "RewardFn",
+    "RewardModule",
+    "RowState",
+    "as_reward_module",
+    "collision_risk",
+    "forward_reward",
+    "normalize_per_image",
+    "reward_output",
+    "straightness_penalty",
+]

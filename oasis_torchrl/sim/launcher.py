@@ -1,0 +1,288 @@
+"""Start the embedded A2V server in this process (:class:`LocalServer`) or as a subprocess
+(:class:`ServerProcess`), e.g. for tests, examples and offline training.
+
+Both accept a :class:`ServerConfig` plus field overrides. When the config names no API key,
+the launcher generates a random one, configures the server with it and exposes it as
+``.api_key``, so a launched server is never open to any key by accident.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import secrets
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+import grpc
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+from oasis_torchrl.sim.config import API_KEYS_ENV_VAR, ServerConfig
+
+if TYPE_CHECKING:
+    from oasis_torchrl.sim.server import A2VServer
+
+logger = logging.getLogger(__name__)
+
+_POLL_INTERVAL_S = 0.05
+
+
+def _with_api_key(config: ServerConfig | None, overrides: dict[str, Any]) -> ServerConfig:
+    """``config`` with ``overrides`` applied and, if it names no key, a fresh random key."""
+    config = dataclasses.replace(config or ServerConfig(), **overrides)
+    if not config.api_keys:
+        config = dataclasses.replace(config, api_keys=(secrets.token_urlsafe(24),))
+    return config
+
+
+class LocalServer:
+    """The embedded A2V server running in this process, on a free loopback port by default.
+
+    Args:
+        config: Server settings (defaults to :class:`ServerConfig`).
+        simulator_factory: Optional world factory handed to
+            :class:`~oasis_torchrl.sim.server.A2VServer`.
+        **overrides: :class:`ServerConfig` fields replacing those of ``config``.
+
+    Example:
+        >>> with LocalServer(width=96, height=64) as server:
+        ...     server.endpoint.startswith("http://127.0.0.1:"), len(server.api_key) > 20
+        (True, True)
+    """
+
+    def __init__(
+        self,
+        config: ServerConfig | None = None,
+        *,
+        simulator_factory: Callable[..., Any] | None = None,
+        **overrides: Any,
+    ) -> None:
+        self.config = _with_api_key(config, overrides)
+        self._simulator_factory = simulator_factory
+        self._server: A2VServer | None = None
+
+    @property
+    def api_key(self) -> str:
+        """A key the server accepts (the first configured one)."""
+        return self.config.api_keys[0]
+
+    @property
+    def port(self) -> int:
+        """The bound port."""
+        if self._server is None:
+            raise RuntimeError("LocalServer is not started; call start() first")
+        return self._server.port
+
+    @property
+    def address(self) -> str:
+        """``host:port`` to dial, e.g. ``127.0.0.1:50051``."""
+        return self.config.client_address(self.port)
+
+    @property
+    def endpoint(self) -> str:
+        """Endpoint URL for clients, e.g. ``http://127.0.0.1:50051``."""
+        return self.config.endpoint(self.port)
+
+    def start(self) -> LocalServer:
+        """Start serving (idempotent); returns ``self``."""
+        from oasis_torchrl.sim.server import A2VServer
+
+        if self._server is None:
+            server = A2VServer(self.config, simulator_factory=self._simulator_factory)
+            server.start()
+            self._server = server
+        return self
+
+    def stop(self, grace: float | None = 0.5) -> None:
+        """Stop serving and free the port (idempotent)."""
+        server, self._server = self._server, None
+        if server is not None:
+            server.stop(grace)
+
+    def __enter__(self) -> LocalServer:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+
+class ServerProcess:
+    """The embedded A2V server as a subprocess (``python -m oasis_torchrl serve``).
+
+    Readiness: the child writes its bound port to a file once serving; the launcher then waits
+    for the gRPC health service to answer SERVING (plain-text servers) within
+    ``startup_timeout``. API keys reach the child through ``OASIS_SERVER_API_KEYS``, never its
+    command line. The child's output goes to :attr:`log_path`.
+
+    Args:
+        config: Server settings (defaults to :class:`ServerConfig`); picklable.
+        startup_timeout: Seconds to wait for readiness before failing.
+        python: Interpreter to run (defaults to this one).
+        **overrides: :class:`ServerConfig` fields replacing those of ``config``.
+
+    Example:
+        >>> with ServerProcess(width=96, height=64) as server:
+        ...     server.is_running()
+        True
+    """
+
+    def __init__(
+        self,
+        config: ServerConfig | None = None,
+        *,
+        startup_timeout: float = 60.0,
+        python: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        self.config = _with_api_key(config, overrides)
+        self.startup_timeout = startup_timeout
+        self.python = python or sys.executable
+        self.port: int | None = None
+        self._process: subprocess.Popen[bytes] | None = None
+        self._workdir: Path | None = None
+
+    @property
+    def api_key(self) -> str:
+        """A key the server accepts (the first configured one)."""
+        return self.config.api_keys[0]
+
+    @property
+    def address(self) -> str:
+        """``host:port`` to dial."""
+        if self.port is None:
+            raise RuntimeError("ServerProcess is not started; call start() first")
+        return self.config.client_address(self.port)
+
+    @property
+    def endpoint(self) -> str:
+        """Endpoint URL for clients, e.g. ``http://127.0.0.1:50051``."""
+        return self.config.endpoint(self.port)
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process id (None before start)."""
+        return None if self._process is None else self._process.pid
+
+    @property
+    def log_path(self) -> Path | None:
+        """File holding the child's stdout and stderr (None before start)."""
+        return None if self._workdir is None else self._workdir / "server.log"
+
+    def is_running(self) -> bool:
+        """Whether the child process is alive."""
+        return self._process is not None and self._process.poll() is None
+
+    def start(self) -> ServerProcess:
+        """Spawn the server and wait until it serves; raises RuntimeError if it does not."""
+        from oasis_torchrl.commands.serve import config_to_argv
+
+        if self._process is not None:
+            return self
+        self._workdir = Path(tempfile.mkdtemp(prefix="oasis-server-"))
+        port_file = self._workdir / "port"
+        command = [self.python, "-m", "oasis_torchrl", "serve", *config_to_argv(self.config)]
+        command += ["--port-file", str(port_file)]
+        environment = {**os.environ, API_KEYS_ENV_VAR: ",".join(self.config.api_keys)}
+        with open(self.log_path, "wb") as log:
+            self._process = subprocess.Popen(
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=environment,
+            )
+        try:
+            self._wait_until_ready(port_file, time.monotonic() + self.startup_timeout)
+        except BaseException:
+            self.kill()
+            raise
+        logger.info("server process %d serving %s", self._process.pid, self.endpoint)
+        return self
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGTERM (clean shutdown), SIGKILL after ``timeout``; returns the exit code."""
+        return self._end(signal.SIGTERM, timeout)
+
+    def kill(self) -> int | None:
+        """SIGKILL at once (to test clients against a dead server); returns the exit code."""
+        return self._end(signal.SIGKILL, 10.0)
+
+    def log_text(self) -> str:
+        """What the child printed so far (empty before start)."""
+        path = self.log_path
+        return path.read_text(errors="replace") if path is not None and path.exists() else ""
+
+    def __enter__(self) -> ServerProcess:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+    def _end(self, signum: signal.Signals, timeout: float) -> int | None:
+        process, self._process = self._process, None
+        if process is None:
+            return None
+        if process.poll() is None:
+            process.send_signal(signum)
+            try:
+                process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                logger.warning("server process %d ignored %s; killing it", process.pid, signum)
+                process.kill()
+                process.wait()
+        if self._workdir is not None:
+            shutil.rmtree(self._workdir, ignore_errors=True)
+            self._workdir = None
+        return process.returncode
+
+    def _wait_until_ready(self, port_file: Path, deadline: float) -> None:
+        while not port_file.exists():
+            self._check_alive_before(deadline, "write its port file")
+            time.sleep(_POLL_INTERVAL_S)
+        self.port = int(port_file.read_text())
+        if self.config.tls_enabled:
+            return  # the port file is written once serving; TLS health would need the CA here
+        with grpc.insecure_channel(self.address) as channel:
+            health = health_pb2_grpc.HealthStub(channel)
+            while not self._reports_serving(health):
+                self._check_alive_before(deadline, "report SERVING")
+                time.sleep(_POLL_INTERVAL_S)
+
+    @staticmethod
+    def _reports_serving(health: health_pb2_grpc.HealthStub) -> bool:
+        try:
+            reply = health.Check(health_pb2.HealthCheckRequest(service=""), timeout=1.0)
+        except grpc.RpcError:
+            return False
+        return reply.status == health_pb2.HealthCheckResponse.SERVING
+
+    def _check_alive_before(self, deadline: float, step: str) -> None:
+        if self._process is not None and self._process.poll() is not None:
+            raise RuntimeError(
+                f"server process exited with code {self._process.returncode} before it could "
+                f"{step}; its output:\n{self.log_text()[-4000:]}"
+            )
+        if time.monotonic() > deadline:
+            raise RuntimeError(
+                f"server process did not {step} within {self.startup_timeout} s; its output:\n"
+                f"{self.log_text()[-4000:]}"
+            )

@@ -1,0 +1,387 @@
+"""The embedded A2V gRPC server: A2VService, the local SimService and gRPC health checking.
+
+Every rule of the A2V protocol is enforced here (see ``/work/shared/PROTOCOL.md``); request
+failures are in-band ``error`` fields, transport conditions are gRPC statuses:
+
+- UNAVAILABLE: an injected transient failure (``failure_rate``), raised before any state
+  changes, so the same request can simply be retried.
+- RESOURCE_EXHAUSTED: the total or per-key session limit is reached (Initialize), or a request
+  exceeds ``max_message_bytes`` (rejected by gRPC itself).
+- INTERNAL: an unexpected server fault (logged); other sessions are unaffected.
+
+``SimService`` has no ``error`` field, so its request failures map to statuses:
+INVALID_API_KEY -> UNAUTHENTICATED, INVALID_SESSION -> NOT_FOUND, ALREADY_FINISHED and
+PROMPT_SET -> FAILED_PRECONDITION, anything else -> INVALID_ARGUMENT.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any, TypeVar
+
+import grpc
+from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+
+from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.sim.auth import ApiKeyAuthority
+from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.sim.errors import RequestError, StatusError
+from oasis_torchrl.sim.faults import FailureInjector
+from oasis_torchrl.sim.sessions import Session, SessionRegistry, SimulatorFactory
+from oasis_torchrl.sim.simulator import CAMERA_NAMES, Simulator
+from oasis_torchrl.sim.validation import (
+    actions_to_array,
+    check_prompt,
+    check_sdk_version,
+    negotiate_format,
+    parse_seed,
+)
+
+logger = logging.getLogger(__name__)
+
+API_KEY_METADATA = "x-api-key"
+SESSION_TARGET_METADATA = "x-session-target"
+SEED_METADATA = "x-oasis-seed"
+TRUTH_METADATA = "x-oasis-truth-bin"
+A2V_SERVICE_NAME = a2v_pb2.DESCRIPTOR.services_by_name["A2VService"].full_name
+SIM_SERVICE_NAME = sim_pb2.DESCRIPTOR.services_by_name["SimService"].full_name
+
+_Response = TypeVar("_Response")
+_SIM_STATUS = {
+    common_pb2.ERROR_CODE_INVALID_API_KEY: grpc.StatusCode.UNAUTHENTICATED,
+    common_pb2.ERROR_CODE_INVALID_SESSION: grpc.StatusCode.NOT_FOUND,
+    common_pb2.ERROR_CODE_ALREADY_FINISHED: grpc.StatusCode.FAILED_PRECONDITION,
+    common_pb2.ERROR_CODE_PROMPT_SET: grpc.StatusCode.FAILED_PRECONDITION,
+}
+
+
+def _metadata(context: grpc.ServicerContext, key: str) -> str | bytes | None:
+    """The first value of invocation metadata ``key`` (str, or bytes for ``-bin`` keys)."""
+    for item in context.invocation_metadata() or ():
+        if item.key == key:
+            return item.value
+    return None
+
+
+def _text_metadata(context: grpc.ServicerContext, key: str) -> str | None:
+    """Metadata ``key`` as text (gRPC hands ``-bin`` keys over as bytes)."""
+    value = _metadata(context, key)
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else value
+
+
+def _run_rpc(
+    context: grpc.ServicerContext,
+    handler: Callable[[], _Response],
+    on_request_error: Callable[[RequestError], _Response],
+) -> _Response:
+    """Run ``handler``; a :class:`RequestError` goes to ``on_request_error``, the rest aborts."""
+    try:
+        return handler()
+    except RequestError as error:
+        return on_request_error(error)
+    except StatusError as error:
+        status = error
+    except Exception:
+        logger.exception("internal error in a gRPC handler")
+        status = StatusError(grpc.StatusCode.INTERNAL, "internal server error")
+    context.abort(status.status, status.message)
+    raise AssertionError("context.abort returned")  # pragma: no cover
+
+
+class _Gate:
+    """Checks shared by every session call: injected failures, API key, session resolution."""
+
+    def __init__(
+        self,
+        registry: SessionRegistry,
+        authority: ApiKeyAuthority,
+        failures: FailureInjector | None = None,
+    ) -> None:
+        self.registry = registry
+        self.authority = authority
+        self.failures = failures
+
+    def admit(self, method: str, api_key: str | None) -> bytes:
+        """Fail transiently if injected, then return the digest of the caller's valid key."""
+        if self.failures is not None:
+            self.failures.maybe_fail(method)
+        return self.authority.authenticate(api_key)
+
+    def use(
+        self, method: str, session_id: str, context: grpc.ServicerContext
+    ) -> AbstractContextManager[Session]:
+        """The caller's session, locked (a context manager), after all access checks."""
+        key_digest = self.admit(method, _text_metadata(context, API_KEY_METADATA))
+        target = _text_metadata(context, SESSION_TARGET_METADATA)
+        return self.registry.use(session_id, key_digest, target)
+
+
+class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
+    """``decart.inference.a2v.A2VService`` backed by the procedural simulator.
+
+    Example:
+        >>> from concurrent.futures import ThreadPoolExecutor
+        >>> config = ServerConfig(width=64, height=48, api_keys=("k",))
+        >>> registry = SessionRegistry(config)
+        >>> servicer = A2VServicer(config, registry, ApiKeyAuthority(config.api_keys),
+        ...                        ThreadPoolExecutor(3))
+        >>> [info.name for info in servicer.stream_infos]
+        ['left_forward', 'front', 'right_forward']
+    """
+
+    def __init__(
+        self,
+        config: ServerConfig,
+        registry: SessionRegistry,
+        authority: ApiKeyAuthority,
+        encode_pool: ThreadPoolExecutor,
+    ) -> None:
+        self._config = config
+        self._registry = registry
+        self._gate = _Gate(
+            registry, authority, FailureInjector(config.failure_rate, config.failure_seed)
+        )
+        self._encode_pool = encode_pool
+        self.stream_infos = [
+            a2v_pb2.StreamInfo(
+                name=name, type=a2v_pb2.SENSOR_TYPE_RGB, width=config.width, height=config.height
+            )
+            for name in CAMERA_NAMES
+        ]
+
+    def Initialize(
+        self, request: a2v_pb2.InitializeRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.InitializeResponse:
+        """Authenticate, check the SDK version, negotiate a format and open a session."""
+        return _run_rpc(
+            context,
+            lambda: self._initialize(request, context),
+            lambda error: a2v_pb2.InitializeResponse(error=error.to_proto()),
+        )
+
+    def Prompt(
+        self, request: a2v_pb2.PromptRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.PromptResponse:
+        """Set the session's scene from the prompt and the ``x-oasis-seed`` metadata."""
+        return _run_rpc(
+            context,
+            lambda: self._prompt(request, context),
+            lambda error: a2v_pb2.PromptResponse(error=error.to_proto()),
+        )
+
+    def Infer(
+        self, request: a2v_pb2.InferRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.InferResponse:
+        """Step the world by 4 actions; 4 frames per stream plus ground-truth trailing metadata."""
+        return _run_rpc(
+            context,
+            lambda: self._infer(request, context),
+            lambda error: a2v_pb2.InferResponse(
+                sequence_num=request.sequence_num, error=error.to_proto()
+            ),
+        )
+
+    def Finish(
+        self, request: a2v_pb2.FinishRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.FinishResponse:
+        """End the session."""
+        return _run_rpc(
+            context,
+            lambda: self._finish(request, context),
+            lambda error: a2v_pb2.FinishResponse(error=error.to_proto()),
+        )
+
+    def _initialize(
+        self, request: a2v_pb2.InitializeRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.InitializeResponse:
+        key_digest = self._gate.admit("Initialize", self._initialize_key(request, context))
+        check_sdk_version(request.client_sdk_version)
+        output_format = negotiate_format(request.accepted_output_formats, self._config.formats)
+        session = self._registry.open(key_digest, output_format)
+        context.send_initial_metadata(((SESSION_TARGET_METADATA, session.target),))
+        return a2v_pb2.InitializeResponse(
+            session_id=session.session_id, output_format=output_format, streams=self.stream_infos
+        )
+
+    @staticmethod
+    def _initialize_key(
+        request: a2v_pb2.InitializeRequest, context: grpc.ServicerContext
+    ) -> str | None:
+        """The key from the request body or ``x-api-key`` metadata; both must agree if both set."""
+        metadata_key = _text_metadata(context, API_KEY_METADATA)
+        if request.api_key and metadata_key and request.api_key != metadata_key:
+            raise RequestError(
+                common_pb2.ERROR_CODE_INVALID_API_KEY,
+                "InitializeRequest.api_key and x-api-key metadata name different keys",
+            )
+        return request.api_key or metadata_key
+
+    def _prompt(
+        self, request: a2v_pb2.PromptRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.PromptResponse:
+        with self._gate.use("Prompt", request.session_id, context) as session:
+            check_prompt(request.prompt, self._config.max_prompt_chars)
+            seed = parse_seed(_metadata(context, SEED_METADATA))
+            session.prompt(request.prompt, seed)
+        return a2v_pb2.PromptResponse()
+
+    def _infer(
+        self, request: a2v_pb2.InferRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.InferResponse:
+        with self._gate.use("Infer", request.session_id, context) as session:
+            actions = actions_to_array(request.actions)
+            # Only this session waits: its lock serialises its own calls, like one GPU stream.
+            if self._config.latency_ms:
+                time.sleep(self._config.latency_ms / 1000.0)
+            record = session.infer(request.sequence_num, actions, self._encode_pool)
+        context.set_trailing_metadata(((TRUTH_METADATA, record.truth),))
+        return record.response
+
+    def _finish(
+        self, request: a2v_pb2.FinishRequest, context: grpc.ServicerContext
+    ) -> a2v_pb2.FinishResponse:
+        with self._gate.use("Finish", request.session_id, context) as session:
+            self._registry.finish(session)
+        return a2v_pb2.FinishResponse()
+
+
+class SimServicer(sim_pb2_grpc.SimServiceServicer):
+    """``oasis_torchrl.sim.v1.SimService``: depth and scene of a session, for local analysis.
+
+    Same authentication and session pinning as A2V calls; no injected failures.
+
+    Example:
+        >>> config = ServerConfig(api_keys=("k",))
+        >>> servicer = SimServicer(SessionRegistry(config), ApiKeyAuthority(config.api_keys))
+        >>> callable(servicer.GetDepth) and callable(servicer.GetScene)
+        True
+    """
+
+    def __init__(self, registry: SessionRegistry, authority: ApiKeyAuthority) -> None:
+        self._gate = _Gate(registry, authority)
+
+    def GetDepth(
+        self, request: sim_pb2.DepthRequest, context: grpc.ServicerContext
+    ) -> sim_pb2.DepthResponse:
+        """Float16 depth of the last frame of each stream."""
+        return self._query("GetDepth", request.session_id, context, lambda s: s.depth())
+
+    def GetScene(
+        self, request: sim_pb2.SceneRequest, context: grpc.ServicerContext
+    ) -> sim_pb2.SceneResponse:
+        """The static world of the session's current scene."""
+        return self._query("GetScene", request.session_id, context, lambda s: s.scene())
+
+    def _query(
+        self,
+        method: str,
+        session_id: str,
+        context: grpc.ServicerContext,
+        answer: Callable[[Session], _Response],
+    ) -> _Response:
+        def handler() -> _Response:
+            with self._gate.use(method, session_id, context) as session:
+                return answer(session)
+
+        return _run_rpc(context, handler, self._abort_with_status(context))
+
+    @staticmethod
+    def _abort_with_status(context: grpc.ServicerContext) -> Callable[[RequestError], Any]:
+        def abort(error: RequestError) -> Any:
+            status = _SIM_STATUS.get(error.code, grpc.StatusCode.INVALID_ARGUMENT)
+            context.abort(status, f"{common_pb2.ErrorCode.Name(error.code)}: {error.message}")
+
+        return abort
+
+
+class A2VServer:
+    """The embedded A2V server: gRPC server, services, sessions, encoder threads.
+
+    Args:
+        config: Server settings; it must name API keys or set ``allow_any_key``.
+        simulator_factory: Builds one world per session from ``width=, height=, fps=``
+            (default: the procedural :class:`~oasis_torchrl.sim.simulator.Simulator`).
+
+    Example:
+        >>> server = A2VServer(ServerConfig(width=96, height=64, api_keys=("secret",)))
+        >>> port = server.start()
+        >>> server.address == f"127.0.0.1:{port}"
+        True
+        >>> server.stop()
+    """
+
+    def __init__(
+        self, config: ServerConfig, *, simulator_factory: SimulatorFactory | None = None
+    ) -> None:
+        self.config = config
+        self._authority = ApiKeyAuthority(config.api_keys, allow_any_key=config.allow_any_key)
+        self._registry = SessionRegistry(config, simulator_factory or Simulator)
+        self._encode_pool = ThreadPoolExecutor(
+            config.resolved_encode_workers, thread_name_prefix="oasis-encode"
+        )
+        self._health = health.HealthServicer()
+        self._handler_pool = ThreadPoolExecutor(config.workers, thread_name_prefix="oasis-grpc")
+        self._server = grpc.server(
+            self._handler_pool,
+            options=[
+                ("grpc.max_receive_message_length", config.max_message_bytes),
+                ("grpc.so_reuseport", 0),
+            ],
+        )
+        a2v_pb2_grpc.add_A2VServiceServicer_to_server(
+            A2VServicer(config, self._registry, self._authority, self._encode_pool), self._server
+        )
+        sim_pb2_grpc.add_SimServiceServicer_to_server(
+            SimServicer(self._registry, self._authority), self._server
+        )
+        health_pb2_grpc.add_HealthServicer_to_server(self._health, self._server)
+        self.port: int | None = None
+
+    @property
+    def address(self) -> str:
+        """``host:port`` a client on this machine dials (wildcard hosts become loopback)."""
+        return self.config.client_address(self._bound_port())
+
+    @property
+    def endpoint(self) -> str:
+        """The endpoint URL clients take: ``http://`` or, with TLS, ``https://``."""
+        return self.config.endpoint(self._bound_port())
+
+    def _bound_port(self) -> int:
+        if self.port is None:
+            raise RuntimeError("the server is not started; call start() first")
+        return self.port
+
+    def start(self) -> int:
+        """Bind, start serving and report SERVING; returns the bound port."""
+        if self.config.tls_enabled:
+            credentials = grpc.ssl_server_credentials(
+                [(Path(self.config.tls_key).read_bytes(), Path(self.config.tls_cert).read_bytes())]
+            )
+            self.port = self._server.add_secure_port(self.config.address_to_bind, credentials)
+        else:
+            self.port = self._server.add_insecure_port(self.config.address_to_bind)
+        self._server.start()
+        self._registry.start_reaper()
+        for service in ("", A2V_SERVICE_NAME, SIM_SERVICE_NAME):
+            self._health.set(service, health_pb2.HealthCheckResponse.SERVING)
+        logger.info("A2V server listening on %s (TLS %s)", self.address, self.config.tls_enabled)
+        return self.port
+
+    def stop(self, grace: float | None = 1.0) -> None:
+        """Report NOT_SERVING, finish in-flight calls within ``grace`` seconds, release all."""
+        self._health.enter_graceful_shutdown()
+        self._server.stop(grace).wait()
+        self._registry.close()
+        self._encode_pool.shutdown(wait=True)
+        self._handler_pool.shutdown(wait=False)
+        logger.info("A2V server on port %s stopped", self.port)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the server stops (or ``timeout``); True if it stopped."""
+        return self._server.wait_for_termination(timeout)

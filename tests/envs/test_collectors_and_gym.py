@@ -1,0 +1,86 @@
+"""OasisEnv inside TorchRL collectors (single and multi-process) and the Gymnasium adapter."""
+
+from __future__ import annotations
+
+import time
+
+import torch
+from gymnasium.utils.env_checker import check_env
+from tensordict import TensorDict
+from torchrl.collectors import Collector, MultiSyncCollector
+
+from oasis_torchrl.envs import OasisEnv, OasisGymEnv
+from oasis_torchrl.sim.config import ServerConfig
+
+SMALL = ServerConfig(width=64, height=48)
+
+
+def make_env() -> OasisEnv:
+    return OasisEnv("local", num_envs=2, prompts="highway", server=SMALL, max_steps=3)
+
+
+def test_collector_yields_batches_with_resets() -> None:
+    collector = Collector(make_env, policy=None, frames_per_batch=8, total_frames=16)
+    try:
+        batches = list(collector)
+    finally:
+        collector.shutdown()
+    assert len(batches) == 2
+    batch = batches[0]
+    assert batch.batch_size == (2, 4)
+    assert batch["next", "pixels", "front"].dtype == torch.uint8
+    # max_steps=3: the third step of every row is truncated and the row starts over
+    assert batch["next", "truncated"][:, 2].all()
+
+
+def test_two_worker_multiprocess_collector_spawn() -> None:
+    collector = MultiSyncCollector(
+        [make_env, make_env],
+        policy=None,
+        frames_per_batch=8,
+        total_frames=16,
+        mp_start_method="spawn",
+    )
+    try:
+        shapes = [tuple(batch["next", "pixels", "front"].shape[-3:]) for batch in collector]
+    finally:
+        collector.shutdown()
+    assert shapes == [(48, 64, 3)] * 2
+
+
+def test_lost_session_is_reopened_for_its_row_only() -> None:
+    env = OasisEnv(
+        "local",
+        num_envs=2,
+        server=ServerConfig(width=64, height=48, idle_timeout_s=0.5),
+        max_steps=50,
+    )
+    try:
+        env.reset()
+        action = TensorDict(action=torch.full((2, 4, 2), 0.0), batch_size=[2])
+        env.step(action)
+        # let row 1's session expire on the server while row 0 keeps being used
+        deadline = time.monotonic() + 1.5
+        while time.monotonic() < deadline:
+            env.pool.infer(torch.zeros(1, 4, 2).numpy(), indices=[0])
+            time.sleep(0.1)
+        out = env.step(action)["next"]
+        assert out["truncated"].flatten().tolist() == [False, True]
+        assert out["info", "session_restarts"].flatten().tolist() == [0, 1]
+        assert out["pixels", "front"][1].float().mean() > 0
+    finally:
+        env.close()
+
+
+def test_gymnasium_adapter_passes_env_checker() -> None:
+    env = OasisGymEnv(prompt="rural road", server=SMALL, max_steps=5)
+    try:
+        check_env(env, skip_render_check=True)
+        obs, info = env.reset(seed=0)
+        assert set(obs) == {"left_forward", "front", "right_forward"}
+        assert obs["front"].shape == (48, 64, 3)
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert isinstance(reward, float)
+        assert "truth" in info
+    finally:
+        env.close()

@@ -1,0 +1,135 @@
+"""OasisEnv against the real embedded server on loopback."""
+
+from __future__ import annotations
+
+import pickle
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.envs.utils import check_env_specs
+
+from oasis_torchrl.envs import OasisEnv, make_training_env
+from oasis_torchrl.sim.config import ServerConfig
+
+SMALL = ServerConfig(width=64, height=48)
+CAMERAS = ("left_forward", "front", "right_forward")
+
+
+@pytest.fixture
+def env():
+    env = OasisEnv("local", num_envs=3, prompts="urban street", server=SMALL, max_steps=5)
+    yield env
+    if not env.is_closed:
+        env.close()
+
+
+def straight(env: OasisEnv, throttle: float = 0.5) -> TensorDict:
+    action = torch.zeros(env.action_spec.shape)
+    action[..., 0] = throttle
+    return TensorDict(action=action, batch_size=env.batch_size)
+
+
+def test_check_env_specs(env: OasisEnv) -> None:
+    check_env_specs(env, seed=0)
+
+
+def test_layout_and_reset_observation(env: OasisEnv) -> None:
+    td = env.reset()
+    for camera in CAMERAS:
+        assert td["pixels", camera].shape == (3, 48, 64, 3)
+        assert td["pixels", camera].dtype == torch.uint8
+    assert torch.equal(td["state"], torch.zeros(3, 2))
+    assert td["truth", "speed"].shape == (3, 4)
+    assert not td["done"].any()
+
+
+def test_rollout_truncates_at_max_steps(env: OasisEnv) -> None:
+    td = env.rollout(5, break_when_any_done=False)
+    assert td.batch_size == (3, 5)
+    assert td["next", "truncated"][:, -1].all()
+    assert not td["next", "truncated"][:, :-1].any()
+    # the previous action is observed at the next step
+    assert torch.allclose(td["next", "state"][:, 0], td["action"][:, 0, -1])
+
+
+def test_partial_reset_reprompts_only_masked_rows(env: OasisEnv) -> None:
+    env.set_seed(1)
+    env.reset()
+    for _ in range(3):
+        out = env.step(straight(env))["next"]
+    before = out["truth", "distance"][:, -1].clone()
+    assert (before > 0).all()
+    reset = torch.tensor([[False], [True], [False]])
+    td = out.clone().set("_reset", reset)
+    after = env.reset(td)
+    assert after["truth", "distance"][1, -1] == 0
+    assert torch.equal(after["truth", "distance"][[0, 2], -1], before[[0, 2]])
+    assert torch.equal(after["pixels", "front"][0], out["pixels", "front"][0])
+
+
+def test_same_seed_same_rollout() -> None:
+    def run(seed: int) -> TensorDict:
+        env = OasisEnv("local", num_envs=2, prompts="rural road", server=SMALL, max_steps=4)
+        try:
+            env.set_seed(seed)
+            torch.manual_seed(0)
+            return env.rollout(4, break_when_any_done=False)
+        finally:
+            env.close()
+
+    a, b, c = run(3), run(3), run(4)
+    assert torch.equal(a["next", "pixels", "front"], b["next", "pixels", "front"])
+    assert torch.equal(a["next", "reward"], b["next", "reward"])
+    assert not torch.equal(a["next", "pixels", "front"], c["next", "pixels", "front"])
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [(float("nan"), "not finite"), (1.5, "outside"), (None, "shape")],
+)
+def test_bad_actions_rejected_before_any_request(env: OasisEnv, value, message) -> None:
+    env.reset()
+    seq_before = env.pool.sequence_nums.copy()
+    if value is None:
+        action = torch.zeros(3, 2)
+    else:
+        action = torch.zeros(env.action_spec.shape)
+        action[1, 2, 0] = value
+    with pytest.raises(ValueError, match=message):
+        env.step(TensorDict(action=action, batch_size=[3]))
+    assert (env.pool.sequence_nums == seq_before).all()
+
+
+def test_single_action_mode_and_all_frames() -> None:
+    env = OasisEnv(
+        "local", num_envs=2, server=SMALL, chunk_actions=False, all_frames=True, max_steps=3
+    )
+    try:
+        assert env.action_spec.shape == (2, 2)
+        td = env.rollout(2)
+        assert td["next", "pixels", "front"].shape == (2, 2, 4, 48, 64, 3)
+    finally:
+        env.close()
+
+
+def test_env_is_picklable_and_lazy(env: OasisEnv) -> None:
+    env.reset()
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone._pool is None
+    try:
+        assert clone.reset()["pixels", "front"].shape == (3, 48, 64, 3)
+    finally:
+        clone.close()
+
+
+def test_training_env_helper() -> None:
+    env = make_training_env(num_envs=2, image_size=(24, 32), server=SMALL, max_steps=3)
+    try:
+        td = env.rollout(3)
+        assert td["next", "images", "front"].shape == (2, 3, 3, 24, 32)
+        assert td["next", "images", "front"].dtype == torch.float32
+        assert "episode_reward" in td["next"].keys()
+        assert td["next", "step_count"][:, -1].eq(3).all()
+    finally:
+        env.close()
