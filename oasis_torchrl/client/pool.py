@@ -250,7 +250,7 @@ class _PoolSession:
         return extras.depth_maps(response)
 
     async def finish_quietly(self) -> None:
-        """Finish the current session if any, ignoring failures (single short attempt)."""
+        """Finish the current session if any, ignoring failures (short timeout per attempt)."""
         if self.info is None:
             return
         request = a2v_pb2.FinishRequest(session_id=self.info.session_id)
@@ -261,7 +261,6 @@ class _PoolSession:
                 "Finish",
                 request,
                 self.metadata,
-                policy=RetryPolicy.never(),
                 timeout=min(self.rpc.timeout or FINISH_TIMEOUT_S, FINISH_TIMEOUT_S),
             )
         except (DecartRoboticsError, grpc.RpcError) as error:
@@ -571,13 +570,19 @@ class SessionPool:
         return await self._step(session, actions, slots)
 
     async def _prompt_session(self, session: _PoolSession, prompt: str, seed: int | None) -> None:
-        if session.lost or session.info is None:
-            await session.open()
+        """Prompt a row, re-Initializing it first if its session is lost or gone."""
         try:
-            await session.prompt(prompt, seed)
-        except SessionLostError:
-            await session.open()
-            await session.prompt(prompt, seed)
+            if session.lost or session.info is None:
+                await session.open()
+            try:
+                await session.prompt(prompt, seed)
+            except SessionLostError:
+                await session.open()
+                await session.prompt(prompt, seed)
+        except TransportError as error:
+            # The server may or may not have applied the call: start this row over next time.
+            session.lost_error = error
+            raise
 
     async def _recover(self, session: _PoolSession) -> None:
         await session.open()

@@ -19,6 +19,7 @@ to what remains of the deadline.
 from __future__ import annotations
 
 import asyncio
+import logging
 import random
 import time
 from collections.abc import Awaitable, Callable
@@ -30,6 +31,8 @@ import grpc
 from oasis_torchrl.client.errors import TransportError, transport_error_from_rpc
 
 T = TypeVar("T")
+
+logger = logging.getLogger(__name__)
 
 TRANSIENT_CODES = frozenset({grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.RESOURCE_EXHAUSTED})
 IDEMPOTENT_METHODS = frozenset({"Infer"})
@@ -125,6 +128,14 @@ class RetryBudget:
         deadline = self.policy.deadline
         if deadline is not None and self.elapsed + delay >= deadline:
             return None
+        logger.debug(
+            "%s failed with %s (attempt %d of %d); retrying in %.3f s",
+            self.method,
+            code.name if code is not None else "an unknown status",
+            self.attempts,
+            self.policy.max_attempts,
+            delay,
+        )
         self.attempts += 1
         return delay
 

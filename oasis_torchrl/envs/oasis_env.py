@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import NonTensorStack, TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 
 from oasis_torchrl.client import TRUTH_FIELDS, PoolStep, RetryPolicy, SessionPool, SessionStatus
@@ -149,6 +149,8 @@ class OasisEnv(EnvBase):
         self.reward_spec = build_reward_spec(self.layout)
         self.full_done_spec = build_done_spec(self.layout)
         self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._prompts = [""] * num_envs
+        self._seeds = torch.zeros(num_envs, 1, dtype=torch.int64)
         self._restarts = torch.zeros(num_envs, 1, dtype=torch.int64)
         self._last_obs: TensorDictBase | None = None
 
@@ -232,6 +234,9 @@ class OasisEnv(EnvBase):
                 f"could not reset env row {rows[failed[0]]}: {step.errors[failed[0]]}"
             ) from step.errors[failed[0]]
         self._steps[rows] = 0
+        for row, prompt, seed in zip(rows, prompts, seeds):
+            self._prompts[row] = prompt
+            self._seeds[row] = seed
         mask = torch.zeros(self.num_envs, dtype=torch.bool)
         mask[rows] = True
         self._reward.reset(mask)
@@ -297,6 +302,8 @@ class OasisEnv(EnvBase):
             frames = torch.from_numpy(step.frames[camera])
             fresh["pixels", camera] = frames if self.all_frames else frames[:, -1].contiguous()
         fresh["state"] = prev_action.to(torch.float32)
+        fresh["prompt"] = NonTensorStack(*(self._prompts[row] for row in rows))
+        fresh["episode_seed"] = self._seeds[rows]
         if self.layout.truth_fields:
             truth = torch.from_numpy(_truth_or_nan(step, len(rows))).to(torch.float32)
             for k, name in enumerate(self.layout.truth_fields):

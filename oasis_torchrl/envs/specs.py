@@ -10,6 +10,8 @@ key                           dtype / shape              meaning
                                                          ``all_frames=True`` ``[N, 4, H, W, 3]``
 ``"state"``                   float32 ``[N, 2]``         the previous action ``[throttle,
                                                          steering]`` (zeros after a reset)
+``"prompt"``                  str ``[N]`` (non-tensor)   the prompt of the row's episode
+``"episode_seed"``            int64 ``[N, 1]``           the seed of the row's episode
 ``("truth", <field>)``        float32 ``[N, 4]``         embedded-server ground truth per frame
                                                          of the chunk (see ``TRUTH_FIELDS``)
 ``("depth", <camera>)``       float32 ``[N, H, W]``      metric depth of the last frame (opt-in)
@@ -28,7 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
-from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 
 CHUNK = 4
 """Actions per Infer call and frames per stream in every response."""
@@ -81,6 +83,8 @@ def build_observation_spec(layout: EnvLayout) -> Composite:
         lambda: Bounded(0, 255, _pixels_shape(layout), dtype=torch.uint8, device=device),
     )
     spec["state"] = Bounded(-1.0, 1.0, (n, 2), dtype=torch.float32, device=device)
+    spec["prompt"] = NonTensor(shape=(n,), example_data="urban street", device=device)
+    spec["episode_seed"] = Unbounded((n, 1), dtype=torch.int64, device=device)
     if layout.truth_fields:
         spec["truth"] = _group(
             layout, layout.truth_fields, lambda: Unbounded((n, CHUNK), device=device)

@@ -72,7 +72,9 @@ def chunk_summary(result: Any, streams: Sequence[Any]) -> dict[str, Any]:
                 "count": len(frames),
                 "shapes": sorted({tuple(f.shape) for f in frames}),
                 "dtypes": sorted({str(f.dtype) for f in frames}),
-                "sha256": [hashlib.sha256(np.ascontiguousarray(f).tobytes()).hexdigest() for f in frames],
+                "sha256": [
+                    hashlib.sha256(np.ascontiguousarray(f).tobytes()).hexdigest() for f in frames
+                ],
             }
             for name, frames in sorted(result.frames.items())
         },

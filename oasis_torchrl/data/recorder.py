@@ -1,0 +1,230 @@
+"""Record TorchRL rollouts and collector batches as a LeRobot dataset, one episode per env episode.
+
+Rows of the N env rows of a batch are kept apart: each env row has its own open episode, which
+is cut where ``("next", "done")`` is set and otherwise continues into the next batch. How steps
+and chunks become rows: :mod:`oasis_torchrl.data.chunk_rows`.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from tensordict import TensorDictBase
+
+from oasis_torchrl.data.chunk_rows import RowBatch, batch_to_rows, infer_layout, rows_per_step
+from oasis_torchrl.data.episode_buffer import EpisodeBuffer
+from oasis_torchrl.data.features import (
+    ACTIONS_PER_CHUNK,
+    DEFAULT_FPS,
+    DatasetLayout,
+    build_features,
+    check_columns,
+)
+from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+
+logger = logging.getLogger(__name__)
+
+
+class LeRobotRecorder:
+    """Writes batches of env steps as LeRobot episodes; also a TorchRL collector hook.
+
+    The dataset is created (or, with ``append=True``, reopened) at the first batch, whose layout
+    fixes the features: pixels ``[..., 4, H, W, 3]`` (``OasisEnv(all_frames=True)``) give one
+    row per frame at ``fps``; pixels ``[..., H, W, 3]`` one row per chunk at ``fps / 4``.
+    Each batch is checked against the features before anything of it is kept.
+
+    Close it (or use it as a context manager): :meth:`close` always finalizes the dataset. On
+    an exception the episodes still running are dropped, so the dataset holds every completed
+    episode and nothing half-written.
+
+    Args:
+        root: dataset folder (created; must not exist unless ``append``).
+        repo_id: LeRobot repo id (default ``local/<folder name>``).
+        fps: world-model frame rate of the run.
+        image_size: stored ``(height, width)`` (even); default: full resolution.
+        vcodec: video codec (``"h264"``, ``"libsvtav1"``, ``"hevc"``).
+        append: add episodes to the dataset at ``root``.
+        max_episodes: stop recording after this many episodes (see :attr:`full`).
+        keep_unfinished: on a clean :meth:`close`, also save the episodes still running.
+        spill_dir: folder for the frames of running episodes (default: beside ``root``).
+
+    Example:
+        >>> from oasis_torchrl.envs import OasisEnv  # doctest: +SKIP
+        >>> env = OasisEnv("local", num_envs=2, all_frames=True)  # doctest: +SKIP
+        >>> with LeRobotRecorder("drives") as recorder:  # doctest: +SKIP
+        ...     recorder.write(env.rollout(50, break_when_any_done=False))
+        >>> # as a collector hook: Collector(env, policy, ..., post_collect_hook=recorder)
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        *,
+        repo_id: str | None = None,
+        fps: int = DEFAULT_FPS,
+        image_size: tuple[int, int] | None = None,
+        vcodec: str = DEFAULT_VCODEC,
+        append: bool = False,
+        max_episodes: int | None = None,
+        keep_unfinished: bool = True,
+        spill_dir: str | Path | None = None,
+    ) -> None:
+        if max_episodes is not None and max_episodes < 1:
+            raise ValueError(f"max_episodes must be >= 1, got {max_episodes}")
+        self.root = Path(root)
+        self.repo_id = repo_id
+        self.fps = fps
+        self.image_size = image_size
+        self.vcodec = vcodec
+        self.append = append
+        self.max_episodes = max_episodes
+        self.keep_unfinished = keep_unfinished
+        self.episodes_written = 0
+        self.frames_written = 0
+        self.dataset: Any = None
+        self.layout: DatasetLayout | None = None
+        self._features: dict[str, Any] = {}
+        self._spill_parent = Path(spill_dir) if spill_dir is not None else self.root.parent
+        self._spill: Path | None = None
+        self._open: list[EpisodeBuffer | None] = []
+        self._closed = False
+
+    @property
+    def full(self) -> bool:
+        """Whether ``max_episodes`` episodes have been written."""
+        return self.max_episodes is not None and self.episodes_written >= self.max_episodes
+
+    @property
+    def running_episodes(self) -> int:
+        """Episodes started and not yet ended."""
+        return sum(buffer is not None for buffer in self._open)
+
+    # -- writing ---------------------------------------------------------------------------
+
+    def __call__(self, batch: TensorDictBase) -> TensorDictBase:
+        """Record ``batch`` and return it unchanged (a collector ``postproc``/post-collect hook)."""
+        self.write(batch)
+        return batch
+
+    def write(self, batch: TensorDictBase) -> int:
+        """Record a batch of env steps ``[..., T]``; returns the episodes it completed."""
+        if self._closed:
+            raise RuntimeError("the recorder is closed")
+        if self.full:
+            return 0
+        layout = self.layout or infer_layout(batch, self.image_size)
+        features = self._features or build_features(layout)
+        rows = batch_to_rows(batch, layout)
+        check_columns(rows.columns, features, leading=3)
+        if self.layout is None:
+            self._start(layout, features, rows_per_step(batch), rows.shape[0])
+        if len(self._open) != rows.shape[0]:
+            raise ValueError(
+                f"the batch has {rows.shape[0]} env rows, earlier batches had {len(self._open)}"
+            )
+        before = self.episodes_written
+        for step in range(rows.shape[1]):
+            for row in range(rows.shape[0]):
+                if not self.full:
+                    self._record_step(rows, row, step)
+        return self.episodes_written - before
+
+    def _start(
+        self, layout: DatasetLayout, features: dict[str, Any], rows_per_step: int, env_rows: int
+    ) -> None:
+        """Open the dataset for the first batch's layout."""
+        if rows_per_step == 1 and self.fps % ACTIONS_PER_CHUNK:
+            raise ValueError(
+                f"fps {self.fps} is not divisible by {ACTIONS_PER_CHUNK} (one row per chunk)"
+            )
+        dataset_fps = self.fps if rows_per_step > 1 else self.fps // ACTIONS_PER_CHUNK
+        self.dataset = open_dataset(
+            self.root,
+            features,
+            dataset_fps,
+            repo_id=self.repo_id,
+            vcodec=self.vcodec,
+            append=self.append,
+        )
+        self.layout, self._features = layout, features
+        self._spill = Path(
+            tempfile.mkdtemp(prefix=f".{self.root.name}-spill-", dir=self._spill_parent)
+        )
+        self._open = [None] * env_rows
+        logger.info(
+            "recording %s at %d fps (%d rows per step) into %s",
+            layout,
+            dataset_fps,
+            rows_per_step,
+            self.root,
+        )
+
+    def _record_step(self, rows: RowBatch, row: int, step: int) -> None:
+        task, seed = rows.tasks[row][step], int(rows.seeds[row, step])
+        episode = self._open[row]
+        if episode is not None and (episode.task, episode.seed) != (task, seed):
+            logger.warning(
+                "env row %d switched to a new episode without a done flag; cutting the old one",
+                row,
+            )
+            self._end(row, save=self.keep_unfinished)
+            episode = None
+        if episode is None:
+            episode = EpisodeBuffer(self._spill, self._features, task, seed)
+            self._open[row] = episode
+        episode.append(rows.step(row, step))
+        if rows.done[row, step]:
+            self._end(row, save=True)
+
+    def _end(self, row: int, *, save: bool) -> None:
+        episode, self._open[row] = self._open[row], None
+        try:
+            if save and not self.full:
+                self.frames_written += write_episode(self.dataset, episode.rows(), episode.task)
+                self.episodes_written += 1
+        finally:
+            episode.discard()
+
+    # -- closing ---------------------------------------------------------------------------
+
+    def close(self, *, keep_unfinished: bool | None = None) -> None:
+        """Save (or drop) the running episodes, then finalize the dataset; always finalizes."""
+        if self._closed:
+            return
+        self._closed = True
+        keep = self.keep_unfinished if keep_unfinished is None else keep_unfinished
+        try:
+            for row, episode in enumerate(self._open):
+                if episode is not None:
+                    self._end(row, save=keep)
+        finally:
+            for row, episode in enumerate(self._open):
+                if episode is not None:
+                    episode.discard()
+                    self._open[row] = None
+            if self._spill is not None:
+                shutil.rmtree(self._spill, ignore_errors=True)
+            if self.dataset is not None:
+                self.dataset.finalize()
+            logger.info(
+                "closed %s: %d episodes, %d rows written",
+                self.root,
+                self.episodes_written,
+                self.frames_written,
+            )
+
+    def __enter__(self) -> LeRobotRecorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close(keep_unfinished=None if exc_type is None else False)

@@ -1,0 +1,167 @@
+"""Writing episodes through LeRobot's own API (``create`` / ``add_frame`` / ``save_episode`` /
+``finalize``), shared by the rollout exporter and the recordings importer.
+
+Frames are streamed to LeRobot's per-camera encoder threads (``streaming_encoding=True``: no PNG
+round trip). That encoder was built for live cameras and drops a frame when its queue stays full
+for 0.1 s; replayed frames must all land, so :func:`write_episode` waits for queue room first and
+refuses to save an episode that lost a frame anyway.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import threading
+import time
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+
+import av
+import numpy as np
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.datasets.utils import INFO_PATH
+from lerobot.datasets.video_utils import resolve_vcodec
+
+from oasis_torchrl.data.features import Feature, check_same_features
+from oasis_torchrl.data.loading import default_repo_id, default_video_backend
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_VCODEC = "h264"
+"""libx264 through PyAV: about 2.5x faster than LeRobot's default libsvtav1 here, smaller files
+at the same settings, and read back by both pyav and torchcodec."""
+ROBOT_TYPE = "oasis_car"
+
+
+def check_vcodec(vcodec: str) -> str:
+    """``vcodec`` if LeRobot accepts it and this PyAV build can encode it.
+
+    Example:
+        >>> check_vcodec("h264")
+        'h264'
+    """
+    resolved = resolve_vcodec(vcodec)
+    try:
+        av.codec.Codec(resolved, "w")
+    except Exception as error:
+        raise ValueError(f"vcodec {vcodec!r}: this PyAV build has no such encoder") from error
+    return resolved
+
+
+def open_dataset(
+    root: str | Path,
+    features: Mapping[str, Feature],
+    fps: int,
+    *,
+    repo_id: str | None = None,
+    vcodec: str = DEFAULT_VCODEC,
+    append: bool = False,
+) -> LeRobotDataset:
+    """Create a dataset at ``root``, or (``append=True``) reopen the one there to add episodes.
+
+    Raises:
+        FileExistsError: ``root`` holds data and ``append`` is false.
+        ValueError: appending with another fps or other features (naming the key).
+    """
+    root = Path(root)
+    repo_id = repo_id or default_repo_id(root)
+    vcodec = check_vcodec(vcodec)
+    # LeRobot's encoder threads hand FFmpeg its default stderr logger back when they finish;
+    # without this, every episode prints the encoder's banner and statistics.
+    av.logging.set_libav_level(av.logging.ERROR)
+    if (root / INFO_PATH).exists():
+        if not append:
+            raise FileExistsError(f"{root} already holds a LeRobot dataset; append to add episodes")
+        dataset = LeRobotDataset(
+            repo_id,
+            root=root,
+            video_backend=default_video_backend(),
+            vcodec=vcodec,
+            streaming_encoding=True,
+        )
+        if dataset.fps != fps:
+            raise ValueError(f"{root} is a {dataset.fps} fps dataset; the new rows are {fps} fps")
+        check_same_features(features, dataset.features)
+        return dataset
+    if root.exists():
+        if any(root.iterdir()):
+            raise FileExistsError(f"{root} exists and is not a LeRobot dataset")
+        root.rmdir()  # LeRobot creates the folder itself and refuses an existing one
+    return LeRobotDataset.create(
+        repo_id,
+        fps,
+        dict(features),
+        root=root,
+        robot_type=ROBOT_TYPE,
+        use_videos=True,
+        video_backend=default_video_backend(),
+        vcodec=vcodec,
+        streaming_encoding=True,
+    )
+
+
+def _encoder_queues(dataset: LeRobotDataset) -> Iterator[tuple[object, threading.Thread]]:
+    # LeRobot exposes no public hook for this; see the module docstring for why it is needed.
+    encoder = dataset._streaming_encoder
+    if encoder is None:
+        return iter(())
+    return ((queue, encoder._threads[key]) for key, queue in encoder._frame_queues.items())
+
+
+def _wait_for_encoder_room(dataset: LeRobotDataset) -> None:
+    for queue, thread in _encoder_queues(dataset):
+        while queue.full() and thread.is_alive():
+            time.sleep(0.001)
+
+
+def _check_no_dropped_frames(dataset: LeRobotDataset) -> None:
+    counts = getattr(dataset._streaming_encoder, "_dropped_frames", {})
+    dropped = {key: count for key, count in counts.items() if count}
+    if dropped:
+        raise RuntimeError(f"the video encoder dropped frames {dropped}; episode not saved")
+
+
+@contextlib.contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C until the block ends, so an episode is saved whole or not at all."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if received and callable(previous):
+            previous(signal.SIGINT, None)
+
+
+def write_episode(
+    dataset: LeRobotDataset, rows: Iterable[Mapping[str, np.ndarray]], task: str
+) -> int:
+    """Add ``rows`` (feature key -> value) as one episode with ``task`` and save it.
+
+    On any error (or Ctrl-C) before the save, LeRobot's episode buffer is cleared so the dataset
+    holds exactly the episodes saved before; the save itself is never interrupted halfway.
+
+    Returns:
+        The number of rows written.
+    """
+    count = 0
+    try:
+        for row in rows:
+            _wait_for_encoder_room(dataset)
+            dataset.add_frame({**row, "task": task})
+            count += 1
+        if count == 0:
+            raise ValueError("an episode needs at least one row")
+        _check_no_dropped_frames(dataset)
+    except BaseException:
+        if dataset.episode_buffer is not None and dataset.episode_buffer["size"]:
+            dataset.clear_episode_buffer(delete_images=False)
+        raise
+    with _interrupts_deferred():
+        dataset.save_episode()
+    return count
