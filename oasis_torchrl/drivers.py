@@ -1,10 +1,10 @@
 """Drivers for recording: TorchRL-policy-like callables ``td -> td`` that set ``"action"``.
 
-- :class:`Autopilot`: the privileged expert of the embedded simulator. It works from the
-  TensorDict alone: the row's ``"prompt"`` and ``"episode_seed"`` rebuild the (deterministic)
-  world with :func:`~oasis_torchrl.sim.scene.build_scene`, and the row's ground truth
-  ``("truth", field)`` places the car in it. It keeps to the freest lane, changes lanes around
-  obstacles, and brakes when no lane is free.
+- :class:`Autopilot`: the embedded simulator's privileged expert
+  (:mod:`oasis_torchrl.sim.autopilot`), working from the TensorDict alone: the row's
+  ``"prompt"`` and ``"episode_seed"`` rebuild the (deterministic) world with
+  :func:`~oasis_torchrl.sim.scene.build_scene`, and the row's ground truth ``("truth", field)``
+  places the car in it.
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a saved policy (TorchScript or ``torch.save``d module).
 
@@ -16,26 +16,27 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 from tensordict import NonTensorData, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from oasis_torchrl.client import TRUTH_FIELDS
 from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
 from oasis_torchrl.client.wire import ACTIONS_PER_CHUNK
+from oasis_torchrl.sim.autopilot import Autopilot as SimAutopilot
 from oasis_torchrl.sim.scene import Scene, build_scene
-from oasis_torchrl.sim.vehicle import VehicleParams
+from oasis_torchrl.sim.vehicle import VehicleState
+from oasis_torchrl.sim.world import FrameTruth, World
 
 logger = logging.getLogger(__name__)
 
 TRUTH = "truth"
-_TRUTH_USED = ("x", "y", "heading", "speed", "progress", "lateral_offset", "collided")
 
 
 class Driver(ABC):
@@ -73,138 +74,6 @@ def cached_scene(prompt: str, seed: int) -> Scene:
     return build_scene(prompt, seed)
 
 
-@dataclass(frozen=True)
-class AutopilotSettings:
-    """Tuning of :class:`Autopilot` (metres, seconds, m/s).
-
-    Example:
-        >>> AutopilotSettings().cruise_speed(14.0)
-        9.8
-    """
-
-    speed_fraction: float = 0.7
-    max_speed: float = 12.0
-    lookahead_time: float = 0.8
-    min_lookahead: float = 6.0
-    scan_time: float = 3.5
-    min_scan: float = 25.0
-    clearance: float = 0.5
-    stop_gap: float = 4.0
-    deceleration: float = 3.0
-    speed_gain: float = 0.6
-
-    def cruise_speed(self, speed_limit: float) -> float:
-        """Target speed on a free road."""
-        return round(min(self.speed_fraction * speed_limit, self.max_speed), 6)
-
-
-def lane_gap(
-    scene: Scene,
-    s: float,
-    lane_offset: float,
-    reach: float,
-    car: VehicleParams,
-    clearance: float = AutopilotSettings.clearance,
-) -> float:
-    """Free distance ahead of the car's front in the lane centred at ``lane_offset``.
-
-    An obstacle is in the lane if it comes within ``clearance`` of the car's sides there.
-    Obstacles alongside the car count (gap 0), so a lane is only free if the car fits into it
-    now. Returns ``reach`` when nothing is in the way within it.
-
-    Example:
-        >>> scene = build_scene("highway", 0)
-        >>> lane_gap(scene, 0.0, scene.style.lane_offset(0), 30.0, VehicleParams())
-        30.0
-    """
-    obstacles = scene.obstacles
-    near = obstacles.between(s - 15.0, s + reach + 15.0)
-    half = car.length / 2
-    in_lane = np.abs(obstacles.d[near] - lane_offset) < (
-        obstacles.half_across[near] + car.width / 2 + clearance
-    )
-    rear = obstacles.s[near] - obstacles.half_along[near] - (s + half)
-    front = obstacles.s[near] + obstacles.half_along[near] - (s - half)
-    blocking = in_lane & (front > 0.0)
-    if not blocking.any():
-        return reach
-    return float(np.clip(rear[blocking].min(), 0.0, reach))
-
-
-def _choose_lane(
-    scene: Scene, s: float, d: float, reach: float, car: VehicleParams, clearance: float
-) -> int:
-    """The current lane while it is free, else the adjacent lane with the most room."""
-    style = scene.style
-    offsets = [style.lane_offset(lane) for lane in range(style.lanes)]
-    current = int(np.argmin([abs(d - offset) for offset in offsets]))
-    candidates = [lane for lane in (current, current - 1, current + 1) if 0 <= lane < style.lanes]
-    gaps = {lane: lane_gap(scene, s, offsets[lane], reach, car, clearance) for lane in candidates}
-    if gaps[current] >= reach:
-        return current
-    return max(candidates, key=lambda lane: (gaps[lane], lane == current))
-
-
-def _pursuit_steering(
-    scene: Scene,
-    truth: dict[str, float],
-    target_offset: float,
-    lookahead: float,
-    car: VehicleParams,
-) -> float:
-    """Pure pursuit towards the target lane's centre ``lookahead`` metres ahead."""
-    x, y, _ = scene.road.pose_at(truth["progress"] + lookahead, target_offset)
-    dx, dy = float(x) - truth["x"], float(y) - truth["y"]
-    alpha = math.remainder(math.atan2(dy, dx) - truth["heading"], math.tau)
-    curvature = 2.0 * math.sin(alpha) / max(math.hypot(dx, dy), 1e-3)
-    wheel_angle = math.atan(curvature * car.wheelbase)
-    return -wheel_angle / car.max_steer  # steering + turns right (clockwise)
-
-
-def autopilot_action(
-    scene: Scene, truth: dict[str, float], settings: AutopilotSettings = AutopilotSettings()
-) -> tuple[float, float]:
-    """``(throttle, steering)`` of the expert for one car state.
-
-    Args:
-        scene: the world the car drives in.
-        truth: ground-truth fields of the current frame (``x``, ``y``, ``heading``, ``speed``,
-            ``progress``, ``lateral_offset``, ``collided``).
-        settings: tuning.
-
-    Example:
-        >>> scene = build_scene("highway", 0)
-        >>> x, y, heading = scene.road.pose_at(0.0, scene.style.lane_offset(0))
-        >>> truth = dict(x=float(x), y=float(y), heading=float(heading), speed=0.0,
-        ...              progress=0.0, lateral_offset=scene.style.lane_offset(0), collided=0.0)
-        >>> throttle, steering = autopilot_action(scene, truth)
-        >>> throttle > 0.5 and abs(steering) < 0.1
-        True
-    """
-    if truth["collided"] > 0.5:
-        return 0.0, 0.0
-    car = VehicleParams(max_speed=scene.style.speed_limit)
-    speed = max(truth["speed"], 0.0)
-    s, d = truth["progress"], truth["lateral_offset"]
-    reach = max(settings.min_scan, settings.scan_time * speed)
-    lane = _choose_lane(scene, s, d, reach, car, settings.clearance)
-    style = scene.style
-    # The car must also stop for anything in the lanes its body still overlaps.
-    touches = style.lane_width / 2 + car.width / 2
-    lanes = {lane} | {k for k in range(style.lanes) if abs(d - style.lane_offset(k)) < touches}
-    gap = min(
-        lane_gap(scene, s, style.lane_offset(k), reach, car, settings.clearance) for k in lanes
-    )
-    room = max(gap - settings.stop_gap, 0.0)
-    target = min(
-        settings.cruise_speed(style.speed_limit), math.sqrt(2 * settings.deceleration * room)
-    )
-    throttle = float(np.clip(settings.speed_gain * (target - speed), -1.0, 1.0))
-    lookahead = max(settings.min_lookahead, settings.lookahead_time * speed)
-    steering = _pursuit_steering(scene, truth, style.lane_offset(lane), lookahead, car)
-    return throttle, float(np.clip(steering, -1.0, 1.0))
-
-
 def _row_strings(td: TensorDictBase, key: str) -> list[str]:
     value = td.get(key, None)
     if value is None:
@@ -216,14 +85,38 @@ def _row_strings(td: TensorDictBase, key: str) -> list[str]:
     return list(value.tolist())
 
 
-class Autopilot(Driver):
-    """The privileged expert: drives from ground truth and the world rebuilt from the row.
+class _RowPilot:
+    """The simulator's :class:`~oasis_torchrl.sim.autopilot.Autopilot` for one env row.
 
-    Needs the embedded server's ground truth (``("truth", field)``); every action of the chunk
-    is the same (the expert looks once per chunk, like a policy).
+    That autopilot reads a live simulator's ``world``; here the world is rebuilt from the row:
+    the scene from prompt and seed, the car's state and truth from the row's ground truth.
+    """
+
+    def __init__(self, scene: Scene, fps: float, target_speed: float | None) -> None:
+        self.scene = scene
+        self.world = World(scene, dt=1.0 / fps)
+        self.pilot = SimAutopilot(SimpleNamespace(world=self.world), target_speed)
+
+    def act(self, truth: FrameTruth) -> np.ndarray:
+        """The next chunk ``(4, 2)`` from the car's current ground truth."""
+        world = self.world
+        world.state = VehicleState(truth.x, truth.y, truth.heading, truth.speed)
+        world.truth = truth
+        # A fresh episode has not moved yet (its reset chunk stands still).
+        world.steps = 0 if truth.distance == 0.0 else world.steps + ACTIONS_PER_CHUNK
+        return self.pilot.act()
+
+
+class Autopilot(Driver):
+    """The privileged expert (:mod:`oasis_torchrl.sim.autopilot`), driven from the TensorDict.
+
+    Each row's ``"prompt"`` and ``"episode_seed"`` rebuild its world (cached per pair) and its
+    ground truth ``("truth", field)`` (last frame of the chunk) places the car; only the
+    embedded server sends ground truth. Rows whose truth is missing (NaN) get zeros.
 
     Args:
-        settings: tuning.
+        fps: world-model frame rate (the simulator's time step is ``1 / fps``).
+        target_speed: cruise speed in m/s (default: the autopilot's, from the speed limit).
         chunk_actions: see :class:`Driver`.
 
     Example:
@@ -233,30 +126,43 @@ class Autopilot(Driver):
     """
 
     def __init__(
-        self, settings: AutopilotSettings | None = None, *, chunk_actions: bool = True
+        self,
+        fps: float = 20.0,
+        target_speed: float | None = None,
+        *,
+        chunk_actions: bool = True,
     ) -> None:
         super().__init__(chunk_actions=chunk_actions)
-        self.settings = settings or AutopilotSettings()
+        self.fps = fps
+        self.target_speed = target_speed
+        self._rows: dict[int, _RowPilot] = {}
+
+    def _pilot(self, row: int, prompt: str, seed: int) -> _RowPilot:
+        scene = cached_scene(prompt, seed)
+        pilot = self._rows.get(row)
+        if pilot is None or pilot.scene is not scene:
+            pilot = self._rows[row] = _RowPilot(scene, self.fps, self.target_speed)
+        return pilot
 
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
-        """One expert action per row, repeated over the chunk."""
-        missing = [name for name in _TRUTH_USED if (TRUTH, name) not in td.keys(True)]
+        """The expert's next chunk for every row."""
+        missing = [name for name in TRUTH_FIELDS if (TRUTH, name) not in td.keys(True)]
         if missing:
             raise KeyError(
                 f"the autopilot needs ground truth {[(TRUTH, m) for m in missing]}, which only "
                 "the embedded server (endpoint 'local') sends"
             )
-        truth = {name: td.get((TRUTH, name))[:, -1].double().cpu().numpy() for name in _TRUTH_USED}
+        truth = torch.stack([td.get((TRUTH, name))[:, -1] for name in TRUTH_FIELDS], dim=-1)
+        truth = truth.double().cpu().numpy()
         prompts = _row_strings(td, "prompt")
         seeds = td.get("episode_seed").reshape(-1).tolist()
-        actions = np.zeros((len(prompts), 2), np.float32)
+        chunks = np.zeros((len(prompts), ACTIONS_PER_CHUNK, 2), np.float32)
         for row, (prompt, seed) in enumerate(zip(prompts, seeds, strict=True)):
-            state = {name: float(values[row]) for name, values in truth.items()}
-            if all(math.isfinite(value) for value in state.values()):
-                actions[row] = autopilot_action(
-                    cached_scene(prompt, int(seed)), state, self.settings
-                )
-        return torch.from_numpy(actions).unsqueeze(1).expand(-1, ACTIONS_PER_CHUNK, 2)
+            if not np.isnan(truth[row]).any():  # NaN: no truth (inf is a valid distance)
+                fields = dict(zip(TRUTH_FIELDS, truth[row].tolist(), strict=True))
+                fields.update(collided=fields["collided"] > 0.5, off_road=fields["off_road"] > 0.5)
+                chunks[row] = self._pilot(row, prompt, int(seed)).act(FrameTruth(**fields))
+        return torch.from_numpy(chunks)
 
 
 # -- scripted driver ----------------------------------------------------------------------

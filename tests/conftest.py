@@ -1,8 +1,8 @@
 """Shared fixtures: embedded A2V servers on loopback and raw gRPC stubs to talk to them.
 
 - ``server_keys``: the two API keys every fixture server accepts.
-- ``local_server``: one in-process server for the whole run (96x64, the keys above); do not
-  change its settings, start your own with ``server_factory`` instead.
+- ``local_server``: one in-process server for the whole run (96x64, the keys above, limits of
+  1024 sessions / 512 per key); do not change it, start your own with ``server_factory``.
 - ``server_factory(**overrides)``: a fresh in-process :class:`LocalServer` (96x64 and the keys
   above unless overridden), stopped at the end of the test.
 - ``stub_factory(address)``: :class:`RawStubs` on a plain-text channel; after the test the
@@ -133,7 +133,10 @@ def server_keys() -> tuple[str, str]:
 @pytest.fixture(scope="session")
 def local_server(server_keys: tuple[str, str]) -> Iterator[LocalServer]:
     """One shared in-process server (96x64) for the whole test run."""
-    with LocalServer(api_keys=server_keys, **SMALL_SERVER) as server:
+    # Generous limits: many test files share this server and some leave sessions open.
+    with LocalServer(
+        api_keys=server_keys, max_sessions=1024, max_sessions_per_key=512, **SMALL_SERVER
+    ) as server:
         yield server
 
 

@@ -86,6 +86,8 @@ _FLAGS: tuple[tuple[str, str, dict[str, Any]], ...] = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add one flag per config field, plus ``--port-file`` and ``--grace``."""
     for flag, field, options in _FLAGS:
+        if options.get("action") != "store_true":
+            options = {"metavar": flag[2:].upper().replace("-", "_"), **options}
         parser.add_argument(flag, dest=field, default=None, **options)
     parser.add_argument(
         "--port-file", type=Path, help="write the bound port to this file once serving"

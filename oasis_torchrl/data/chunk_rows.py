@@ -129,11 +129,18 @@ def rows_per_step(batch: TensorDictBase) -> int:
     return pixels.shape[2] if pixels.dim() == 6 else 1
 
 
-def _frames(steps: TensorDictBase, camera: str, size: tuple[int, int]) -> torch.Tensor:
+def _frames(
+    steps: TensorDictBase, camera: str, size: tuple[int, int], source: tuple[int, int] | None
+) -> torch.Tensor:
     """``[B, T, R, H, W, 3]`` uint8: the image of each row (see the mapping table)."""
     root = _get(steps, (PIXELS, camera), "the frames before each action")
     if root.dtype != torch.uint8:
         raise TypeError(f"('pixels', {camera!r}) must be uint8, got {root.dtype}")
+    if source is not None and tuple(root.shape[-3:-1]) != tuple(source):
+        raise ValueError(
+            f"('pixels', {camera!r}): expected {source[0]}x{source[1]} frames (height x width) "
+            f"as in earlier batches, got shape {tuple(root.shape)}"
+        )
     if root.dim() == 5:
         images = root.unsqueeze(2)
     elif root.dim() == 6:
@@ -191,8 +198,20 @@ def _tasks(steps: TensorDictBase) -> list[list[str]]:
     return tasks
 
 
-def batch_to_rows(batch: TensorDictBase, layout: DatasetLayout) -> RowBatch:
+def frame_size(batch: TensorDictBase) -> tuple[int, int]:
+    """``(height, width)`` of the batch's frames (before any resizing)."""
+    steps = _as_steps(batch)
+    pixels = _get(steps, (PIXELS, _cameras(steps)[0]), "the camera frames")
+    return tuple(pixels.shape[-3:-1])
+
+
+def batch_to_rows(
+    batch: TensorDictBase, layout: DatasetLayout, source_size: tuple[int, int] | None = None
+) -> RowBatch:
     """Map a batch of env steps to dataset rows (see the module docstring for the mapping).
+
+    Frames are resized to ``layout.image_size``; ``source_size``, if given, is the frame size
+    the batch must have (a recorder's later batches must match its first).
 
     Example:
         >>> from tensordict import TensorDict
@@ -211,7 +230,7 @@ def batch_to_rows(batch: TensorDictBase, layout: DatasetLayout) -> RowBatch:
     steps = _as_steps(batch)
     rows = rows_per_step(steps)
     columns = {
-        image_key(camera): _frames(steps, camera, layout.image_size).numpy()
+        image_key(camera): _frames(steps, camera, layout.image_size, source_size).numpy()
         for camera in layout.cameras
     }
     state, action = _actions(steps, rows)

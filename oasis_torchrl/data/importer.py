@@ -196,7 +196,7 @@ def drop_idle_start(steps: Sequence[RecordedStep]) -> list[RecordedStep]:
 def _load_frame(path: Path, size: tuple[int, int], manifest: Path, line: int) -> np.ndarray:
     try:
         with Image.open(path) as image:
-            rgb = np.asarray(image.convert("RGB"))
+            rgb = np.array(image.convert("RGB"))  # writable, as torch wants
     except OSError as error:
         raise RecordingError(manifest, f"cannot decode {path.name}: {error}", line) from None
     return resize_frames(torch.from_numpy(rgb), size).numpy()

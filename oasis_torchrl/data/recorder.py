@@ -16,7 +16,13 @@ from typing import Any
 
 from tensordict import TensorDictBase
 
-from oasis_torchrl.data.chunk_rows import RowBatch, batch_to_rows, infer_layout, rows_per_step
+from oasis_torchrl.data.chunk_rows import (
+    RowBatch,
+    batch_to_rows,
+    frame_size,
+    infer_layout,
+    rows_per_step,
+)
 from oasis_torchrl.data.episode_buffer import EpisodeBuffer
 from oasis_torchrl.data.features import (
     ACTIONS_PER_CHUNK,
@@ -89,6 +95,7 @@ class LeRobotRecorder:
         self.dataset: Any = None
         self.layout: DatasetLayout | None = None
         self._features: dict[str, Any] = {}
+        self._source_size: tuple[int, int] | None = None
         self._spill_parent = Path(spill_dir) if spill_dir is not None else self.root.parent
         self._spill: Path | None = None
         self._open: list[EpisodeBuffer | None] = []
@@ -119,10 +126,11 @@ class LeRobotRecorder:
             return 0
         layout = self.layout or infer_layout(batch, self.image_size)
         features = self._features or build_features(layout)
-        rows = batch_to_rows(batch, layout)
+        rows = batch_to_rows(batch, layout, self._source_size)
         check_columns(rows.columns, features, leading=3)
         if self.layout is None:
             self._start(layout, features, rows_per_step(batch), rows.shape[0])
+            self._source_size = frame_size(batch)
         if len(self._open) != rows.shape[0]:
             raise ValueError(
                 f"the batch has {rows.shape[0]} env rows, earlier batches had {len(self._open)}"

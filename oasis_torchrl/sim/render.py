@@ -5,25 +5,30 @@ Cameras: pinhole, no roll, no pitch, :data:`CAMERA_HEIGHT` above the ground, yaw
 :data:`HORIZONTAL_FOV`, square pixels. Without pitch the horizon is the middle row and the ground
 depth of a row is ``height * focal / (row - horizon)``: one number per row.
 
-Each frame is drawn as a ``uint8`` palette-index image and turned into RGB by one palette
-lookup (Pillow's C conversion). The palette holds every material at several depth bands, with
-light (ambient, night headlights) and distance fog baked in, so fog costs nothing per pixel:
+A frame is a ``uint8`` palette-index image ``[cameras, rows, columns]``. The 256-entry palette
+holds every material at several depth bands with light (ambient, night headlights) and distance
+fog baked in, so fog and headlights cost nothing per pixel:
 
 - sky: one gradient level per row (static per resolution);
-- ground: road coordinates ``(s, d)`` are computed exactly at knots (every ``knot`` columns of
-  every ground row), linearly interpolated in between (the ground point of a row is linear in
-  the column, only the road's gentle curvature bends it), and used to sample a baked road-space
-  texture (lanes, dashes, shoulders, verges, fields); the depth band is per row;
+- ground: road coordinates ``(s, d)`` are exact at a few depths under knot columns (every
+  ``knot`` pixels), interpolated to every row (linear in depth along a ray) and column (the
+  ground point of a row is linear in the column; only the road's gentle curvature bends it).
+  Each pixel then looks up its lateral texel in its row's profile (lanes, edge lines, shoulders,
+  verges, fields, at the row's depth band); the dashes are decided per row, where the row
+  crosses each dashed line;
 - roadside layers (buildings, tree lines, guard rails) are walls at a fixed lateral offset: each
-  column's wall distance comes from where the knots cross that offset, and the wall is a
-  textured vertical span of that column;
+  column's wall distance comes from where the knots' rays cross that offset, and the wall is a
+  vertical span of that column, patterned (windows, trunks, posts) in small-integer arithmetic;
 - obstacles (boxes) are rasterised together: visible vertical faces become column spans
   (a vertical face projects to a quad with vertical sides), spans become pixel runs, painted far
   to near; low boxes also paint their back faces, which shows their top;
 - rain streaks and snow flakes are sparse pixels that fall frame by frame.
 
-The same drawing code optionally fills a metric depth buffer (distance along the camera axis,
-``inf`` for sky) for :meth:`Renderer.depth`.
+Palette indices become packed RGB by three table gathers per 4 pixels (:class:`_QuadPalette`).
+Per-pixel work is a few large NumPy calls without temporaries (frame-sized allocations cost
+page faults), and on large frames runs as independent parts on a small thread pool (NumPy
+releases the GIL inside its loops). The same drawing code optionally fills a metric depth
+buffer (distance along the camera axis, ``inf`` for sky) for :meth:`Renderer.depth`.
 """
 
 from __future__ import annotations
@@ -177,7 +182,13 @@ class Look:
 
 
 def scene_look(style: Style) -> Look:
-    """The :class:`Look` of a style: lighting sets sky and light, weather sky, fog, ground."""
+    """The :class:`Look` of a style: lighting sets sky and light, weather sky, fog, ground.
+
+    Example:
+        >>> from oasis_torchrl.sim.scene import build_scene
+        >>> scene_look(build_scene("rural fog", 0).style).fog_distance
+        40.0
+    """
     colours = {name: np.asarray(rgb, dtype=np.float64) for name, rgb in _DAY_COLOURS.items()}
     if style.weather == "snow":
         colours.update({name: np.asarray(rgb) for name, rgb in _SNOW_COLOURS.items()})
@@ -258,8 +269,6 @@ def build_palette(look: Look, camera_yaw: float, sky_levels: np.ndarray) -> np.n
 TEXTURE_COLUMN = 0.125
 TEXTURE_COLUMNS = 1024
 TEXTURE_HALF_WIDTH = TEXTURE_COLUMN * TEXTURE_COLUMNS / 2
-#: Fraction bits of the uint32 fixed-point ground texture coordinate.
-FIXED_BITS = 12
 FAR_TEXTURE_DEPTH = 45.0
 LINE_HALF_WIDTH = 0.125
 #: Depths (log-spaced, nearest ground row to FAR) at which road coordinates are exact.
@@ -385,7 +394,13 @@ def _obstacle_texture(kind: str, variant: int) -> np.ndarray:
 
 
 def obstacle_textures() -> np.ndarray:
-    """All obstacle textures with the depth band added: ``[OBJECT_BANDS, textures, 8, 8]``."""
+    """All obstacle textures with the depth band added: ``[OBJECT_BANDS, textures, 8, 8]``
+    (rows up the face, columns along it; textures: each kind's variants in turn).
+
+    Example:
+        >>> obstacle_textures().shape
+        (8, 9, 8, 8)
+    """
     base = np.stack(
         [
             _obstacle_texture(kind, variant)
@@ -501,8 +516,8 @@ class _WallPlan:
 
 @dataclass(frozen=True)
 class _GroundPlan:
-    """Per camera, ground row and knot interval: uint32 fixed-point texel index at the
-    interval's first column and its step per column (:data:`FIXED_BITS` fraction bits)."""
+    """Per camera, ground row and knot interval: texel index (float32) at the interval's
+    first column and its step per column."""
 
     start: np.ndarray
     step: np.ndarray
@@ -515,7 +530,7 @@ class _Buffers:
         shape = (len(CAMERAS), height, width)
         self.index = np.zeros(shape, dtype=np.uint8)
         ground_shape = (len(CAMERAS), ground_rows, width // knot, knot)
-        self.texel = np.empty(ground_shape, dtype=np.uint32)
+        self.texel = np.empty(ground_shape, dtype=np.float32)
         self.gather = np.empty(ground_shape, dtype=np.intp)
         self.level = np.empty(shape, dtype=np.float32)
         self.wall_texel = np.empty(shape, dtype=np.int16)
@@ -559,13 +574,14 @@ class Renderer:
         self._row_samples = _interpolation_weights(self._samples, ground_depths)
         knots = np.arange(0, model.padded_width + 1, model.knot)
         self._knot_slopes = model.column_slopes(knots)
-        self._knot_steps = np.arange(model.knot, dtype=np.uint32)
+        self._knot_steps = np.arange(model.knot, dtype=np.float32)
         columns = np.arange(model.padded_width)
         self._column_knot = columns // model.knot
         self._column_fraction = (columns % model.knot) / model.knot
         self._yaws = np.array([CAMERA_YAWS[name] for name in CAMERAS])
         self._buffers = _Buffers(height, model.padded_width, ground_depths.size, model.knot)
-        middle = min(max(height // 8 * 4, 4), height)
+        self._parallel = width * height >= PARALLEL_PIXELS
+        middle = height // 8 * 4 if self._parallel else height
         self._rgb_parts = [
             (camera, rows)
             for camera in range(len(CAMERAS))
@@ -609,7 +625,7 @@ class Renderer:
             np.copyto(indices, self._buffers.index[camera, rows, :width])
             self._palettes[camera].convert(indices.reshape(-1), out[CAMERAS[camera]][rows])
 
-        _in_parallel(convert, self._rgb_parts)
+        _in_parallel(convert, self._rgb_parts, self._parallel)
 
     def depth(self, car: VehicleState) -> dict[str, np.ndarray]:
         """Metric depth (along each camera axis, ``inf`` for sky) per camera, float32 [H, W]."""
@@ -653,12 +669,15 @@ class Renderer:
             for plan in walls:
                 self._draw_wall_rows(plan, camera, rows, depth)
 
-        _in_parallel(draw_part, self._draw_parts(walls))
+        _in_parallel(draw_part, self._draw_parts(walls), self._parallel)
         self._draw_obstacles(views, walls, depth)
 
     def _draw_parts(self, walls: list[_WallPlan]) -> list[tuple[int, slice]]:
-        """Each camera's rows split in two parts of about equal per-pixel work."""
+        """Each camera's rows, split in two parts of about equal per-pixel work when drawing
+        in parallel."""
         height = self.model.height
+        if not self._parallel:
+            return [(camera, slice(0, height)) for camera in range(len(CAMERAS))]
         parts = []
         for camera in range(len(CAMERAS)):
             work = np.ones(height)
@@ -706,7 +725,7 @@ class Renderer:
         return (variant * GROUND_BANDS + self._ground_bands) * TEXTURE_COLUMNS
 
     def _plan_ground(self, s_samples: np.ndarray, d_samples: np.ndarray) -> _GroundPlan:
-        """Texel indices of the ground at the knots of every row, and their steps.
+        """Texel indices of the ground at the knots of every row, and their steps per column.
 
         A texel index is the row's profile (dash variant and depth band) plus the lateral
         texel; it is linear in the column within a knot interval (exact for a straight road,
@@ -716,11 +735,9 @@ class Renderer:
         columns = (d_rows + TEXTURE_HALF_WIDTH) / TEXTURE_COLUMN
         np.clip(columns, 0.0, TEXTURE_COLUMNS - 0.01, out=columns)
         columns += self._row_profiles(s_rows, d_rows)[..., None]
-        fixed = np.rint(columns * (1 << FIXED_BITS)).astype(np.int64)
-        step = np.rint(np.diff(fixed, axis=-1) / self.model.knot).astype(np.int64)
-        return _GroundPlan(
-            fixed[..., :-1, None].astype(np.uint32), (step % 2**32).astype(np.uint32)[..., None]
-        )
+        columns = columns.astype(np.float32)
+        step = np.diff(columns, axis=-1) / np.float32(self.model.knot)
+        return _GroundPlan(columns[..., :-1, None], step[..., None])
 
     def _draw_ground_rows(self, plan: _GroundPlan, camera: int, rows: slice) -> None:
         """Look up the ground pixels of ``rows`` (image rows) of ``camera`` in their profiles."""
@@ -732,8 +749,7 @@ class Renderer:
         texel, gather = buffers.texel[camera, ground], buffers.gather[camera, ground]
         np.multiply(plan.step[camera, ground], self._knot_steps, out=texel)
         texel += plan.start[camera, ground]
-        texel >>= FIXED_BITS
-        np.copyto(gather, texel)
+        np.copyto(gather, texel, casting="unsafe")
         index = buffers.index[camera, first + ground.start : first + ground.stop]
         np.take(self._ground_profiles, gather, out=index.reshape(gather.shape), mode="clip")
 
@@ -953,6 +969,7 @@ class _ObstacleGeometry:
     y: np.ndarray
     corner_x: np.ndarray
     corner_y: np.ndarray
+    facing: np.ndarray
     height: np.ndarray
     texture: np.ndarray
     textures: np.ndarray
@@ -964,12 +981,20 @@ class _ObstacleGeometry:
         cos, sin = np.cos(obstacles.heading)[:, None], np.sin(obstacles.heading)[:, None]
         along = _BOX_CORNERS[:, 0] * (obstacles.length / 2)[:, None]
         across = _BOX_CORNERS[:, 1] * (obstacles.width / 2)[:, None]
+        corner_x = obstacles.x[:, None] + along * cos - across * sin
+        corner_y = obstacles.y[:, None] + along * sin + across * cos
+        # Outward normal of face i (corner i to i + 1, counter-clockwise) and its offset: a
+        # face looks at a point p when normal . p + offset > 0.
+        normal_x = np.roll(corner_y, -1, axis=1) - corner_y
+        normal_y = corner_x - np.roll(corner_x, -1, axis=1)
+        offset = -(normal_x * corner_x + normal_y * corner_y)
         return cls(
             s=obstacles.s,
             x=obstacles.x,
             y=obstacles.y,
-            corner_x=obstacles.x[:, None] + along * cos - across * sin,
-            corner_y=obstacles.y[:, None] + along * sin + across * cos,
+            corner_x=corner_x,
+            corner_y=corner_y,
+            facing=np.stack([normal_x, normal_y, offset]),
             height=obstacles.height,
             texture=_OBSTACLE_TEXTURE_START[obstacles.kind] + obstacles.variant,
             textures=obstacle_textures().ravel(),
@@ -987,10 +1012,8 @@ class _ObstacleGeometry:
         spread = math.tan(HORIZONTAL_FOV / 2) * forward
         in_view = (forward.max(axis=2) > NEAR) & (forward.min(axis=2) < OBSTACLE_FAR)
         in_view &= ((right - spread).min(axis=2) < 0.0) & ((right + spread).max(axis=2) > 0.0)
-        next_x, next_y = np.roll(corner_x, -1, axis=1), np.roll(corner_y, -1, axis=1)
-        facing = (next_y - corner_y) * (views.x - corner_x)
-        facing -= (next_x - corner_x) * (views.y - corner_y)
-        front = facing > 0.0
+        normal_x, normal_y, offset = self.facing[:, near]
+        front = normal_x * views.x + normal_y * views.y + offset > 0.0
         height = self.height[near]
         drawn = (front | (height < CAMERA_HEIGHT)[:, None])[None] & in_view[:, :, None]
         camera, obstacle, face = np.nonzero(drawn)
@@ -1154,6 +1177,8 @@ class _QuadPalette:
         flat[12 * quads :] = self.palette[tail].reshape(-1)
 
 
+#: Images at least this large (pixels per camera) are drawn by several threads.
+PARALLEL_PIXELS = 200_000
 #: Most threads the renderer spreads per-pixel work over.
 MAX_WORKERS = 4
 #: Relative per-pixel cost of ground and of each wall layer (a plain row costs 1), to split
@@ -1169,10 +1194,11 @@ def _workers() -> ThreadPoolExecutor | None:
     return ThreadPoolExecutor(count, thread_name_prefix="oasis-render") if count > 1 else None
 
 
-def _in_parallel(function: Callable[[T], None], items: Sequence[T]) -> None:
-    """Run ``function`` on every item, spread over the worker threads (NumPy releases the GIL
-    inside its loops, so independent chunks of pixels run on separate cores)."""
-    workers = _workers()
+def _in_parallel(function: Callable[[T], None], items: Sequence[T], parallel: bool) -> None:
+    """Run ``function`` on every item, spread over the worker threads if ``parallel`` (NumPy
+    releases the GIL inside its loops, so large independent parts of images run on separate
+    cores; small ones are faster in one thread)."""
+    workers = _workers() if parallel else None
     if workers is None or len(items) < 2:
         for item in items:
             function(item)

@@ -34,9 +34,11 @@ rightmost lane; the car starts in it, at rest, at ``s = 0``.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,7 +70,11 @@ _LIGHTING_WORDS = {"night": "night", "sunset": "sunset"}
 _WEATHER_WORDS = {"rain": "rain", "snow": "snow", "fog": "fog"}
 
 #: (length along heading, width across, height) of each obstacle kind, metres.
-OBSTACLE_SIZES = {"car": (4.4, 1.8, 1.5), "barrier": (0.5, 2.4, 1.0), "pedestrian": (0.5, 0.5, 1.75)}
+OBSTACLE_SIZES = {
+    "car": (4.4, 1.8, 1.5),
+    "barrier": (0.5, 2.4, 1.0),
+    "pedestrian": (0.5, 0.5, 1.75),
+}
 #: Colour variants per obstacle kind (cars and pedestrians' clothes have several).
 OBSTACLE_VARIANTS = {"car": 4, "barrier": 1, "pedestrian": 4}
 #: Colour variants per roadside kind.
@@ -260,7 +266,7 @@ class Road:
         return float(self.s[-1])
 
     def _lookup(self, x: np.ndarray) -> np.ndarray:
-        """Interpolated ``(y, cos, sin, s)`` of the centreline at ``x``, shape ``x.shape + (4,)``."""
+        """Interpolated ``(y, cos, sin, s)`` of the centreline at ``x``: ``[*x.shape, 4]``."""
         position = (x - self.x0) * (1.0 / self.step)
         index = np.clip(position.astype(np.int64), 0, self.x.size - 2)
         rows = self._table[index]
@@ -400,6 +406,17 @@ class Scene:
         """The lane the car starts in: the rightmost."""
         return 0
 
+    def with_obstacles(self, obstacles: Obstacles) -> Scene:
+        """This scene with other obstacles (e.g. from :func:`obstacles_at`), for scenarios.
+
+        Example:
+            >>> scene = build_scene("rural", 0)
+            >>> empty = obstacles_at(scene.road, [], [], [])
+            >>> len(scene.with_obstacles(empty).obstacles)
+            0
+        """
+        return dataclasses.replace(self, obstacles=obstacles)
+
 
 def _road_headings(spec: _LayoutSpec, rng: np.random.Generator) -> np.ndarray:
     """Heading per sample: straight and constant-curvature runs, smoothed, straight at start."""
@@ -490,29 +507,41 @@ def _place_roadside_obstacles(
         s = CLEAR_START + rng.exponential(200.0)
         edge = style.road_half_width - 0.35
         while s < length - 50.0:
-            out.add(rng, "pedestrian", s, rng.choice((-1.0, 1.0)) * edge, rng.uniform(-np.pi, np.pi))
+            side = rng.choice((-1.0, 1.0))
+            out.add(rng, "pedestrian", s, side * edge, rng.uniform(-np.pi, np.pi))
             s += 40.0 + rng.exponential(220.0)
 
 
-def _make_obstacles(
-    style: Style, spec: _LayoutSpec, road: Road, rng: np.random.Generator
+def obstacles_at(
+    road: Road,
+    kinds: Sequence[str],
+    s: Sequence[float],
+    d: Sequence[float],
+    yaw: Sequence[float] | None = None,
+    variant: Sequence[int] | None = None,
 ) -> Obstacles:
-    """Place every obstacle of the scene and convert it to world poses."""
-    placed = _ObstacleList([], [], [], [], [])
-    _place_lane_events(style, spec, road.length, rng, placed)
-    _place_roadside_obstacles(style, road.length, rng, placed)
-    order = np.argsort(placed.s, kind="stable")
-    kind = np.asarray(placed.kind, dtype=np.int8)[order]
-    s = np.asarray(placed.s)[order]
-    d = np.asarray(placed.d)[order]
-    yaw = np.asarray(placed.yaw)[order]
-    sizes = np.array([OBSTACLE_SIZES[name] for name in OBSTACLE_KINDS])[kind]
+    """Obstacles of ``kinds`` centred at road coordinates ``(s, d)``, turned by ``yaw``
+    (radians) from the road direction, sorted by ``s``.
+
+    Example:
+        >>> road = build_scene("rural", 0).road
+        >>> obstacles = obstacles_at(road, ["barrier", "car"], [30.0, 20.0], [-1.6, 0.0])
+        >>> [OBSTACLE_KINDS[kind] for kind in obstacles.kind], obstacles.s.tolist()
+        (['car', 'barrier'], [20.0, 30.0])
+    """
+    order = np.argsort(np.asarray(s, dtype=np.float64), kind="stable")
+    kind = np.array([OBSTACLE_KINDS.index(name) for name in kinds], dtype=np.int8)[order]
+    s = np.asarray(s, dtype=np.float64)[order]
+    d = np.asarray(d, dtype=np.float64)[order]
+    yaw = np.zeros(s.size) if yaw is None else np.asarray(yaw, dtype=np.float64)[order]
+    variant = np.zeros(s.size) if variant is None else np.asarray(variant)[order]
+    sizes = np.array([OBSTACLE_SIZES[name] for name in OBSTACLE_KINDS])[kind].reshape(-1, 3)
     x, y, road_heading = road.pose_at(s, d)
     length, width = sizes[:, 0], sizes[:, 1]
     cos, sin = np.abs(np.cos(yaw)), np.abs(np.sin(yaw))
     return Obstacles(
         kind=kind,
-        variant=np.asarray(placed.variant, dtype=np.int8)[order],
+        variant=variant.astype(np.int8),
         x=x,
         y=y,
         heading=road_heading + yaw,
@@ -524,6 +553,17 @@ def _make_obstacles(
         half_along=(length * cos + width * sin) / 2,
         half_across=(length * sin + width * cos) / 2,
     )
+
+
+def _make_obstacles(
+    style: Style, spec: _LayoutSpec, road: Road, rng: np.random.Generator
+) -> Obstacles:
+    """Place every obstacle of the scene."""
+    placed = _ObstacleList([], [], [], [], [])
+    _place_lane_events(style, spec, road.length, rng, placed)
+    _place_roadside_obstacles(style, road.length, rng, placed)
+    kinds = [OBSTACLE_KINDS[kind] for kind in placed.kind]
+    return obstacles_at(road, kinds, placed.s, placed.d, placed.yaw, placed.variant)
 
 
 def _wall_run(
@@ -557,16 +597,14 @@ def _make_roadside(style: Style, length: float, rng: np.random.Generator) -> tup
     """Roadside layers for the layout, outermost first."""
     edge = style.road_half_width
 
-    def layer(kind: str, offsets: tuple[float, float], **shape: tuple[float, float]) -> RoadsideLayer:
+    def layer(kind: str, offsets: tuple, **shape: tuple[float, float]) -> RoadsideLayer:
         left, right = (_wall_run(rng, kind, offset, length, **shape) for offset in offsets)
         return RoadsideLayer(kind, left, right)
 
     if style.layout == "urban":
         offsets = tuple(edge + style.verge_width + rng.uniform(0.5, 3.0) for _ in range(2))
         return (
-            layer(
-                "building", offsets, run_length=(12, 35), gap=(0.0, 1.5), height=(8.0, 32.0)
-            ),
+            layer("building", offsets, run_length=(12, 35), gap=(0.0, 1.5), height=(8.0, 32.0)),
         )
     tree_range = (10.0, 22.0) if style.layout == "highway" else (5.0, 14.0)
     trees = layer(
@@ -605,7 +643,11 @@ def build_scene(prompt: str, seed: int = 0) -> Scene:
     obstacles = _make_obstacles(style, spec, road, rng)
     roadside = _make_roadside(style, road.length, rng)
     logger.debug(
-        "scene %r seed %d: %s, %d lanes, %d obstacles", prompt, seed, style, style.lanes,
+        "scene %r seed %d: %s, %d lanes, %d obstacles",
+        prompt,
+        seed,
+        style,
+        style.lanes,
         len(obstacles),
     )
     return Scene(

@@ -153,15 +153,17 @@ class Session:
     def depth(self) -> sim_pb2.DepthResponse:
         """Metric depth of the last frame of each stream, as little-endian float16."""
         self._require_prompt()
-        maps = [
-            sim_pb2.DepthMap(
-                name=name,
-                height=depth.shape[0],
-                width=depth.shape[1],
-                depth_f16=depth.astype("<f2").tobytes(),
-            )
-            for name, depth in ((name, self._simulator.depth()[name]) for name in CAMERA_NAMES)
-        ]
+        depths = self._simulator.depth()
+        with np.errstate(over="ignore"):  # beyond float16 range (65504 m) is as good as inf
+            maps = [
+                sim_pb2.DepthMap(
+                    name=name,
+                    height=depths[name].shape[0],
+                    width=depths[name].shape[1],
+                    depth_f16=depths[name].astype("<f2").tobytes(),
+                )
+                for name in CAMERA_NAMES
+            ]
         last_sequence_num = self._last.sequence_num if self._last is not None else 0
         return sim_pb2.DepthResponse(sequence_num=last_sequence_num, maps=maps)
 
@@ -210,11 +212,9 @@ class SessionRegistry:
         self,
         config: ServerConfig,
         simulator_factory: SimulatorFactory = Simulator,
-        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._config = config
         self._simulator_factory = simulator_factory
-        self._clock = clock
         self._lock = threading.Lock()
         self._open: dict[str, Session] = {}
         self._last_used: dict[str, float] = {}
@@ -236,7 +236,7 @@ class SessionRegistry:
         with self._lock:
             self._check_limits(key_digest)
             self._open[session.session_id] = session
-            self._last_used[session.session_id] = self._clock()
+            self._last_used[session.session_id] = time.monotonic()
         logger.info(
             "session %s opened for key %s", session.session_id[:6], key_fingerprint(key_digest)
         )
@@ -352,7 +352,7 @@ class SessionRegistry:
         if not session.lock.acquire(blocking=False):
             return False
         try:
-            deadline = self._clock() - self._config.idle_timeout_s
+            deadline = time.monotonic() - self._config.idle_timeout_s
             with self._lock:
                 idle = self._last_used.get(session.session_id, deadline) < deadline
                 if idle:
@@ -371,4 +371,4 @@ class SessionRegistry:
     def _touch(self, session_id: str) -> None:
         with self._lock:
             if session_id in self._last_used:
-                self._last_used[session_id] = self._clock()
+                self._last_used[session_id] = time.monotonic()

@@ -87,6 +87,9 @@ def boxes_overlap(
 ) -> np.ndarray:
     """Which of many oriented rectangles overlap ``box`` (separating-axis test, vectorised).
 
+    Rectangles whose bounding circle misses ``box`` are ruled out first, so the full test runs
+    only on the few near ones.
+
     Example:
         >>> hits = boxes_overlap(
         ...     Box(0, 0, 0, 4, 2), np.array([3.0, 6.0]), np.zeros(2), np.zeros(2),
@@ -94,25 +97,42 @@ def boxes_overlap(
         >>> hits.tolist()
         [True, False]
     """
-    own_axes = np.array([[math.cos(box.heading), math.sin(box.heading)]])
-    own_axes = np.concatenate([own_axes, own_axes[:, ::-1] * (-1.0, 1.0)])  # along, across
-    cos, sin = np.cos(heading), np.sin(heading)
-    other_along = np.stack([cos, sin], axis=-1)
-    other_across = np.stack([-sin, cos], axis=-1)
-    offset = np.stack([x - box.x, y - box.y], axis=-1)
-    overlap = np.ones(np.shape(x), dtype=bool)
-    axes = [np.broadcast_to(axis, offset.shape) for axis in own_axes] + [other_along, other_across]
-    for axis in axes:
-        own_reach = 0.5 * (
-            box.length * np.abs(axis @ own_axes[0]) + box.width * np.abs(axis @ own_axes[1])
+    cos, sin = math.cos(box.heading), math.sin(box.heading)
+    dx, dy = np.asarray(x) - box.x, np.asarray(y) - box.y
+    along, across = dx * cos + dy * sin, dy * cos - dx * sin
+    radius = np.hypot(length, width) / 2
+    gap_along = np.maximum(np.abs(along) - box.length / 2, 0.0)
+    gap_across = np.maximum(np.abs(across) - box.width / 2, 0.0)
+    overlap = np.hypot(gap_along, gap_across) <= radius
+    near = np.flatnonzero(overlap)
+    if near.size:
+        overlap[near] = _separating_axes_overlap(
+            box, along[near], across[near], heading[near] - box.heading, length[near], width[near]
         )
-        other_reach = 0.5 * (
-            length * np.abs(np.sum(axis * other_along, axis=-1))
-            + width * np.abs(np.sum(axis * other_across, axis=-1))
-        )
-        distance = np.abs(np.sum(axis * offset, axis=-1))
-        overlap &= distance <= own_reach + other_reach
     return overlap
+
+
+def _separating_axes_overlap(
+    box: Box,
+    along: np.ndarray,
+    across: np.ndarray,
+    relative_heading: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+) -> np.ndarray:
+    """Separating-axis test of rectangles given in ``box``'s frame (centre and heading)."""
+    cos, sin = np.abs(np.cos(relative_heading)), np.abs(np.sin(relative_heading))
+    half_length, half_width = length / 2, width / 2
+    # Axes of the box: the rectangles' reach along them.
+    separated = np.abs(along) > box.length / 2 + half_length * cos + half_width * sin
+    separated |= np.abs(across) > box.width / 2 + half_length * sin + half_width * cos
+    # Axes of each rectangle: the box's reach along them.
+    signed_cos, signed_sin = np.cos(relative_heading), np.sin(relative_heading)
+    own_along = np.abs(along * signed_cos + across * signed_sin)
+    own_across = np.abs(across * signed_cos - along * signed_sin)
+    separated |= own_along > half_length + box.length / 2 * cos + box.width / 2 * sin
+    separated |= own_across > half_width + box.length / 2 * sin + box.width / 2 * cos
+    return ~separated
 
 
 class World:

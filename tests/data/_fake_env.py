@@ -17,7 +17,9 @@ CAMERAS = ("left_forward", "front", "right_forward")
 SIZE = (48, 64)
 
 
-def frame(row: int, episode: int, index: int, camera: int, size: tuple[int, int] = SIZE) -> np.ndarray:
+def frame(
+    row: int, episode: int, index: int, camera: int, size: tuple[int, int] = SIZE
+) -> np.ndarray:
     """Frame ``index`` (0-3: the reset chunk) of an episode: smooth shading and a moving block."""
     height, width = size
     yy, xx = np.mgrid[0:height, 0:width]

@@ -1,0 +1,22 @@
+"""The driving network shared by TorchRL PPO and the LeRobot policy plugin.
+
+>>> from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+>>> modules = make_actor_critic(DrivingNet(DrivingNetConfig(shared_encoder=False)))
+"""
+
+from oasis_torchrl.models.actor_critic import ActorCritic, make_actor_critic, observation_keys
+from oasis_torchrl.models.config import CAMERAS, CHUNK, POLICY_IMAGE_SIZE, DrivingNetConfig
+from oasis_torchrl.models.encoder import MultiCameraEncoder
+from oasis_torchrl.models.network import DrivingNet
+
+__all__ = [
+    "CAMERAS",
+    "CHUNK",
+    "POLICY_IMAGE_SIZE",
+    "ActorCritic",
+    "DrivingNet",
+    "DrivingNetConfig",
+    "MultiCameraEncoder",
+    "make_actor_critic",
+    "observation_keys",
+]

@@ -1,0 +1,110 @@
+"""Hyper-parameters of the driving network, shared by TorchRL PPO and the LeRobot policy."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
+
+CAMERAS: tuple[str, ...] = DEFAULT_REQUIRED_STREAMS
+"""The world model's cameras, in the conventional order."""
+POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
+"""Default ``(height, width)`` the network sees."""
+CHUNK = 4
+"""Actions per world-model call."""
+ACTION_DIM = 2
+"""``[throttle, steering]``."""
+
+
+@dataclass(frozen=True)
+class DrivingNetConfig:
+    """Architecture of :class:`~oasis_torchrl.models.DrivingNet`.
+
+    Args:
+        cameras: camera names, in the order the network reads them.
+        image_size: ``(height, width)`` of the images (any size works: the encoder pools to a
+            fixed grid; this is the size the policies resize to).
+        shared_encoder: one convolutional encoder for every camera (``True``) or one per camera.
+        encoder_channels: channels of the three convolutions (a 4x4 stride-4 patch stem, then
+            3x3 stride 2, then 3x3 stride 1).
+        pool_grid: ``(rows, cols)`` the last feature map is average-pooled to; keeping a grid
+            (not a global pool) keeps where things are, which steering needs.
+        camera_features: features per camera after the projection.
+        state_dim: length of ``"state"`` (the previous action).
+        hidden_dim: width of the actor and value MLPs.
+        chunk: actions per chunk.
+        action_dim: numbers per action.
+        init_scale: initial scale (before the tanh) of the PPO action distribution.
+        min_scale: lower bound of that scale.
+
+    Example:
+        >>> config = DrivingNetConfig(shared_encoder=False)
+        >>> DrivingNetConfig.from_dict(config.to_dict()) == config
+        True
+    """
+
+    cameras: tuple[str, ...] = CAMERAS
+    image_size: tuple[int, int] = POLICY_IMAGE_SIZE
+    shared_encoder: bool = True
+    encoder_channels: tuple[int, int, int] = (24, 48, 64)
+    pool_grid: tuple[int, int] = (4, 6)
+    camera_features: int = 128
+    state_dim: int = 2
+    hidden_dim: int = 256
+    chunk: int = CHUNK
+    action_dim: int = ACTION_DIM
+    init_scale: float = 0.5
+    min_scale: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if not self.cameras:
+            raise ValueError("DrivingNetConfig.cameras must name at least one camera")
+        if len(set(self.cameras)) != len(self.cameras):
+            raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
+        if len(self.encoder_channels) != 3:
+            raise ValueError(
+                f"DrivingNetConfig.encoder_channels needs 3 values, got {list(self.encoder_channels)}"
+            )
+        positive = {
+            "image_size": self.image_size,
+            "encoder_channels": self.encoder_channels,
+            "pool_grid": self.pool_grid,
+            "camera_features": (self.camera_features,),
+            "hidden_dim": (self.hidden_dim,),
+            "chunk": (self.chunk,),
+            "action_dim": (self.action_dim,),
+            "init_scale": (self.init_scale,),
+            "min_scale": (self.min_scale,),
+        }
+        for name, values in positive.items():
+            if any(value <= 0 for value in values):
+                raise ValueError(f"DrivingNetConfig.{name} must be positive, got {values}")
+
+    @property
+    def features_dim(self) -> int:
+        """Length of the shared feature vector: camera features plus the state."""
+        return len(self.cameras) * self.camera_features + self.state_dim
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain types (lists for tuples), for JSON and checkpoints."""
+        return {
+            key: list(value) if isinstance(value, tuple) else value
+            for key, value in dataclasses.asdict(self).items()
+        }
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> DrivingNetConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error naming them."""
+        known = {field.name: field for field in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(f"unknown DrivingNetConfig fields {unknown}; known: {sorted(known)}")
+        return cls(
+            **{
+                key: tuple(value) if isinstance(value, list) else value
+                for key, value in values.items()
+            }
+        )

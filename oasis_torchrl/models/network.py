@@ -1,0 +1,88 @@
+"""The driving network: multi-camera encoder, action-chunk head and value head.
+
+One definition serves both ecosystems: TorchRL PPO reads ``loc``/``scale`` of a TanhNormal over
+the chunk and the value (:mod:`oasis_torchrl.models.actor_critic`); LeRobot behaviour cloning
+reads the deterministic chunk ``tanh(loc)`` (``policies/lerobot_policy_oasis``), which is also the
+TanhNormal's deterministic sample, so a cloned policy acts the same under PPO's evaluation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import torch
+from torch import nn
+
+from oasis_torchrl.models.config import DrivingNetConfig
+from oasis_torchrl.models.encoder import MultiCameraEncoder
+
+
+def _mlp(in_features: int, hidden: int, out_features: int) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Linear(in_features, hidden), nn.ReLU(inplace=True), nn.Linear(hidden, out_features)
+    )
+
+
+class DrivingNet(nn.Module):
+    """Camera images and the previous action in; an action chunk distribution and a value out.
+
+    ``features`` (shared) = camera features ++ state. The actor MLP gives ``loc`` ``[..., 4, 2]``
+    (before the tanh); the scale is a learned, observation-independent ``[4, 2]`` parameter (the
+    usual choice for PPO; behaviour cloning leaves it untouched). The critic MLP gives the value.
+
+    Example:
+        >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+        >>> images = [torch.rand(2, 3, 32, 48) for _ in net.config.cameras]
+        >>> chunk = net(images, torch.zeros(2, 2))
+        >>> chunk.shape, bool(chunk.abs().max() < 1)
+        (torch.Size([2, 4, 2]), True)
+        >>> net.value(net.features(images, torch.zeros(2, 2))).shape
+        torch.Size([2, 1])
+    """
+
+    def __init__(self, config: DrivingNetConfig | None = None) -> None:
+        super().__init__()
+        self.config = config or DrivingNetConfig()
+        cfg = self.config
+        self.encoder = MultiCameraEncoder(cfg)
+        self.actor = _mlp(cfg.features_dim, cfg.hidden_dim, cfg.chunk * cfg.action_dim)
+        self.critic = _mlp(cfg.features_dim, cfg.hidden_dim, 1)
+        self.log_scale = nn.Parameter(torch.empty(cfg.chunk, cfg.action_dim))
+        self.set_scale(cfg.init_scale)
+        # A small last actor layer starts PPO near a zero chunk instead of saturated tanh ends.
+        with torch.no_grad():
+            self.actor[-1].weight.mul_(0.01)
+            self.actor[-1].bias.zero_()
+
+    def features(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
+        """Shared features ``[..., features_dim]`` from one image per camera and the state."""
+        if state.shape[-1] != self.config.state_dim:
+            raise ValueError(
+                f"state must end in {self.config.state_dim} values, got {list(state.shape)}"
+            )
+        return torch.cat([self.encoder(images), state.to(images[0].dtype)], dim=-1)
+
+    def action_loc(self, features: torch.Tensor) -> torch.Tensor:
+        """Location ``[..., chunk, action_dim]`` of the chunk distribution, before the tanh."""
+        return self.actor(features).unflatten(-1, (self.config.chunk, self.config.action_dim))
+
+    def action_scale(self, loc: torch.Tensor) -> torch.Tensor:
+        """Scale of the chunk distribution, broadcast to ``loc``'s shape."""
+        scale = self.log_scale.exp().clamp_min(self.config.min_scale)
+        return scale.expand_as(loc)
+
+    def value(self, features: torch.Tensor) -> torch.Tensor:
+        """State value ``[..., 1]``."""
+        return self.critic(features)
+
+    def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
+        """The deterministic chunk ``tanh(loc)`` ``[..., chunk, action_dim]`` in ``[-1, 1]``."""
+        return torch.tanh(self.action_loc(self.features(images, state)))
+
+    @torch.no_grad()
+    def set_scale(self, scale: float) -> None:
+        """Reset the action distribution's scale (e.g. before PPO fine-tuning of a BC policy)."""
+        if scale <= 0:
+            raise ValueError(f"scale must be positive, got {scale}")
+        self.log_scale.fill_(math.log(scale))

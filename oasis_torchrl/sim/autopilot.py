@@ -1,0 +1,166 @@
+"""A privileged driver for the embedded simulator (reads the scene and the car's true state).
+
+Lane keeping is pure pursuit on the centre line of a target lane; speed follows the layout's
+speed cap, slowed for curves ahead. Obstacles in the target lane within braking range make it
+change to the nearest lane that is free well past them, or brake to a stop in front of them when
+no lane is free. Each chunk of 4 actions is planned by stepping the (known, deterministic)
+vehicle model, so every action is closed-loop on the state it will act on.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from oasis_torchrl.sim.scene import Scene
+from oasis_torchrl.sim.simulator import CHUNK, Simulator
+from oasis_torchrl.sim.vehicle import VehicleState, step_vehicle
+
+#: Fraction of the layout's speed cap the autopilot cruises at.
+CRUISE_FRACTION = 0.85
+#: Lateral acceleration allowed in curves, m/s^2.
+CURVE_ACCELERATION = 2.5
+#: Deceleration planned for stopping before an obstacle, m/s^2.
+PLANNED_BRAKING = 4.0
+#: Distance (car centre to obstacle edge) to stop at before a blocked lane, metres.
+STOP_GAP = 6.0
+#: Closest the car may get to an obstacle right in its path, metres (centre to edge).
+MIN_GAP = 3.5
+#: Road an intermediate lane must be free for when crossing it, short of the obstacle, metres.
+CROSSING_MARGIN = 10.0
+#: Lateral clearance kept on each side of the car when judging a lane free, metres.
+CLEARANCE = 0.4
+SPEED_GAIN = 0.6
+
+
+class Autopilot:
+    """Lane following and obstacle avoidance with full knowledge of the simulator's world.
+
+    Args:
+        simulator: A reset :class:`~oasis_torchrl.sim.simulator.Simulator`.
+        target_speed: Cruise speed in m/s (default: 85% of the layout's speed cap).
+
+    Example:
+        >>> simulator = Simulator(64, 48)
+        >>> simulator.reset("highway", seed=0)
+        >>> pilot = Autopilot(simulator)
+        >>> for _ in range(25):
+        ...     result = simulator.step(pilot.act(), render=False)
+        >>> simulator.truth.progress > 30 and not simulator.truth.collided
+        True
+    """
+
+    def __init__(self, simulator: Simulator, target_speed: float | None = None) -> None:
+        if target_speed is not None and not target_speed > 0:
+            raise ValueError(f"target_speed must be positive, got {target_speed}")
+        self._simulator = simulator
+        self._target_speed = target_speed
+        self._scene: Scene | None = None
+        self._lane = 0
+
+    def act(self) -> np.ndarray:
+        """The next 4 actions, ``float32 (4, 2)`` of ``[throttle, steering]``."""
+        world = self._simulator.world
+        if world.scene is not self._scene or world.steps == 0:
+            self._scene = world.scene
+            self._lane = self._nearest_lane(world.truth.lateral_offset)
+        state = world.state
+        actions = np.zeros((CHUNK, 2), dtype=np.float32)
+        for index in range(CHUNK):
+            actions[index] = self._control(state)
+            throttle, steering = (float(value) for value in actions[index])
+            state = step_vehicle(state, throttle, steering, world.params, world.dt)
+        return actions
+
+    def _control(self, state: VehicleState) -> tuple[float, float]:
+        """Throttle and steering for one frame from ``state``."""
+        scene = self._require_scene()
+        s, lateral = (float(value) for value in scene.road.locate(state.x, state.y, 2))
+        reach = max(25.0, 3.0 * abs(state.speed) + 15.0)
+        style = self._require_scene().style
+        blocked = self._blocked_distance(style.lane_offset(self._lane), s, reach)
+        if blocked is not None:
+            free_lane = self._free_lane(s, blocked)
+            if free_lane is not None:
+                self._lane = free_lane
+                blocked = None
+        ahead = self._blocked_distance(lateral, s, min(reach, 12.0))
+        limits = [self._cruise_speed(), self._curve_speed(s, state.speed)]
+        for distance, gap in ((blocked, STOP_GAP), (ahead, MIN_GAP)):
+            if distance is not None:
+                limits.append(math.sqrt(2 * PLANNED_BRAKING * max(distance - gap, 0.0)))
+        throttle = float(np.clip(SPEED_GAIN * (min(limits) - state.speed), -1.0, 1.0))
+        return throttle, self._steering(state, s)
+
+    def _steering(self, state: VehicleState, s: float) -> float:
+        """Pure pursuit towards the target lane's centre line."""
+        scene = self._require_scene()
+        params = self._simulator.world.params
+        look_ahead = float(np.clip(0.9 * abs(state.speed) + 5.0, 6.0, 25.0))
+        goal_x, goal_y, _ = scene.road.pose_at(s + look_ahead, scene.style.lane_offset(self._lane))
+        dx, dy = float(goal_x) - state.x, float(goal_y) - state.y
+        cos, sin = math.cos(state.heading), math.sin(state.heading)
+        forward, left = dx * cos + dy * sin, -dx * sin + dy * cos
+        curvature = 2.0 * left / max(forward * forward + left * left, 1e-6)
+        steer_angle = math.atan(params.wheelbase * curvature)
+        return float(np.clip(-steer_angle / params.max_steer, -1.0, 1.0))
+
+    def _cruise_speed(self) -> float:
+        scene = self._require_scene()
+        return self._target_speed or CRUISE_FRACTION * scene.style.speed_limit
+
+    def _curve_speed(self, s: float, speed: float) -> float:
+        """The speed that keeps lateral acceleration bounded on the road ahead."""
+        road = self._require_scene().road
+        ahead = s + np.linspace(0.0, 2.0 * abs(speed) + 20.0, 12)
+        curvature = float(np.max(np.abs(road.curvature_at(ahead))))
+        return math.sqrt(CURVE_ACCELERATION / max(curvature, 1e-6))
+
+    def _nearest_lane(self, lateral: float) -> int:
+        style = self._require_scene().style
+        offsets = np.array([style.lane_offset(lane) for lane in range(style.lanes)])
+        return int(np.argmin(np.abs(offsets - lateral)))
+
+    def _blocking(self, centre: float, s: float, behind: float, reach: float) -> np.ndarray:
+        """Distances (from the car's centre to their near edge) of obstacles overlapping the
+        corridor of the car's width around lateral ``centre``, from ``behind`` the car to
+        ``reach`` ahead."""
+        scene = self._require_scene()
+        obstacles = scene.obstacles
+        near = obstacles.between(s - behind - 10.0, s + reach + 10.0)
+        half_width = self._simulator.world.params.width / 2 + CLEARANCE
+        overlaps = np.abs(obstacles.d[near] - centre) < obstacles.half_across[near] + half_width
+        edge = obstacles.s[near] - obstacles.half_along[near] - s
+        far_edge = obstacles.s[near] + obstacles.half_along[near] - s
+        ahead = overlaps & (far_edge > -behind) & (edge < reach)
+        return edge[ahead]
+
+    def _blocked_distance(self, centre: float, s: float, reach: float) -> float | None:
+        """Distance to the first obstacle within ``reach`` in a corridor of the car's width
+        around lateral ``centre`` (None: clear)."""
+        edges = self._blocking(centre, s, behind=0.0, reach=reach)
+        return float(max(edges.min(), 0.0)) if edges.size else None
+
+    def _free_lane(self, s: float, obstacle: float) -> int | None:
+        """The nearest lane free from just behind the car to well past an obstacle
+        ``obstacle`` metres ahead, whose lanes on the way are free until shortly before it
+        (None: no such lane)."""
+        style = self._require_scene().style
+        for lane in sorted(range(style.lanes), key=lambda lane: (abs(lane - self._lane), -lane)):
+            if lane == self._lane:
+                continue
+            crossed = range(min(lane, self._lane) + 1, max(lane, self._lane))
+            reaches = [(lane, obstacle + 25.0)]
+            reaches += [(step, obstacle - CROSSING_MARGIN) for step in crossed]
+            if all(
+                self._blocking(style.lane_offset(step), s, 8.0, reach).size == 0
+                for step, reach in reaches
+            ):
+                return lane
+        return None
+
+    def _require_scene(self) -> Scene:
+        if self._scene is None:
+            raise RuntimeError("Autopilot.act() must be called first")
+        return self._scene

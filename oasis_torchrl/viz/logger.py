@@ -1,0 +1,225 @@
+"""``RolloutLogger``: OasisEnv rollouts to rerun, live or as ``.rrd`` files.
+
+One logger, four ways in:
+
+- a plain function on a rollout: ``logger.log_rollout(env.rollout(100))`` (``[N, T]``);
+- a collector hook: ``Collector(..., postproc=logger)`` (batches continue episodes);
+- a TorchRL transform: ``env.append_transform(logger.transform())`` (logs every reset and step);
+- a ``FrameConsumer`` of the sync client:
+  ``A2VClient(..., frame_consumer=logger.frame_consumer())``.
+
+Every logged reset or step is one *tick* of 4 world frames on the ``frame`` and ``sim_time``
+timelines (layout in :mod:`oasis_torchrl.viz.paths`). Frames are JPEG-encoded and logged on a
+background thread by default, at most ``max_pending`` steps behind the env, so memory stays
+bounded and the env does not wait for the encoder.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+
+from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.recording import APPLICATION_ID, DEFAULT_MEMORY_LIMIT, open_recording
+from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
+from oasis_torchrl.viz.worker import BoundedWorker
+from oasis_torchrl.viz.writer import RecordWriter
+
+if TYPE_CHECKING:
+    from oasis_torchrl.viz.hooks import RerunFrameConsumer, RerunTransform
+
+logger = logging.getLogger(__name__)
+
+
+class RolloutLogger:
+    """Logs OasisEnv rollouts to rerun: cameras, actions, rewards and terms, collision risk,
+    ground truth, depth, episode events and a top-down map, one tab per env row.
+
+    Args:
+        target: ``"spawn"`` (start a viewer), a ``rerun+http://host:port/proxy`` URL (a running
+            viewer or ``rerun --serve-grpc``), or an ``.rrd`` path.
+        options: what to log (:class:`LogOptions`; e.g. ``LogOptions(rows=(0, 5))``).
+        application_id: rerun application id.
+        recording_id: rerun recording id (default: a fresh one).
+        memory_limit: memory limit of a spawned viewer; it drops the oldest data beyond it.
+
+    Example:
+        >>> import tempfile, os
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> from oasis_torchrl.sim.config import ServerConfig
+        >>> env = OasisEnv("local", num_envs=2, server=ServerConfig(width=96, height=64))
+        >>> path = os.path.join(tempfile.mkdtemp(), "rollout.rrd")
+        >>> with RolloutLogger(path) as rerun_logger:
+        ...     rerun_logger.log_rollout(env.rollout(3))
+        >>> env.close()
+        >>> os.path.getsize(path) > 0
+        True
+    """
+
+    def __init__(
+        self,
+        target: str | Path,
+        options: LogOptions | None = None,
+        *,
+        application_id: str = APPLICATION_ID,
+        recording_id: str | None = None,
+        memory_limit: str = DEFAULT_MEMORY_LIMIT,
+    ) -> None:
+        self.options = options if options is not None else LogOptions()
+        self.target = target
+        self.recording = open_recording(
+            target,
+            application_id=application_id,
+            recording_id=recording_id,
+            memory_limit=memory_limit,
+        )
+        self._writer = RecordWriter(self.recording, self.options)
+        self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
+        self._tick = 0
+        self._pending_starts: np.ndarray | None = None
+        self._closed = False
+
+    # -- ways in -----------------------------------------------------------------------------
+
+    def log_reset(self, obs: TensorDictBase, rows: Sequence[int] | None = None) -> None:
+        """Log a reset observation (batch ``[N]``): ``rows`` (default all) start new episodes."""
+        n = batch_rows(obs)
+        rows = list(range(n) if rows is None else rows)
+        outside = [row for row in rows if not 0 <= row < n]
+        if outside:
+            raise ValueError(f"reset rows {outside} are outside the batch of {n} env rows")
+        self._pending(n)[rows] = False
+        self._submit(read_step(obs, self._logged(n, rows), start=True, **self._read_options()))
+
+    def log_step(self, next_obs: TensorDictBase, action: torch.Tensor | None = None) -> None:
+        """Log one step: ``next_obs`` is the step's ``"next"`` TensorDict (batch ``[N]``) and
+        ``action`` the ``[N, 4, 2]`` (or ``[N, 2]``) action that produced it."""
+        n = batch_rows(next_obs)
+        record = read_step(
+            next_obs, self._logged(n), start=False, action=action, **self._read_options()
+        )
+        done = next_obs.get("done", None)
+        if done is not None:
+            self._pending(n)[:] = done.detach().cpu().reshape(n).numpy()
+        self._submit(record)
+
+    def log_rollout(self, rollout: TensorDictBase, *, new_episodes: bool = True) -> None:
+        """Log a rollout ``[N, T]`` (time last, as ``env.rollout`` and collectors return it).
+
+        Args:
+            rollout: the rollout; a ``[T]`` rollout is taken as one env row.
+            new_episodes: every row starts an episode at ``t = 0`` (``env.rollout`` resets
+                first); False continues the episodes of the previous call (collector batches).
+        """
+        if rollout.batch_dims == 1:
+            rollout = rollout.unsqueeze(0)
+        if rollout.batch_dims != 2:
+            raise ValueError(
+                f"a rollout must have batch size [N, T] (time last), got {list(rollout.batch_size)}"
+            )
+        n = int(rollout.batch_size[0])
+        if new_episodes:
+            self._pending(n)[:] = True
+        for t in range(int(rollout.batch_size[1])):
+            step = rollout[:, t]
+            starting = np.flatnonzero(self._pending(n)).tolist()
+            if starting:
+                self.log_reset(step, starting)
+            self.log_step(step.get("next"), step.get("action", None))
+
+    def __call__(self, batch: TensorDictBase) -> TensorDictBase:
+        """Collector hook (``postproc=logger``): log the batch, continuing episodes; return it."""
+        self.log_rollout(batch, new_episodes=False)
+        return batch
+
+    def log_frames(
+        self, frames: Mapping[str, Sequence[np.ndarray]], *, row: int = 0, start: bool = False
+    ) -> None:
+        """Log one chunk of client frames (camera -> frames in time order) as ``row``."""
+        self._submit(read_frames(frames, row, start))
+
+    def transform(self) -> RerunTransform:
+        """A TorchRL transform that logs every reset and step of the env it is appended to."""
+        from oasis_torchrl.viz.hooks import RerunTransform
+
+        return RerunTransform(self)
+
+    def frame_consumer(self, row: int = 0) -> RerunFrameConsumer:
+        """A ``FrameConsumer`` for :class:`~oasis_torchrl.client.A2VClient`, logging as ``row``."""
+        from oasis_torchrl.viz.hooks import RerunFrameConsumer
+
+        return RerunFrameConsumer(self, row)
+
+    # -- lifecycle ---------------------------------------------------------------------------
+
+    def flush(self) -> None:
+        """Wait until everything submitted is logged and handed to the sink."""
+        if self._worker is not None:
+            self._worker.drain()
+        self.recording.flush()
+
+    def close(self) -> None:
+        """Flush and release the sink (an ``.rrd`` file is complete afterwards). Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._worker is not None:
+                self._worker.close()
+        finally:
+            self.recording.flush()
+            self.recording.disconnect()
+
+    def __enter__(self) -> RolloutLogger:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __getstate__(self) -> dict[str, Any]:
+        raise TypeError(
+            "RolloutLogger holds a live rerun recording and cannot be pickled; log from the "
+            "main process, e.g. as the collector's postproc or on the env before ParallelEnv"
+        )
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _read_options(self) -> dict[str, Any]:
+        return {"cameras": self.options.cameras, "depth": self.options.depth}
+
+    def _pending(self, n: int) -> np.ndarray:
+        """Rows whose next root observation starts an episode (all, at first)."""
+        if self._pending_starts is None or len(self._pending_starts) != n:
+            self._pending_starts = np.ones(n, dtype=bool)
+        return self._pending_starts
+
+    def _logged(self, n: int, rows: Sequence[int] | None = None) -> list[int]:
+        """The rows to log among ``rows`` (default all): those chosen in the options."""
+        chosen = range(n) if self.options.rows is None else self.options.rows
+        if max(chosen) >= n:
+            raise ValueError(f"LogOptions.rows {self.options.rows} exceed the {n} env rows")
+        allowed = set(range(n) if rows is None else rows)
+        return [row for row in chosen if row in allowed]
+
+    def _submit(self, record: StepRecord) -> None:
+        if self._closed:
+            raise RuntimeError("this RolloutLogger is closed")
+        if not record.rows:
+            return
+        tick, self._tick = self._tick, self._tick + 1
+        if self._worker is None:
+            self._writer.write(record, tick)
+        else:
+            self._worker.submit(self._writer.write, record, tick)

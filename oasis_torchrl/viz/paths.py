@@ -1,0 +1,78 @@
+"""Entity paths and timelines of oasis recordings (so logger, replay and blueprint agree).
+
+Every env row (or replayed dataset episode) lives under ``<root>/<row>``:
+
+=====================================  ==============  ==========================================
+entity                                 archetype       what
+=====================================  ==============  ==========================================
+``<root>/<row>/camera/<camera>``       EncodedImage    camera frames (JPEG by default) or Image
+``<root>/<row>/depth/<camera>``        DepthImage      metric depth (metres; sky and unknown 0)
+``<root>/<row>/action/<name>``         Scalars         ``throttle`` and ``steering``, one per frame
+``<root>/<row>/reward/total``          Scalars         the step reward
+``<root>/<row>/reward/<term>``         Scalars         each reward term (``collision_risk``, ...)
+``<root>/<row>/truth/<field>``         Scalars         embedded-server ground truth per frame
+``<root>/<row>/state/<name>``          Scalars         ``observation.state`` of replayed datasets
+``<root>/<row>/events``                TextLog         episode starts (prompt, seed), collisions,
+                                                       episode ends
+``<root>/<row>/topdown/road``          LineStrips2D    road edges and centreline near the car
+``<root>/<row>/topdown/obstacles``     LineStrips2D    obstacle outlines near the car
+``<root>/<row>/topdown/path``          LineStrips2D    the car's recent path
+``<root>/<row>/topdown/car``           LineStrips2D    the car's outline (red after a collision)
+=====================================  ==============  ==========================================
+
+Timelines: ``frame`` (sequence: world frames, 4 per env step) and ``sim_time`` (duration:
+``frame / fps``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+FRAME_TIMELINE = "frame"
+"""Sequence timeline: the world frame index."""
+TIME_TIMELINE = "sim_time"
+"""Duration timeline: simulated seconds (``frame / fps``)."""
+ENV_ROOT = "env"
+"""Root of live env rows."""
+EPISODE_ROOT = "episode"
+"""Root of replayed dataset episodes."""
+
+
+@dataclass(frozen=True)
+class RowPaths:
+    """Entity paths of one row.
+
+    Example:
+        >>> paths = RowPaths("env", 5)
+        >>> paths.camera("front"), paths.scalar("reward", "total")
+        ('env/5/camera/front', 'env/5/reward/total')
+    """
+
+    root: str
+    row: int
+
+    @property
+    def base(self) -> str:
+        """The row's own entity, parent of everything it logs."""
+        return f"{self.root}/{self.row}"
+
+    def camera(self, camera: str) -> str:
+        """Frames of ``camera``."""
+        return f"{self.base}/camera/{camera}"
+
+    def depth(self, camera: str) -> str:
+        """Depth map of ``camera``."""
+        return f"{self.base}/depth/{camera}"
+
+    def scalar(self, group: str, name: str) -> str:
+        """A time series: ``group`` is ``action``, ``reward``, ``truth`` or ``state``."""
+        return f"{self.base}/{group}/{name}"
+
+    @property
+    def events(self) -> str:
+        """The row's text log."""
+        return f"{self.base}/events"
+
+    def topdown(self, layer: str = "") -> str:
+        """The top-down map (``layer``: ``road``, ``obstacles``, ``path``, ``car``)."""
+        return f"{self.base}/topdown/{layer}" if layer else f"{self.base}/topdown"

@@ -1,0 +1,83 @@
+"""Where a recording goes: a spawned viewer, a running viewer or server (gRPC), or an ``.rrd`` file.
+
+Each logger owns its own ``rr.RecordingStream`` (never rerun's global recording), so several
+loggers coexist in one process. Memory stays bounded on long runs: an ``.rrd`` sink streams to
+disk; a viewer drops its oldest data at its memory limit (``memory_limit`` for a spawned viewer,
+``rerun --memory-limit 4GB`` for one you start yourself).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import rerun as rr
+import rerun.blueprint as rrb
+
+logger = logging.getLogger(__name__)
+
+SPAWN = "spawn"
+"""Target that starts a native viewer (or reuses the one already listening on its port)."""
+GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+APPLICATION_ID = "oasis_torchrl"
+DEFAULT_MEMORY_LIMIT = "25%"
+
+
+def describe_target(target: str | Path) -> str:
+    """``"spawn"``, ``"grpc"`` or ``"file"``; a ValueError names a target that is none of them.
+
+    Example:
+        >>> [describe_target(t) for t in ("spawn", "rerun+http://127.0.0.1:9876/proxy", "a.rrd")]
+        ['spawn', 'grpc', 'file']
+    """
+    text = str(target)
+    if text == SPAWN:
+        return "spawn"
+    if text.startswith(GRPC_SCHEMES):
+        return "grpc"
+    if text.endswith(".rrd"):
+        return "file"
+    raise ValueError(
+        f"rerun target must be 'spawn', a gRPC URL starting with one of {GRPC_SCHEMES} "
+        f"(e.g. rerun+http://127.0.0.1:9876/proxy) or a path ending in .rrd, got {text!r}"
+    )
+
+
+def open_recording(
+    target: str | Path,
+    *,
+    application_id: str = APPLICATION_ID,
+    recording_id: str | None = None,
+    memory_limit: str = DEFAULT_MEMORY_LIMIT,
+    blueprint: rrb.Blueprint | None = None,
+) -> rr.RecordingStream:
+    """A new recording stream connected to ``target``.
+
+    Args:
+        target: ``"spawn"``, a ``rerun+http://host:port/proxy`` URL, or an ``.rrd`` path
+            (parent folders are created).
+        application_id: rerun application id.
+        recording_id: rerun recording id (default: a fresh one).
+        memory_limit: memory limit of a spawned viewer (e.g. ``"2GB"`` or ``"25%"``).
+        blueprint: default layout sent with the connection.
+
+    Example:
+        >>> import tempfile, os
+        >>> path = os.path.join(tempfile.mkdtemp(), "run.rrd")
+        >>> recording = open_recording(path)
+        >>> recording.flush()
+        >>> os.path.exists(path)
+        True
+    """
+    kind = describe_target(target)
+    recording = rr.RecordingStream(application_id, recording_id=recording_id)
+    if kind == "spawn":
+        recording.spawn(memory_limit=memory_limit, default_blueprint=blueprint)
+    elif kind == "grpc":
+        recording.connect_grpc(str(target), default_blueprint=blueprint)
+    else:
+        path = Path(target)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        recording.save(path, default_blueprint=blueprint)
+    logger.info("rerun recording %s -> %s", recording.get_recording_id(), target)
+    return recording

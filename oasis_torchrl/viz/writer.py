@@ -1,0 +1,282 @@
+"""Writes :class:`~oasis_torchrl.viz.records.StepRecord` s into a rerun recording.
+
+Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 * tick`` to
+``4 * tick + 3``: action ``k`` and ground truth ``k`` sit on frame ``4 * tick + k`` (frame ``k``
+is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
+frame. Each row keeps a little state (episode number, step count, return, collided flag, its
+road map and a fixed-size path buffer), never frames.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import rerun as rr
+
+from oasis_torchrl.envs.specs import CHUNK
+from oasis_torchrl.viz.blueprint import default_blueprint
+from oasis_torchrl.viz.images import depth_archetype, image_archetype
+from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.records import StepRecord
+from oasis_torchrl.viz.topdown import (
+    CAR_COLOR,
+    CAR_SIZE,
+    CRASHED_COLOR,
+    PATH_COLOR,
+    RoadMap,
+    Trail,
+    box_outlines,
+    to_view,
+)
+
+logger = logging.getLogger(__name__)
+
+ACTION_NAMES = ("throttle", "steering")
+_LAST = CHUNK - 1
+
+
+@dataclass
+class _RowState:
+    """What the writer remembers about one row between steps."""
+
+    trail: Trail
+    episode: int = -1
+    step: int = 0
+    episode_return: float = 0.0
+    collided: bool = False
+    road: RoadMap | None = None
+    anchor: np.ndarray | None = None
+
+
+def send_series(
+    recording: rr.RecordingStream, path: str, frames: np.ndarray, values: np.ndarray, fps: float
+) -> None:
+    """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
+
+    Example:
+        >>> recording = rr.RecordingStream("doc")
+        >>> send_series(recording, "env/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
+    """
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    recording.send_columns(
+        path,
+        indexes=[
+            rr.TimeColumn(FRAME_TIMELINE, sequence=frames),
+            rr.TimeColumn(TIME_TIMELINE, duration=np.asarray(frames) / fps),
+        ],
+        columns=rr.Scalars.columns(scalars=np.where(np.isfinite(values), values, np.nan)),
+    )
+
+
+class RecordWriter:
+    """Logs step records of env rows under ``env/<row>``; sends the default blueprint as rows,
+    cameras, depth maps and the top-down view appear.
+
+    Example:
+        >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
+        >>> record = StepRecord(rows=[0], start=True, prompts=["rural road"], seeds=[1])
+        >>> writer.write(record, tick=0)
+        >>> writer.episode(0)
+        0
+    """
+
+    def __init__(self, recording: rr.RecordingStream, options: LogOptions) -> None:
+        self.recording = recording
+        self.options = options
+        self._rows: dict[int, _RowState] = {}
+        self._cameras: list[str] = []
+        self._depth_cameras: list[str] = []
+        self._topdown = False
+        self._layout: tuple | None = None
+
+    def episode(self, row: int) -> int:
+        """Number of the current episode of ``row`` (0 for the first; -1 before any)."""
+        state = self._rows.get(row)
+        return -1 if state is None else state.episode
+
+    def write(self, record: StepRecord, tick: int) -> None:
+        """Log ``record`` as step ``tick`` (frames ``4 * tick`` to ``4 * tick + 3``)."""
+        self._update_blueprint(record)
+        first = tick * CHUNK
+        for i, row in enumerate(record.rows):
+            state = self._rows.setdefault(row, _RowState(Trail(self.options.trail_frames)))
+            paths = RowPaths(ENV_ROOT, row)
+            if record.start or state.episode < 0:
+                self._start_episode(paths, state, record, i, first)
+            else:
+                state.step += 1
+            self._write_series(paths, record, i, first)
+            self._write_frames(paths, state, record, i, first)
+            self._at(first + _LAST)
+            self._write_step_values(paths, state, record, i, first + _LAST)
+            self._write_topdown(paths, state, record, i)
+            if not record.start:
+                self._write_episode_end(paths, state, record, i)
+
+    # -- helpers -----------------------------------------------------------------------------
+
+    def _at(self, frame: int) -> None:
+        self.recording.set_time(FRAME_TIMELINE, sequence=frame)
+        self.recording.set_time(TIME_TIMELINE, duration=frame / self.options.fps)
+
+    def _event(self, paths: RowPaths, text: str, level: str) -> None:
+        self.recording.log(paths.events, rr.TextLog(text, level=level))
+
+    def _send(self, path: str, frames: np.ndarray, values: np.ndarray) -> None:
+        send_series(self.recording, path, frames, values, self.options.fps)
+
+    # -- blueprint ---------------------------------------------------------------------------
+
+    def _update_blueprint(self, record: StepRecord) -> None:
+        self._cameras += [c for c in record.images if c not in self._cameras]
+        self._depth_cameras += [c for c in record.depth if c not in self._depth_cameras]
+        self._topdown |= self.options.topdown and {"x", "y"} <= set(record.truth)
+        rows = sorted({*self._rows, *record.rows})
+        layout = (tuple(rows), tuple(self._cameras), tuple(self._depth_cameras), self._topdown)
+        if layout != self._layout:
+            self._layout = layout
+            self.recording.send_blueprint(
+                default_blueprint(
+                    rows,
+                    self._cameras,
+                    depth_cameras=self._depth_cameras if self.options.depth else (),
+                    topdown=self._topdown,
+                )
+            )
+
+    # -- episodes ----------------------------------------------------------------------------
+
+    def _start_episode(
+        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
+    ) -> None:
+        state.episode += 1
+        state.step = 0
+        state.episode_return = 0.0
+        state.collided = False
+        state.trail.clear()
+        state.anchor = None
+        prompt = record.prompts[i] if record.prompts else None
+        seed = int(record.seeds[i]) if record.seeds else None
+        state.road = self._road(prompt, seed) if {"x", "y"} <= set(record.truth) else None
+        self._at(first)
+        if prompt is None:
+            self._event(paths, f"episode {state.episode} starts (new clip)", "INFO")
+        else:
+            self._event(paths, f"episode {state.episode} starts: {prompt!r}, seed {seed}", "INFO")
+        if self._topdown:
+            empty = rr.LineStrips2D([])
+            self.recording.log(paths.topdown("road"), empty)
+            self.recording.log(paths.topdown("obstacles"), empty)
+
+    def _road(self, prompt: str | None, seed: int | None) -> RoadMap | None:
+        source = self.options.scene_source
+        if not self.options.topdown or source is None or prompt is None or seed is None:
+            return None
+        try:
+            scene = source(prompt, seed)
+        except Exception as error:  # a missing scene must not stop the logging of a rollout
+            logger.warning("no top-down road for %r seed %s: %s", prompt, seed, error)
+            return None
+        return None if scene is None else RoadMap.from_scene(scene)
+
+    def _write_episode_end(
+        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int
+    ) -> None:
+        terminated = record.terminated is not None and bool(record.terminated[i])
+        truncated = record.truncated is not None and bool(record.truncated[i])
+        if not (terminated or truncated):
+            return
+        how = "terminated" if terminated else "truncated"
+        self._event(
+            paths,
+            f"episode {state.episode} ends after {state.step} steps ({how}), "
+            f"return {state.episode_return:.3f}",
+            "WARN" if terminated else "INFO",
+        )
+
+    # -- per-frame and per-step values -------------------------------------------------------
+
+    def _write_series(self, paths: RowPaths, record: StepRecord, i: int, first: int) -> None:
+        frames = np.arange(first, first + CHUNK)
+        if record.actions is not None:
+            for column, name in enumerate(ACTION_NAMES):
+                self._send(paths.scalar("action", name), frames, record.actions[i, :, column])
+        for name in self.options.truth_series:
+            if name in record.truth:
+                self._send(paths.scalar("truth", name), frames, record.truth[name][i])
+
+    def _write_frames(
+        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
+    ) -> None:
+        """Per frame of the chunk: the first collision event and the camera images."""
+        quality = self.options.jpeg_quality
+        collided = record.truth.get("collided")
+        off_road = record.truth.get("off_road")
+        for k in range(CHUNK):
+            self._at(first + k)
+            if collided is not None and collided[i, k] > 0.5 and not state.collided:
+                state.collided = True
+                what = (
+                    "left the road"
+                    if off_road is not None and off_road[i, k] > 0.5
+                    else ("hit an obstacle")
+                )
+                self._event(paths, f"collision at step {state.step}: {what}", "ERROR")
+            for camera, frames in record.images.items():
+                every = frames.shape[1] == CHUNK and self.options.all_frames
+                if every or k == _LAST:
+                    image = frames[i, k if every else -1]
+                    self.recording.log(paths.camera(camera), image_archetype(image, quality))
+
+    def _write_step_values(
+        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, last: int
+    ) -> None:
+        frame = np.array([last])
+        if record.reward is not None:
+            state.episode_return += float(record.reward[i])
+            self._send(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
+        for name, values in record.terms.items():
+            self._send(paths.scalar("reward", name), frame, values[i : i + 1])
+        if self.options.depth:
+            for camera, depth in record.depth.items():
+                self.recording.log(paths.depth(camera), depth_archetype(depth[i]))
+
+    # -- top-down ----------------------------------------------------------------------------
+
+    def _write_topdown(self, paths: RowPaths, state: _RowState, record: StepRecord, i: int) -> None:
+        truth = record.truth
+        if not (self.options.topdown and "x" in truth and "y" in truth):
+            return
+        positions = np.stack([truth["x"][i], truth["y"][i]], axis=-1).astype(np.float64)
+        state.trail.extend(positions)
+        car = positions[-1]
+        if not np.isfinite(car).all():
+            return
+        radius = self.options.topdown_radius
+        if state.road is not None and (
+            state.anchor is None or np.linalg.norm(car - state.anchor) > radius / 3
+        ):
+            self._write_road(paths, state.road, car, radius)
+            state.anchor = car
+        path = state.trail.recent_within(radius)
+        self.recording.log(
+            paths.topdown("path"), rr.LineStrips2D([to_view(path)], colors=[PATH_COLOR])
+        )
+        heading = truth["heading"][i, -1:] if "heading" in truth else np.zeros(1)
+        outline = box_outlines(car[:1], car[1:], heading, *(np.array([v]) for v in CAR_SIZE))
+        color = CRASHED_COLOR if state.collided else CAR_COLOR
+        self.recording.log(paths.topdown("car"), rr.LineStrips2D(to_view(outline), colors=[color]))
+
+    def _write_road(self, paths: RowPaths, road: RoadMap, car: np.ndarray, radius: float) -> None:
+        patch = road.near(car, radius)
+        self.recording.log(
+            paths.topdown("road"),
+            rr.LineStrips2D([to_view(line) for line in patch.road], colors=patch.road_colors),
+        )
+        self.recording.log(
+            paths.topdown("obstacles"),
+            rr.LineStrips2D(to_view(patch.obstacles), colors=patch.obstacle_colors),
+        )

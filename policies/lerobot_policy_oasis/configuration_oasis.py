@@ -1,0 +1,159 @@
+"""LeRobot configuration of the oasis driving policy (policy type ``oasis``).
+
+Inputs: ``observation.images.<camera>`` (any number of cameras; the world model's three are
+``left_forward``, ``front``, ``right_forward``) and ``observation.state`` (the previous
+``[throttle, steering]``). Output: ``action`` ``[throttle, steering]`` per row at the world
+model's 20 fps; the policy predicts ``chunk_size`` of them per call (4 = one world-model call).
+
+Normalisation runs in LeRobot's processor pipeline (:mod:`.processor_oasis`). The defaults are
+``IDENTITY`` on purpose: images arrive in ``[0, 1]`` and the network centres them itself, and
+state and action already live in the env's ``[-1, 1]`` box, which the tanh-bounded chunk head
+targets directly. That keeps one set of weights valid in TorchRL PPO, which feeds the env's raw
+values. Any LeRobot mode can still be chosen per feature type with ``normalization_mapping``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.configs.types import FeatureType, NormalizationMode
+from lerobot.optim.optimizers import AdamWConfig
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+from oasis_torchrl.models import CAMERAS, DrivingNetConfig
+
+POLICY_TYPE = "oasis"
+ACTION_DIM = 2
+
+
+def _identity_mapping() -> dict[str, NormalizationMode]:
+    return {
+        "VISUAL": NormalizationMode.IDENTITY,
+        "STATE": NormalizationMode.IDENTITY,
+        "ACTION": NormalizationMode.IDENTITY,
+    }
+
+
+@PreTrainedConfig.register_subclass(POLICY_TYPE)
+@dataclass
+class OasisConfig(PreTrainedConfig):
+    """Configuration of :class:`~lerobot_policy_oasis.modeling_oasis.OasisPolicy`.
+
+    Architecture fields mirror :class:`oasis_torchrl.models.DrivingNetConfig`
+    (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
+
+    Args:
+        chunk_size: actions predicted per call.
+        n_action_steps: actions of each chunk executed before predicting again.
+        image_size: ``(height, width)`` images are resized to in the preprocessor.
+        shared_encoder: one CNN for all cameras, or one per camera.
+        encoder_channels, pool_grid, camera_features, hidden_dim: network sizes.
+        loss: behaviour-cloning loss on the chunk, ``"l1"`` or ``"mse"``.
+        optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
+
+    Example:
+        >>> config = OasisConfig(device="cpu")
+        >>> config.type, config.action_delta_indices
+        ('oasis', [0, 1, 2, 3])
+    """
+
+    n_obs_steps: int = 1
+    chunk_size: int = 4
+    n_action_steps: int = 4
+    normalization_mapping: dict[str, NormalizationMode] = field(default_factory=_identity_mapping)
+
+    image_size: tuple[int, int] = (64, 96)
+    shared_encoder: bool = True
+    encoder_channels: tuple[int, int, int] = (24, 48, 64)
+    pool_grid: tuple[int, int] = (4, 6)
+    camera_features: int = 128
+    hidden_dim: int = 256
+
+    loss: str = "l1"
+    optimizer_lr: float = 1e-3
+    optimizer_weight_decay: float = 1e-4
+    optimizer_grad_clip_norm: float = 10.0
+
+    # Nothing is uploaded unless asked for, so `lerobot-train` needs no `policy.repo_id`.
+    push_to_hub: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.n_obs_steps != 1:
+            raise ValueError(f"OasisConfig.n_obs_steps must be 1, got {self.n_obs_steps}")
+        if not 1 <= self.n_action_steps <= self.chunk_size:
+            raise ValueError(
+                f"OasisConfig.n_action_steps must be in [1, chunk_size={self.chunk_size}], "
+                f"got {self.n_action_steps}"
+            )
+        if self.loss not in ("l1", "mse"):
+            raise ValueError(f"OasisConfig.loss must be 'l1' or 'mse', got {self.loss!r}")
+
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        """Camera names of the image inputs, the world model's order first."""
+        prefix = f"{OBS_IMAGES}."
+        names = [key.removeprefix(prefix) for key in self.image_features]
+        known = [camera for camera in CAMERAS if camera in names]
+        return (*known, *sorted(set(names) - set(known)))
+
+    def net_config(self) -> DrivingNetConfig:
+        """The :class:`DrivingNetConfig` of this policy (needs the input features set)."""
+        self.validate_features()
+        return DrivingNetConfig(
+            cameras=self.cameras,
+            image_size=tuple(self.image_size),
+            shared_encoder=self.shared_encoder,
+            encoder_channels=tuple(self.encoder_channels),
+            pool_grid=tuple(self.pool_grid),
+            camera_features=self.camera_features,
+            state_dim=self.robot_state_feature.shape[0],
+            hidden_dim=self.hidden_dim,
+            chunk=self.chunk_size,
+            action_dim=ACTION_DIM,
+        )
+
+    def validate_features(self) -> None:
+        """Check for at least one camera, ``observation.state`` and a 2-number ``action``."""
+        if not self.image_features:
+            raise ValueError(f"the oasis policy needs at least one '{OBS_IMAGES}.<camera>' input")
+        if self.robot_state_feature is None:
+            raise ValueError(f"the oasis policy needs an '{OBS_STATE}' input")
+        action = self.action_feature
+        if action is None or tuple(action.shape) != (ACTION_DIM,):
+            shape = None if action is None else tuple(action.shape)
+            raise ValueError(
+                f"the oasis policy needs '{ACTION}' of shape ({ACTION_DIM},) (one [throttle, "
+                f"steering] per row: record with all frames), got {shape}"
+            )
+        visual = [ft for ft in self.input_features.values() if ft.type is FeatureType.VISUAL]
+        if any(len(ft.shape) != 3 or ft.shape[0] != 3 for ft in visual):
+            raise ValueError(f"camera inputs must be RGB [3, H, W], got {visual}")
+
+    def get_optimizer_preset(self) -> AdamWConfig:
+        """AdamW with this config's learning rate, weight decay and clipping."""
+        return AdamWConfig(
+            lr=self.optimizer_lr,
+            weight_decay=self.optimizer_weight_decay,
+            grad_clip_norm=self.optimizer_grad_clip_norm,
+        )
+
+    def get_scheduler_preset(self) -> None:
+        """No learning-rate schedule."""
+        return None
+
+    @property
+    def observation_delta_indices(self) -> None:
+        """Only the current observation."""
+        return None
+
+    @property
+    def action_delta_indices(self) -> list[int]:
+        """The next ``chunk_size`` actions."""
+        return list(range(self.chunk_size))
+
+    @property
+    def reward_delta_indices(self) -> None:
+        """Rewards are not used."""
+        return None

@@ -1,0 +1,112 @@
+"""The oasis driving policy as a LeRobot ``PreTrainedPolicy`` (behaviour cloning).
+
+The network is :class:`oasis_torchrl.models.DrivingNet`, the one TorchRL PPO trains; this class
+only adapts LeRobot batches to it: ``forward`` returns the behaviour-cloning loss of the
+deterministic chunk ``tanh(loc)`` against the next ``chunk_size`` actions (padded actions past
+an episode's end are masked out), ``predict_action_chunk`` returns that chunk and
+``select_action`` serves it one action at a time from a queue.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterator
+from typing import Any
+
+import torch
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+from torch import Tensor, nn
+
+from lerobot_policy_oasis.configuration_oasis import POLICY_TYPE, OasisConfig
+from oasis_torchrl.models import DrivingNet
+
+ACTION_IS_PAD = f"{ACTION}_is_pad"
+
+
+class OasisPolicy(PreTrainedPolicy):
+    """Multi-camera action-chunk driving policy.
+
+    Args:
+        config: the policy configuration, with its input and output features set (LeRobot's
+            ``make_policy`` sets them from a dataset).
+        **kwargs: what LeRobot's factory also passes (``dataset_stats``, ``dataset_meta``);
+            unused, normalisation is the processors' job.
+
+    Example:
+        >>> from lerobot.configs.types import FeatureType, PolicyFeature
+        >>> features = {f"observation.images.{c}": PolicyFeature(FeatureType.VISUAL, (3, 64, 96))
+        ...             for c in ("left_forward", "front", "right_forward")}
+        >>> features["observation.state"] = PolicyFeature(FeatureType.STATE, (2,))
+        >>> config = OasisConfig(device="cpu", input_features=features,
+        ...                      output_features={"action": PolicyFeature(FeatureType.ACTION, (2,))})
+        >>> policy = OasisPolicy(config)
+        >>> batch = {key: torch.rand(1, *ft.shape) for key, ft in features.items()}
+        >>> policy.predict_action_chunk(batch).shape, policy.select_action(batch).shape
+        (torch.Size([1, 4, 2]), torch.Size([1, 2]))
+    """
+
+    config_class = OasisConfig
+    name = POLICY_TYPE
+
+    def __init__(self, config: OasisConfig, **kwargs: Any) -> None:
+        super().__init__(config)
+        self.config: OasisConfig = config
+        self.model = DrivingNet(config.net_config())
+        self._image_keys = [f"{OBS_IMAGES}.{camera}" for camera in self.model.config.cameras]
+        self._queue: deque[Tensor] = deque(maxlen=config.n_action_steps)
+
+    def get_optim_params(self) -> Iterator[nn.Parameter]:
+        """The parameters behaviour cloning trains: the encoder and the actor."""
+        yield from self.model.encoder.parameters()
+        yield from self.model.actor.parameters()
+
+    def reset(self) -> None:
+        """Drop queued actions (call at every episode start)."""
+        self._queue.clear()
+
+    def _get(self, batch: dict[str, Any], key: str) -> Tensor:
+        if key not in batch:
+            raise KeyError(f"the oasis policy needs batch[{key!r}]; the batch has {sorted(batch)}")
+        return batch[key]
+
+    def _chunk(self, batch: dict[str, Any]) -> Tensor:
+        images = [self._get(batch, key) for key in self._image_keys]
+        return self.model(images, self._get(batch, OBS_STATE))
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
+        """The chunk ``[B, chunk_size, 2]`` for a batch of (preprocessed) observations."""
+        return self._chunk(batch)
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
+        """The next action ``[B, 2]``: a new chunk when the queue is empty, else the next queued."""
+        if not self._queue:
+            chunk = self.predict_action_chunk(batch)[:, : self.config.n_action_steps]
+            self._queue.extend(chunk.transpose(0, 1))
+        return self._queue.popleft()
+
+    def forward(
+        self, batch: dict[str, Tensor], reduction: str = "mean"
+    ) -> tuple[Tensor, dict[str, float]]:
+        """Behaviour-cloning loss of the chunk vs ``batch["action"]`` ``[B, chunk_size, 2]``.
+
+        ``reduction="none"`` returns the per-sample loss ``[B]`` (LeRobot's weighted BC).
+        """
+        if reduction not in ("mean", "none"):
+            raise ValueError(f"reduction must be 'mean' or 'none', got {reduction!r}")
+        target = self._get(batch, ACTION)
+        predicted = self._chunk(batch)
+        if target.shape != predicted.shape:
+            raise ValueError(
+                f"batch[{ACTION!r}] must be [B, {self.config.chunk_size}, 2] (set the dataset's "
+                f"delta timestamps from config.action_delta_indices), got {list(target.shape)}"
+            )
+        error = predicted - target
+        error = error.abs() if self.config.loss == "l1" else error.square()
+        pad = batch.get(ACTION_IS_PAD)
+        valid = torch.ones_like(error[..., 0]) if pad is None else (~pad).to(error.dtype)
+        per_sample = (error.mean(-1) * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+        loss = per_sample if reduction == "none" else per_sample.mean()
+        return loss, {f"{self.config.loss}_loss": per_sample.mean().item()}

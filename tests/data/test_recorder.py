@@ -1,0 +1,143 @@
+"""LeRobotRecorder on hand-built env steps: round trip, interruption, append, validation."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from oasis_torchrl.data import LeRobotRecorder
+from oasis_torchrl.data.images import resize_frames
+
+from ._fake_env import CAMERAS, FakeEnvRun, action, frame
+from ._readback import episodes, expected_frame_rows, open_dataset, psnr
+
+MIN_PSNR = 25.0  # h264 crf 30, 4:2:0: these 64x48 frames with a sharp block measure ~29-34 dB
+
+
+def _record(root: Path, run: FakeEnvRun, batches: int, horizon: int, **kwargs: object) -> None:
+    with LeRobotRecorder(root, **kwargs) as recorder:
+        for _ in range(batches):
+            recorder.write(run.batch(horizon))
+
+
+def test_round_trip_keeps_env_rows_apart_and_episodes_whole(tmp_path: Path) -> None:
+    root = tmp_path / "drives"
+    # Row 0's first episode spans two batches; episodes of different rows end interleaved.
+    _record(root, FakeEnvRun([[3, 2], [1, 4], [5]]), batches=3, horizon=2)
+    dataset = open_dataset(root)
+    stored = episodes(dataset)
+    finished = {(0, 0): 3, (1, 0): 1, (0, 1): 2, (1, 1): 4, (2, 0): 5}
+    running = {(0, 2): 1, (1, 2): 1, (2, 1): 1}  # saved at close as unfinished
+    order = [(1, 0), (0, 0), (0, 1), (1, 1), (2, 0), *running]
+    assert [(e.env_row, e.number) for e in stored] == order
+    assert dataset.num_episodes == 8 and dataset.fps == 20
+    for episode in stored:
+        key = (episode.env_row, episode.number)
+        steps = finished.get(key) or running[key]
+        expected = expected_frame_rows(*key, steps, finished=key in finished)
+        assert episode.stop - episode.start == 4 * steps
+        for column, values in expected.items():
+            np.testing.assert_array_equal(episode.columns[column].reshape(values.shape), values)
+    # Frames: lossy video, so closeness, and closer to the right frame than to its neighbour.
+    scores = []
+    for episode in stored[:3]:
+        for offset in range(episode.stop - episode.start):
+            sample = dataset[episode.start + offset]
+            for camera_index, camera in enumerate(CAMERAS):
+                decoded = sample[f"observation.images.{camera}"]
+                truth = frame(episode.env_row, episode.number, offset + 3, camera_index)
+                neighbour = frame(episode.env_row, episode.number, offset + 4, camera_index)
+                scores.append(psnr(decoded, truth))
+                assert scores[-1] > psnr(decoded, neighbour)
+    logging.getLogger(__name__).info("PSNR min %.1f mean %.1f dB", min(scores), np.mean(scores))
+    assert min(scores) > MIN_PSNR
+
+
+def test_chunk_rows_at_a_quarter_of_the_rate_and_reduced_size(tmp_path: Path) -> None:
+    root = tmp_path / "chunks"
+    _record(root, FakeEnvRun([[3]], all_frames=False), batches=1, horizon=3, image_size=(24, 32))
+    dataset = open_dataset(root)
+    assert dataset.fps == 5 and dataset.num_frames == 3
+    assert dataset.meta.features["observation.images.front"]["shape"] == (24, 32, 3)
+    sample = dataset[2]
+    np.testing.assert_array_equal(
+        sample["action"].numpy(), np.stack([action(0, 0, 2, k) for k in range(4)]).ravel()
+    )
+    small = resize_frames(torch.from_numpy(frame(0, 0, 11, 1)), (24, 32)).numpy()
+    assert psnr(sample["observation.images.front"], small) > MIN_PSNR - 5
+    assert bool(sample["next.done"])
+
+
+@pytest.mark.parametrize("interruption", [RuntimeError, KeyboardInterrupt])
+def test_interrupted_export_keeps_every_completed_episode(
+    tmp_path: Path, interruption: type[BaseException]
+) -> None:
+    root = tmp_path / "interrupted"
+    run = FakeEnvRun([[2, 9], [1, 9]])
+    with pytest.raises(interruption), LeRobotRecorder(root) as recorder:
+        recorder.write(run.batch(3))  # completes (1, 0) and (0, 0); two episodes still running
+        raise interruption()
+    stored = episodes(open_dataset(root))
+    assert [(e.env_row, e.number) for e in stored] == [(1, 0), (0, 0)]
+    assert not list(tmp_path.glob(".interrupted-spill-*"))  # spilled frames are cleaned up
+
+
+def test_append_adds_episodes_and_checks_features(tmp_path: Path) -> None:
+    root = tmp_path / "appended"
+    _record(root, FakeEnvRun([[1, 2]]), batches=1, horizon=3)
+    with pytest.raises(FileExistsError, match="append"):
+        _record(root, FakeEnvRun([[1]]), batches=1, horizon=1)
+    _record(
+        root, FakeEnvRun([[9, 9], [2]]), batches=1, horizon=2, append=True, keep_unfinished=False
+    )
+    dataset = open_dataset(root)
+    assert [len(range(e.start, e.stop)) for e in episodes(dataset)] == [4, 8, 8]
+    assert dataset[16]["episode_index"].item() == 2 and dataset[16]["task"] == "road 1-0"
+    with pytest.raises(
+        ValueError,
+        match=r"images.left_forward: the dataset stores video \(48, 64, 3\), the new rows are",
+    ):
+        _record(root, FakeEnvRun([[1]]), batches=1, horizon=1, append=True, image_size=(24, 32))
+
+
+def test_invalid_batches_are_rejected_before_anything_is_written(tmp_path: Path) -> None:
+    root = tmp_path / "invalid"
+    bad = FakeEnvRun([[1]]).batch(1)
+    bad["episode_seed"] = bad["episode_seed"].int()
+    message = (
+        r"episode_seed: expected int64 rows of shape \(1,\), got int32 of shape \(1, 1, 4, 1\)"
+    )
+    with LeRobotRecorder(root) as recorder:
+        with pytest.raises(TypeError, match=message):
+            recorder.write(bad)
+        assert not root.exists()  # a bad first batch creates nothing
+        recorder.write(FakeEnvRun([[1]]).batch(1))
+        with pytest.raises(TypeError, match=message):
+            recorder.write(bad)
+        smaller = FakeEnvRun([[1]], size=(24, 32)).batch(1)
+        with pytest.raises(
+            ValueError, match=r"\('pixels', 'left_forward'\): expected 48x64 frames"
+        ):
+            recorder.write(smaller)
+        with pytest.raises(ValueError, match="2 env rows, earlier batches had 1"):
+            recorder.write(FakeEnvRun([[1], [1]]).batch(1))
+    assert open_dataset(root).num_episodes == 1
+
+
+def test_max_episodes_and_a_missed_episode_boundary(tmp_path: Path, caplog) -> None:
+    root = tmp_path / "limited"
+    first = FakeEnvRun([[9]]).batch(2)  # episode (0, 0) still running...
+    later = FakeEnvRun([[1, 9]])
+    later.batch(1)
+    switched = later.batch(2)  # ... then rows of episode (0, 1) arrive without a done flag
+    with LeRobotRecorder(root, max_episodes=2) as recorder:
+        recorder.write(first)
+        with caplog.at_level(logging.WARNING):
+            recorder.write(switched)
+        assert "without a done flag" in caplog.text
+        assert recorder.episodes_written == 1 and not recorder.full
+    assert [(e.env_row, e.number) for e in episodes(open_dataset(root))] == [(0, 0), (0, 1)]

@@ -1,0 +1,93 @@
+"""What the cameras show: lighting and weather looks, depth, odd sizes, palette conversion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from oasis_torchrl.sim.render import CAMERAS, Renderer, _QuadPalette
+from oasis_torchrl.sim.scene import build_scene, obstacles_at
+from oasis_torchrl.sim.world import World
+
+WIDTH, HEIGHT = 96, 64
+
+
+def render(prompt: str, seed: int = 0, steps: int = 0, scene=None) -> dict[str, np.ndarray]:
+    """Frames of every camera after ``steps`` frames of gentle throttle."""
+    scene = scene or build_scene(prompt, seed)
+    world = World(scene, dt=0.05)
+    for _ in range(steps):
+        world.advance(0.5, 0.0)
+    renderer = Renderer(WIDTH, HEIGHT)
+    renderer.prepare(scene)
+    frames = {name: np.zeros((HEIGHT, WIDTH, 3), np.uint8) for name in CAMERAS}
+    renderer.render(world.state, steps, frames)
+    return frames
+
+
+def test_night_is_darker_than_day_and_sunset_warmer() -> None:
+    day, night, sunset = (
+        render(prompt)["front"] for prompt in ("rural", "rural night", "rural sunset")
+    )
+    assert night.mean() < 0.5 * day.mean()
+
+    def warmth(frame: np.ndarray) -> float:
+        return float(frame[..., 0].mean() - frame[..., 2].mean())
+
+    assert warmth(sunset) > warmth(day) + 20
+
+
+def test_fog_flattens_the_far_view() -> None:
+    horizon_band = slice(HEIGHT // 2 - 6, HEIGHT // 2 + 6)
+    clear, foggy = (
+        render(p, seed=1)["front"][horizon_band].astype(float) for p in ("urban", "urban fog")
+    )
+    assert foggy.std() < 0.6 * clear.std()
+
+
+def test_rain_streaks_fall_frame_by_frame() -> None:
+    first, second = render("rural rain", steps=3)["front"], render("rural rain", steps=4)["front"]
+    dry_first, dry_second = render("rural", steps=3)["front"], render("rural", steps=4)["front"]
+    rain_change = np.abs(first.astype(int) - second).mean()
+    assert rain_change > 2 * np.abs(dry_first.astype(int) - dry_second).mean()
+
+
+def test_depth_is_metric_and_occludes() -> None:
+    scene = build_scene("highway", 0)
+    lane = scene.style.lane_offset(0)
+    scene = scene.with_obstacles(obstacles_at(scene.road, ["car"], [15.0], [lane]))
+    renderer = Renderer(WIDTH, HEIGHT)
+    renderer.prepare(scene)
+    depth = renderer.depth(World(scene, dt=0.05).state)["front"]
+    assert depth.shape == (HEIGHT, WIDTH) and depth.dtype == np.float32
+    assert np.isinf(depth[0]).mean() > 0.5  # sky
+    ground = depth[HEIGHT // 2 + 12 :, 5]
+    assert np.all(np.diff(ground) < 0)  # nearer towards the bottom
+    column = depth[:, WIDTH // 2]
+    car_rows = np.flatnonzero(np.isclose(column, 15.0 - 1.0 - 2.2, atol=1.0))
+    assert car_rows.size > 2
+    behind = column[car_rows.min() - 1]
+    assert behind > column[car_rows.min()]
+
+
+@pytest.mark.parametrize(("width", "height"), [(97, 61), (33, 17)])
+def test_odd_sizes_render(width: int, height: int) -> None:
+    scene = build_scene("city rain", 2)
+    renderer = Renderer(width, height)
+    renderer.prepare(scene)
+    frames = {name: np.zeros((height, width, 3), np.uint8) for name in CAMERAS}
+    renderer.render(World(scene, dt=0.05).state, 0, frames)
+    for frame in frames.values():
+        assert frame.std() > 5.0
+    assert renderer.depth(World(scene, dt=0.05).state)["front"].shape == (height, width)
+
+
+def test_quad_palette_matches_a_plain_lookup() -> None:
+    rng = np.random.default_rng(0)
+    palette = rng.integers(0, 256, (256, 3)).astype(np.uint8)
+    converter = _QuadPalette(palette)
+    for size in (1, 2, 3, 4, 5, 7, 8, 1001):
+        indices = rng.integers(0, 256, size).astype(np.uint8)
+        out = np.empty((size, 3), np.uint8)
+        converter.convert(indices, out)
+        assert np.array_equal(out, palette[indices])
