@@ -61,15 +61,25 @@ class EpisodePlanner:
         return prompts, seeds
 
 
+class _PromptPerRow:
+    """A picklable sampler: row ``i`` always gets ``prompts[i]``."""
+
+    def __init__(self, prompts: Sequence[str]) -> None:
+        self.prompts = tuple(prompts)
+
+    def __call__(self, row: int, rng: np.random.Generator) -> str:
+        return self.prompts[row]
+
+
 def _as_sampler(prompts: Prompts, num_rows: int) -> PromptSampler:
-    if isinstance(prompts, str):
-        return lambda row, rng: prompts
     if callable(prompts):
         return prompts
-    prompt_list = list(prompts)
+    prompt_list = [prompts] * num_rows if isinstance(prompts, str) else list(prompts)
     if len(prompt_list) != num_rows:
-        raise ValueError(f"got {len(prompt_list)} prompts for {num_rows} env rows; pass one per row")
+        raise ValueError(
+            f"got {len(prompt_list)} prompts for {num_rows} env rows; pass one per row"
+        )
     bad = [p for p in prompt_list if not isinstance(p, str) or not p.strip()]
     if bad:
         raise ValueError(f"prompts must be non-empty strings, got {bad[0]!r}")
-    return lambda row, rng: prompt_list[row]
+    return _PromptPerRow(prompt_list)

@@ -54,9 +54,7 @@ class OasisGymEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
-        self._env = OasisEnv(
-            endpoint, 1, prompt, reward=reward, max_steps=max_steps, **env_kwargs
-        )
+        self._env = OasisEnv(endpoint, 1, prompt, reward=reward, max_steps=max_steps, **env_kwargs)
         height, width = self._env.layout.frame_size
         self.action_space = spaces.Box(-1.0, 1.0, (CHUNK, 2), dtype=np.float32)
         self.observation_space = spaces.Dict(
@@ -99,7 +97,9 @@ class OasisGymEnv(gym.Env):
             self._env.close()
 
     def _observe(self, td: TensorDictBase) -> dict[str, np.ndarray]:
-        self._last = {camera: td["pixels", camera][0].numpy() for camera in self._env.layout.cameras}
+        self._last = {
+            camera: td["pixels", camera][0].numpy() for camera in self._env.layout.cameras
+        }
         return self._last
 
     @staticmethod

@@ -234,7 +234,7 @@ class OasisEnv(EnvBase):
                 f"could not reset env row {rows[failed[0]]}: {step.errors[failed[0]]}"
             ) from step.errors[failed[0]]
         self._steps[rows] = 0
-        for row, prompt, seed in zip(rows, prompts, seeds):
+        for row, prompt, seed in zip(rows, prompts, seeds, strict=True):
             self._prompts[row] = prompt
             self._seeds[row] = seed
         mask = torch.zeros(self.num_envs, dtype=torch.bool)

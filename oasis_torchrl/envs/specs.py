@@ -68,9 +68,7 @@ def _pixels_shape(layout: EnvLayout) -> tuple[int, ...]:
 
 
 def _group(layout: EnvLayout, names: Sequence[str], spec_for) -> Composite:
-    return Composite(
-        {name: spec_for() for name in names}, shape=layout.batch, device=layout.device
-    )
+    return Composite({name: spec_for() for name in names}, shape=layout.batch, device=layout.device)
 
 
 def build_observation_spec(layout: EnvLayout) -> Composite:

@@ -98,14 +98,14 @@ def _palette_layout() -> dict[str, tuple[int, int]]:
         for name in names:
             layout[name] = (index, bands)
             index += bands
-    if index > 256:
-        raise AssertionError(f"palette needs {index} entries, a uint8 image holds 256")
+    if index > TRANSPARENT:
+        raise AssertionError(f"palette needs {index} entries, {TRANSPARENT} are available")
     return layout
 
 
-PALETTE = _palette_layout()
-#: Texture value of a see-through texel in roadside textures.
+#: Marks see-through texels of roadside walls (never a palette entry).
 TRANSPARENT = 255
+PALETTE = _palette_layout()
 
 
 def material(name: str) -> int:
@@ -575,9 +575,7 @@ class Renderer:
         knots = np.arange(0, model.padded_width + 1, model.knot)
         self._knot_slopes = model.column_slopes(knots)
         self._knot_steps = np.arange(model.knot, dtype=np.float32)
-        columns = np.arange(model.padded_width)
-        self._column_knot = columns // model.knot
-        self._column_fraction = (columns % model.knot) / model.knot
+        self._knot_fraction = np.arange(model.knot) / model.knot
         self._yaws = np.array([CAMERA_YAWS[name] for name in CAMERAS])
         self._buffers = _Buffers(height, model.padded_width, ground_depths.size, model.knot)
         self._parallel = width * height >= PARALLEL_PIXELS
@@ -609,6 +607,7 @@ class Renderer:
         self._dashed_lines = dashed_lines(scene.style)
         self._obstacles = _ObstacleGeometry.of(scene)
         self._particles = _Particles(model, scene)
+        logger.debug("renderer %dx%d ready for %r", model.width, model.height, scene.prompt)
 
     def render(self, car: VehicleState, frame: int, out: dict[str, np.ndarray]) -> None:
         """Draw every camera into ``out[name]`` (``uint8 [H, W, 3]``, written in place).
@@ -784,18 +783,24 @@ class Renderer:
         its end) each column takes its nearest knot.
         """
         inverse, s, is_left = self._wall_samples(layer, s_samples, d_samples)
-        first, fraction = self._column_knot, self._column_fraction
-        second = first + 1
-        smooth = (inverse[:, first] > 0) & (inverse[:, second] > 0)
-        smooth &= is_left[:, first] == is_left[:, second]
-        column_inverse = inverse[:, first] + fraction * (inverse[:, second] - inverse[:, first])
-        weighted = s[:, first] * inverse[:, first]
-        weighted = weighted + fraction * (s[:, second] * inverse[:, second] - weighted)
-        nearest = np.where(fraction < 0.5, first, second)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            column_s = np.where(smooth, weighted / column_inverse, s[:, nearest])
-        column_inverse = np.where(smooth, column_inverse, inverse[:, nearest])
-        return column_inverse, column_s, is_left[:, nearest]
+        shape = (inverse.shape[0], -1)
+        fraction = self._knot_fraction
+        before, after = inverse[:, :-1, None], inverse[:, 1:, None]
+        side_before, side_after = is_left[:, :-1, None], is_left[:, 1:, None]
+        smooth = (before > 0) & (after > 0) & (side_before == side_after)
+        blended = before + fraction * (after - before)
+        weighted = s[:, :-1, None] * before
+        weighted = weighted + fraction * (s[:, 1:, None] * after - weighted)
+        first_half = fraction < 0.5
+        nearest_inverse = np.where(first_half, before, after)
+        nearest_s = np.where(first_half, s[:, :-1, None], s[:, 1:, None])
+        column_s = np.where(smooth, weighted / np.where(smooth, blended, 1.0), nearest_s)
+        column_side = np.where(first_half, side_before, side_after)
+        return (
+            np.where(smooth, blended, nearest_inverse).reshape(shape),
+            column_s.reshape(shape),
+            column_side.reshape(shape),
+        )
 
     def _plan_roadside(
         self, layer: RoadsideLayer, s_samples: np.ndarray, d_samples: np.ndarray

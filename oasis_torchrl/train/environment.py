@@ -1,0 +1,105 @@
+"""The training env of a config's ``env`` section (shared by PPO, evaluation and the pipeline).
+
+``env`` keys: ``endpoint`` (``local`` or an A2V URL), ``prompts`` (a list; one prompt is used
+for every episode, several are drawn from per episode), ``num_envs``, ``max_steps`` (chunks per
+episode), ``image_size`` ``[height, width]`` of the policy images, ``server`` (``width``,
+``height`` of the embedded server's frames) and ``reward`` (``kind: ground_truth`` with
+``progress_scale``, ``collision_penalty``, ``lane_penalty``; or ``kind: depth``, the peer's
+depth-collision reward, for remote endpoints).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from omegaconf import DictConfig
+from torchrl.envs import TransformedEnv
+
+from oasis_torchrl.envs import make_training_env
+from oasis_torchrl.envs.episodes import Prompts
+from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, RewardModule
+from oasis_torchrl.sim.config import ServerConfig
+
+REWARD_KINDS = ("ground_truth", "depth")
+
+
+def episode_prompts(prompts: Sequence[str]) -> Prompts:
+    """One prompt for every episode, or a sampler drawing one uniformly per episode.
+
+    Example:
+        >>> episode_prompts(["urban"])
+        'urban'
+        >>> sampler = episode_prompts(["urban", "rural"])
+        >>> sampler(0, np.random.default_rng(0)) in ("urban", "rural")
+        True
+    """
+    choices = [str(prompt) for prompt in prompts]
+    if not choices:
+        raise ValueError("env.prompts must hold at least one prompt")
+    if len(choices) == 1:
+        return choices[0]
+
+    def sample(row: int, rng: np.random.Generator) -> str:
+        return choices[int(rng.integers(len(choices)))]
+
+    return sample
+
+
+def make_reward(cfg: DictConfig) -> RewardModule:
+    """The reward module of ``env.reward``.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"kind": "ground_truth", "progress_scale": 0.1,
+        ...                         "collision_penalty": 10.0, "lane_penalty": 0.01})
+        >>> type(make_reward(cfg)).__name__
+        'GroundTruthReward'
+    """
+    kind = cfg.kind
+    if kind == "ground_truth":
+        return GroundTruthReward(
+            progress_scale=cfg.progress_scale,
+            collision_penalty=cfg.collision_penalty,
+            lane_penalty=cfg.lane_penalty,
+        )
+    if kind == "depth":
+        return DepthCollisionReward()
+    raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {kind!r}")
+
+
+def build_env(
+    cfg: DictConfig,
+    *,
+    num_envs: int | None = None,
+    prompts: Prompts | None = None,
+    max_steps: int | None = None,
+    **env_kwargs: Any,
+) -> TransformedEnv:
+    """The transformed :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` config section.
+
+    Args:
+        cfg: the ``env`` section.
+        num_envs, prompts, max_steps: replace the section's values (evaluation uses one row
+            per episode and fixed per-row prompts).
+        **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> env = build_env(load_config("ppo").env, num_envs=1)
+        >>> env.batch_size
+        torch.Size([1])
+        >>> env.close()
+    """
+    height, width = cfg.image_size
+    return make_training_env(
+        endpoint=cfg.endpoint,
+        num_envs=num_envs or cfg.num_envs,
+        prompts=prompts if prompts is not None else episode_prompts(cfg.prompts),
+        image_size=(int(height), int(width)),
+        server=ServerConfig(width=cfg.server.width, height=cfg.server.height),
+        max_steps=max_steps or cfg.max_steps,
+        reward=make_reward(cfg.reward),
+        **env_kwargs,
+    )

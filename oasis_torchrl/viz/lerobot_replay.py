@@ -1,0 +1,215 @@
+"""LeRobot datasets to rerun: chosen episodes, each under ``episode/<index>`` with the same layout
+as live rollouts (cameras, actions, state, reward, events; no ground truth, so no top-down map).
+
+Tabular columns are read with LeRobot's own reader and sent as whole columns; videos are decoded
+sequentially with PyAV and logged frame by frame, so memory stays flat however long an episode is.
+Timelines: ``frame`` = the dataset's ``frame_index``, ``sim_time`` = ``frame_index / fps``.
+Needs the ``lerobot`` extra.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import av
+import numpy as np
+import rerun as rr
+
+from oasis_torchrl.viz.blueprint import default_blueprint
+from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
+from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.writer import send_series
+
+logger = logging.getLogger(__name__)
+
+IMAGE_PREFIX = "observation.images."
+STATE, ACTION, REWARD, DONE, SEED = (
+    "observation.state",
+    "action",
+    "next.reward",
+    "next.done",
+    "episode_seed",
+)
+
+
+def is_dataset_root(path: str | Path) -> bool:
+    """Whether ``path`` is a LeRobot dataset folder (it has ``meta/info.json``).
+
+    Example:
+        >>> is_dataset_root("/nonexistent")
+        False
+    """
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
+def video_frames(
+    path: Path, start_s: float, count: int, tolerance_s: float
+) -> Iterator[np.ndarray]:
+    """``count`` RGB frames of a video from ``start_s`` seconds on, decoded in order.
+
+    Example:
+        >>> import tempfile
+        >>> from oasis_torchrl.video import StripVideoWriter
+        >>> path = Path(tempfile.mkdtemp()) / "clip.mp4"
+        >>> with StripVideoWriter(path, ["front"], fps=20) as video:
+        ...     video.write({"front": [np.zeros((64, 96, 3), np.uint8)] * 4})
+        >>> [frame.shape for frame in video_frames(path, 0.1, 2, tolerance_s=0.025)]
+        [(64, 96, 3), (64, 96, 3)]
+    """
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        container.seek(int(start_s / stream.time_base), stream=stream, backward=True)
+        produced = 0
+        for frame in container.decode(stream):
+            if frame.time is None or frame.time < start_s - tolerance_s:
+                continue
+            yield frame.to_ndarray(format="rgb24")
+            produced += 1
+            if produced == count:
+                return
+
+
+def _names(feature: dict[str, Any], width: int) -> list[str]:
+    names = feature.get("names")
+    if isinstance(names, dict):  # LeRobot also allows {"motors": [...]}
+        names = next(iter(names.values()), None)
+    if isinstance(names, list) and len(names) == width:
+        return [str(name) for name in names]
+    return [str(k) for k in range(width)]
+
+
+class DatasetReplay:
+    """Replays episodes of a LeRobot dataset into a recording.
+
+    Args:
+        root: the dataset folder.
+        recording: where to log (see :func:`~oasis_torchrl.viz.recording.open_recording`).
+        jpeg_quality: JPEG quality of logged frames (None: raw images).
+        repo_id: LeRobot repo id (default ``local/<folder name>``).
+
+    Example:
+        >>> replay = DatasetReplay("drives", rr.RecordingStream("doc"))  # doctest: +SKIP
+        >>> replay.log([0, 3])  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        recording: rr.RecordingStream,
+        *,
+        jpeg_quality: int | None = DEFAULT_JPEG_QUALITY,
+        repo_id: str | None = None,
+    ) -> None:
+        from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
+
+        from oasis_torchrl.data.loading import default_repo_id
+
+        self.root = Path(root)
+        if not is_dataset_root(self.root):
+            raise ValueError(f"{self.root} is not a LeRobot dataset (no meta/info.json)")
+        self.repo_id = repo_id or default_repo_id(self.root)
+        self.meta = LeRobotDatasetMetadata(self.repo_id, root=self.root)
+        self.recording = recording
+        self.jpeg_quality = jpeg_quality
+
+    @property
+    def cameras(self) -> list[str]:
+        """Camera names (the ``observation.images.<camera>`` features)."""
+        return [key.removeprefix(IMAGE_PREFIX) for key in self.meta.camera_keys]
+
+    def check_episodes(self, episodes: Sequence[int] | None) -> list[int]:
+        """``episodes`` (default: all) after checking they exist."""
+        total = self.meta.total_episodes
+        chosen = list(range(total)) if episodes is None else [int(e) for e in episodes]
+        missing = [e for e in chosen if not 0 <= e < total]
+        if missing or not chosen:
+            raise ValueError(
+                f"episodes {missing or chosen} not in dataset {self.root} "
+                f"({total} episodes: 0-{total - 1})"
+            )
+        return chosen
+
+    def log(self, episodes: Sequence[int] | None = None) -> list[int]:
+        """Log ``episodes`` (default all), each as a row of its own; returns them."""
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        chosen = self.check_episodes(episodes)
+        self.recording.send_blueprint(
+            default_blueprint(chosen, self.cameras, root=EPISODE_ROOT, topdown=False)
+        )
+        dataset = LeRobotDataset(
+            self.repo_id, root=self.root, episodes=chosen, video_backend="pyav"
+        )
+        table = dataset.hf_dataset.with_format("numpy")
+        episode_of_row = np.asarray(table["episode_index"]).reshape(-1)
+        for episode in chosen:
+            rows = table[np.flatnonzero(episode_of_row == episode)]
+            self._log_episode(episode, rows)
+            logger.info("replayed episode %d (%d frames)", episode, len(rows["frame_index"]))
+        return chosen
+
+    def _log_episode(self, episode: int, rows: dict[str, np.ndarray]) -> None:
+        paths = RowPaths(EPISODE_ROOT, episode)
+        frames = np.asarray(rows["frame_index"]).reshape(-1).astype(np.int64)
+        self._log_events(paths, episode, rows, frames)
+        self._log_series(paths, rows, frames)
+        for key in self.meta.camera_keys:
+            self._log_camera(paths, episode, key, rows, frames)
+
+    def _at(self, frame: int) -> None:
+        self.recording.set_time(FRAME_TIMELINE, sequence=int(frame))
+        self.recording.set_time(TIME_TIMELINE, duration=int(frame) / self.meta.fps)
+
+    def _log_events(
+        self, paths: RowPaths, episode: int, rows: dict[str, np.ndarray], frames: np.ndarray
+    ) -> None:
+        tasks = self.meta.episodes[episode]["tasks"]
+        seed = f", seed {int(np.asarray(rows[SEED]).reshape(-1)[0])}" if SEED in rows else ""
+        self._at(frames[0])
+        text = f"episode {episode} starts: {', '.join(map(repr, tasks))}{seed}"
+        self.recording.log(paths.events, rr.TextLog(text, level="INFO"))
+        if DONE in rows:
+            for frame in frames[np.asarray(rows[DONE]).reshape(-1).astype(bool)]:
+                self._at(frame)
+                self.recording.log(paths.events, rr.TextLog("episode ends", level="INFO"))
+
+    def _log_series(self, paths: RowPaths, rows: dict[str, np.ndarray], frames: np.ndarray) -> None:
+        fps = float(self.meta.fps)
+        for key, group in ((ACTION, "action"), (STATE, "state")):
+            if key not in rows:
+                continue
+            values = np.asarray(rows[key], dtype=np.float64).reshape(len(frames), -1)
+            names = _names(self.meta.features[key], values.shape[1])
+            for column, name in enumerate(names):
+                path = paths.scalar(group, name)
+                send_series(self.recording, path, frames, values[:, column], fps)
+        if REWARD in rows:
+            reward = np.asarray(rows[REWARD], dtype=np.float64).reshape(-1)
+            send_series(self.recording, paths.scalar("reward", "total"), frames, reward, fps)
+
+    def _log_camera(
+        self,
+        paths: RowPaths,
+        episode: int,
+        key: str,
+        rows: dict[str, np.ndarray],
+        frames: np.ndarray,
+    ) -> None:
+        entity = paths.camera(key.removeprefix(IMAGE_PREFIX))
+        images = self._images(episode, key, rows, len(frames))
+        for frame, image in zip(frames, images, strict=False):
+            self._at(frame)
+            self.recording.log(entity, image_archetype(check_frame(image, key), self.jpeg_quality))
+
+    def _images(
+        self, episode: int, key: str, rows: dict[str, np.ndarray], count: int
+    ) -> Iterator[np.ndarray]:
+        if key not in self.meta.video_keys:  # stored as images: decoded with the table
+            yield from (np.asarray(image, dtype=np.uint8) for image in rows[key])
+            return
+        start = float(self.meta.episodes[episode][f"videos/{key}/from_timestamp"])
+        path = self.root / self.meta.get_video_file_path(episode, key)
+        yield from video_frames(path, start, count, tolerance_s=0.5 / self.meta.fps)
