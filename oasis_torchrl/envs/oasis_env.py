@@ -67,9 +67,12 @@ class OasisEnv(EnvBase):
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
-            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` on the embedded server, zero
+            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
             elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
             reference depth reward).
+        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``;
+            default: only for ``endpoint="local"``. Set it for an ``oasis-torchrl serve`` server
+            started elsewhere (a server that sends none yields NaN).
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
             server only), e.g. ``("front",)`` for ``GroundTruthDepth``.
         terminate_on_collision: end the episode when the ground truth reports a collision.
@@ -104,6 +107,7 @@ class OasisEnv(EnvBase):
         chunk_actions: bool = True,
         max_steps: int = 512,
         reward: RewardModule | Callable[[TensorDictBase], torch.Tensor] | None = None,
+        ground_truth: bool | None = None,
         depth_cameras: Sequence[str] = (),
         terminate_on_collision: bool = True,
         retry: RetryPolicy | None = None,
@@ -125,7 +129,8 @@ class OasisEnv(EnvBase):
         self._api_key = api_key
         self._server_config = server if server is not None else ServerConfig()
         self._planner = EpisodePlanner(prompts, num_envs)
-        self._reward = _resolve_reward(reward, self.is_local)
+        self.ground_truth = self.is_local if ground_truth is None else ground_truth
+        self._reward = _resolve_reward(reward, self.ground_truth)
         self._server: LocalServer | None = None
         self._pool: SessionPool | None = None
         self._frame_size = frame_size
@@ -139,7 +144,7 @@ class OasisEnv(EnvBase):
             frame_size=frame_size or advertised,
             all_frames=all_frames,
             chunk_actions=chunk_actions,
-            truth_fields=TRUTH_FIELDS if self.is_local else (),
+            truth_fields=TRUTH_FIELDS if self.ground_truth else (),
             depth_cameras=tuple(depth_cameras),
             reward_terms=tuple(getattr(self._reward, "terms", ())),
             device=self.device,
@@ -342,9 +347,9 @@ def _flags(
     ).to(device)
 
 
-def _resolve_reward(reward: Any, is_local: bool) -> RewardModule:
+def _resolve_reward(reward: Any, ground_truth: bool) -> RewardModule:
     if reward is None:
-        return GroundTruthReward() if is_local else as_reward_module(_zero_reward)
+        return GroundTruthReward() if ground_truth else as_reward_module(_zero_reward)
     if hasattr(reward, "reset"):
         return reward
     return as_reward_module(reward)

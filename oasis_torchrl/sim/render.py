@@ -703,22 +703,28 @@ class Renderer:
         weight = weight[:, None]
         return samples[..., lower, :] * (1.0 - weight) + samples[..., upper, :] * weight
 
-    def _row_profiles(self, s_rows: np.ndarray, d_rows: np.ndarray) -> np.ndarray:
+    def _row_profiles(self, s_samples: np.ndarray, d_rows: np.ndarray) -> np.ndarray:
         """Per camera and ground row, the first entry of its lateral profile: the variant for
         the dashes where the row crosses each dashed line, and the row's depth band."""
         style = self._require_scene().style
-        variant = np.zeros(s_rows.shape[:-1], dtype=np.intp)
+        cameras, rows = np.ogrid[: d_rows.shape[0], : d_rows.shape[1]]
+        lower, upper, weight = self._row_samples
+        variant = np.zeros(d_rows.shape[:-1], dtype=np.intp)
         for bit, (offset, _) in enumerate(self._dashed_lines):
             side = d_rows - offset
             crossed = side[..., :-1] * side[..., 1:] <= 0.0
-            knot = np.argmax(crossed, axis=-1)[..., None]
-            before = np.take_along_axis(side, knot, -1)
-            after = np.take_along_axis(side, knot + 1, -1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                weight = np.nan_to_num(before / (before - after))
-            s_before = np.take_along_axis(s_rows, knot, -1)
-            s = s_before + weight * (np.take_along_axis(s_rows, knot + 1, -1) - s_before)
-            dash = crossed.any(axis=-1) & (s[..., 0] % style.dash_period < style.dash_length)
+            knot = np.argmax(crossed, axis=-1)
+            before, after = side[cameras, rows, knot], side[cameras, rows, knot + 1]
+            fraction = np.divide(
+                before, before - after, out=np.zeros_like(before), where=before != after
+            )
+            s_knots = [
+                s_samples[cameras, lower, column] * (1.0 - weight)
+                + s_samples[cameras, upper, column] * weight
+                for column in (knot, knot + 1)
+            ]
+            s = s_knots[0] + fraction * (s_knots[1] - s_knots[0])
+            dash = crossed.any(axis=-1) & (s % style.dash_period < style.dash_length)
             variant |= dash.astype(np.intp) << bit
         variant[:, : self._first_near_row] = 2 ** len(self._dashed_lines)
         return (variant * GROUND_BANDS + self._ground_bands) * TEXTURE_COLUMNS
@@ -730,10 +736,10 @@ class Renderer:
         texel; it is linear in the column within a knot interval (exact for a straight road,
         the road's curvature is gentle over one interval).
         """
-        s_rows, d_rows = self._by_row(np.stack([s_samples, d_samples]))
+        d_rows = self._by_row(d_samples)
         columns = (d_rows + TEXTURE_HALF_WIDTH) / TEXTURE_COLUMN
         np.clip(columns, 0.0, TEXTURE_COLUMNS - 0.01, out=columns)
-        columns += self._row_profiles(s_rows, d_rows)[..., None]
+        columns += self._row_profiles(s_samples, d_rows)[..., None]
         columns = columns.astype(np.float32)
         step = np.diff(columns, axis=-1) / np.float32(self.model.knot)
         return _GroundPlan(columns[..., :-1, None], step[..., None])

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from lerobot.configs.policies import PreTrainedConfig
-from lerobot.configs.types import FeatureType, NormalizationMode
+from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
@@ -112,6 +112,36 @@ class OasisConfig(PreTrainedConfig):
             hidden_dim=self.hidden_dim,
             chunk=self.chunk_size,
             action_dim=ACTION_DIM,
+        )
+
+    @classmethod
+    def from_net_config(cls, net: DrivingNetConfig, device: str = "cpu") -> OasisConfig:
+        """The policy config of a network (e.g. one trained with PPO), features included.
+
+        Example:
+            >>> config = OasisConfig.from_net_config(DrivingNetConfig(image_size=(32, 48)))
+            >>> config.net_config().image_size, config.cameras[0]
+            ((32, 48), 'left_forward')
+        """
+        if net.action_dim != ACTION_DIM:
+            raise ValueError(f"the network's action_dim must be {ACTION_DIM}, got {net.action_dim}")
+        inputs = {
+            f"{OBS_IMAGES}.{camera}": PolicyFeature(FeatureType.VISUAL, (3, *net.image_size))
+            for camera in net.cameras
+        }
+        inputs[OBS_STATE] = PolicyFeature(FeatureType.STATE, (net.state_dim,))
+        return cls(
+            device=device,
+            input_features=inputs,
+            output_features={ACTION: PolicyFeature(FeatureType.ACTION, (ACTION_DIM,))},
+            chunk_size=net.chunk,
+            n_action_steps=net.chunk,
+            image_size=net.image_size,
+            shared_encoder=net.shared_encoder,
+            encoder_channels=net.encoder_channels,
+            pool_grid=net.pool_grid,
+            camera_features=net.camera_features,
+            hidden_dim=net.hidden_dim,
         )
 
     def validate_features(self) -> None:
