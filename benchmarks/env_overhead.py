@@ -15,7 +15,6 @@ import time
 
 import numpy as np
 import torch
-from tensordict import TensorDict
 
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.launcher import ServerProcess
@@ -42,7 +41,7 @@ def env_rate(env: OasisEnv, seconds: float) -> float:
     steps, started = 0, time.perf_counter()
     while time.perf_counter() - started < seconds:
         action = torch.rand(env.action_spec.shape, generator=generator) * 1.2 - 0.2
-        td = env.step_and_maybe_reset(TensorDict(action=action, batch_size=env.batch_size))[1]
+        _, td = env.step_and_maybe_reset(td.set("action", action))
         steps += 1
     return steps / (time.perf_counter() - started)
 

@@ -268,6 +268,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args()
     av.logging.set_libav_level(av.logging.ERROR)
+    os.environ.setdefault("SVT_LOG", "1")  # libsvtav1 prints its banner per episode otherwise
     torch.set_num_threads(1)  # the encoders get the cores, as in a recording run
     rollout = record_rollout(args.num_envs, args.steps, args.width, args.height)
     work = Path(tempfile.mkdtemp(prefix="export-bench-"))
