@@ -1,10 +1,11 @@
 """Render cost of the embedded simulator versus VP9 encoding of the same frames.
 
-Drives the autopilot through a few scenes, renders every step (4 frames x 3 cameras), and
-encodes the frames of one camera with libvpx-vp9 realtime (deadline=realtime, cpu-used=8,
-lag-in-frames=0, row-mt=1, 2 Mb/s, from ``rgb24`` ndarrays), the settings of the embedded server.
-Prints JSON: milliseconds per camera-frame for rendering and encoding at 768x512 and 192x128,
-and their ratio (the target is <= 0.5).
+Drives the autopilot through a few scenes, then replays each drive: every step is rendered
+(4 frames x 3 cameras) and its front frames are encoded with libvpx-vp9 realtime
+(deadline=realtime, cpu-used=8, lag-in-frames=0, row-mt=1, 2 Mb/s, from ``rgb24`` ndarrays, the
+embedded server's settings), alternating so both see the same machine load. Prints JSON:
+milliseconds per camera-frame to render and per frame to encode (median of the repeats) at
+768x512 and 192x128, and their ratio (the target at 768x512 is <= 0.5).
 
 Run: ``python benchmarks/render_speed.py [--steps 40] [--repeats 3]``
 """
@@ -38,40 +39,40 @@ def drive(simulator: Simulator, prompt: str, steps: int) -> list[np.ndarray]:
     return chunks
 
 
-def render_ms(simulator: Simulator, prompt: str, chunks: list[np.ndarray], repeats: int) -> tuple:
-    """Best milliseconds per camera-frame over ``repeats`` replays, and the front frames."""
-    best, frames = float("inf"), []
-    for _ in range(repeats):
-        simulator.reset(prompt, seed=0)
-        frames = []
-        start = time.perf_counter()
-        for chunk in chunks:
-            frames.extend(simulator.step(chunk).rgb["front"])
-        elapsed = time.perf_counter() - start
-        best = min(best, elapsed * 1000 / (len(chunks) * 4 * len(CAMERA_NAMES)))
-    return best, frames
+def new_encoder(width: int, height: int) -> av.CodecContext:
+    """A libvpx-vp9 realtime encoder with the embedded server's settings."""
+    codec = av.CodecContext.create("libvpx-vp9", "w")
+    codec.width, codec.height, codec.pix_fmt = width, height, "yuv420p"
+    codec.time_base = fractions.Fraction(1, FPS)
+    codec.framerate = FPS
+    codec.bit_rate = 2_000_000
+    codec.options = {"deadline": "realtime", "cpu-used": "8", "lag-in-frames": "0", "row-mt": "1"}
+    return codec
 
 
-def encode_ms(frames: list[np.ndarray], repeats: int) -> float:
-    """Best milliseconds per frame to VP9-encode ``frames`` (one stream)."""
-    height, width = frames[0].shape[:2]
-    best = float("inf")
-    for _ in range(repeats):
-        codec = av.CodecContext.create("libvpx-vp9", "w")
-        codec.width, codec.height, codec.pix_fmt = width, height, "yuv420p"
-        codec.time_base = fractions.Fraction(1, FPS)
-        codec.framerate = FPS
-        codec.bit_rate = 2_000_000
-        codec.options = {"deadline": "realtime", "cpu-used": "8", "lag-in-frames": "0"}
-        codec.options["row-mt"] = "1"
+def replay(simulator: Simulator, prompt: str, chunks: list[np.ndarray]) -> tuple[float, float]:
+    """Milliseconds per camera-frame to render, and per frame to encode, over one replay.
+
+    Rendering a step and encoding its front frames alternate, so both see the same machine
+    load (the ratio stays meaningful on a busy machine).
+    """
+    simulator.reset(prompt, seed=0)
+    codec = new_encoder(simulator.width, simulator.height)
+    render = encode = 0.0
+    frames = 0
+    for chunk in chunks:
         start = time.perf_counter()
-        for index, frame in enumerate(frames):
+        rgb = simulator.step(chunk).rgb["front"]
+        rendered = time.perf_counter()
+        for frame in rgb:
             video_frame = av.VideoFrame.from_ndarray(frame, format="rgb24")
-            video_frame.pts = index
+            video_frame.pts = frames
             codec.encode(video_frame)
-        codec.encode(None)
-        best = min(best, (time.perf_counter() - start) * 1000 / len(frames))
-    return best
+            frames += 1
+        render += rendered - start
+        encode += time.perf_counter() - rendered
+    codec.encode(None)
+    return render * 1000 / (frames * len(CAMERA_NAMES)), encode * 1000 / frames
 
 
 def main() -> None:
@@ -85,12 +86,12 @@ def main() -> None:
         per_scene = {}
         for prompt in PROMPTS:
             chunks = drive(simulator, prompt, args.steps)
-            render, frames = render_ms(simulator, prompt, chunks, args.repeats)
-            encode = encode_ms(frames, args.repeats)
+            runs = np.array([replay(simulator, prompt, chunks) for _ in range(args.repeats)])
+            render, encode = np.median(runs, axis=0)
             per_scene[prompt] = {
-                "render_ms": round(render, 3),
-                "encode_ms": round(encode, 3),
-                "ratio": round(render / encode, 3),
+                "render_ms": round(float(render), 3),
+                "encode_ms": round(float(encode), 3),
+                "ratio": round(float(render / encode), 3),
             }
         render = float(np.mean([scene["render_ms"] for scene in per_scene.values()]))
         encode = float(np.mean([scene["encode_ms"] for scene in per_scene.values()]))

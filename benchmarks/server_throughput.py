@@ -46,6 +46,7 @@ class BenchSession:
         self.sequence_num = 0
         self.bytes_received = 0
         self.responses = 0
+        self.restarts = 0
         self.prompt()
 
     def prompt(self) -> None:
@@ -70,10 +71,11 @@ class BenchSession:
         self.responses += 1
         truth = sim_pb2.InferTruth.FromString(dict(call.trailing_metadata())[TRUTH_METADATA])
         if truth.frames[-1].collided:
+            self.restarts += 1
             self.prompt()
 
 
-def measure(width: int, height: int, sessions: int, seconds: float) -> dict[str, float]:
+def measure(width: int, height: int, sessions: int, seconds: float) -> dict[str, float | int]:
     """Calls/s (and derived numbers) for ``sessions`` concurrent sessions at one resolution."""
     with (
         LocalServer(width=width, height=height, max_sessions=sessions + 1) as server,
@@ -106,9 +108,8 @@ def measure(width: int, height: int, sessions: int, seconds: float) -> dict[str,
         "infer_calls_per_s": round(calls / elapsed, 2),
         "frames_per_s": round(calls * 4 * 3 / elapsed, 1),
         "mean_latency_ms": round(1000 * elapsed * sessions / max(calls, 1), 1),
-        "mean_response_kib": round(
-            received / max(sum(d.sequence_num for d in drivers), 1) / 1024, 1
-        ),
+        "mean_response_kib": round(received / sum(d.responses for d in drivers) / 1024, 1),
+        "rollout_restarts": sum(d.restarts for d in drivers),
         "calls": calls,
     }
 

@@ -92,7 +92,7 @@ def _as_steps(batch: TensorDictBase) -> TensorDictBase:
 
 def _cameras(batch: TensorDictBase) -> tuple[str, ...]:
     """Camera names in the conventional order (TensorDict ops may reorder keys)."""
-    names = [str(key) for key in _get(batch, PIXELS, "the camera frames").keys()]  # noqa: SIM118
+    names = [str(key) for key in _get(batch, PIXELS, "the camera frames").keys()]
     known = [camera for camera in DEFAULT_REQUIRED_STREAMS if camera in names]
     return (*known, *sorted(set(names) - set(known)))
 

@@ -35,6 +35,8 @@ from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episod
 
 logger = logging.getLogger(__name__)
 
+DEFAULT_BUFFER_BYTES = 1 << 30
+
 
 class LeRobotRecorder:
     """Writes batches of env steps as LeRobot episodes; also a TorchRL collector hook.
@@ -57,7 +59,9 @@ class LeRobotRecorder:
         append: add episodes to the dataset at ``root``.
         max_episodes: stop recording after this many episodes (see :attr:`full`).
         keep_unfinished: on a clean :meth:`close`, also save the episodes still running.
-        spill_dir: folder for the frames of running episodes (default: beside ``root``).
+        buffer_bytes: memory for the rows of running episodes, shared by the env rows; an
+            episode past its share keeps its frames in a spill file instead.
+        spill_dir: folder for spill files (default: beside ``root``).
 
     Example:
         >>> from oasis_torchrl.envs import OasisEnv  # doctest: +SKIP
@@ -78,6 +82,7 @@ class LeRobotRecorder:
         append: bool = False,
         max_episodes: int | None = None,
         keep_unfinished: bool = True,
+        buffer_bytes: int = DEFAULT_BUFFER_BYTES,
         spill_dir: str | Path | None = None,
     ) -> None:
         if max_episodes is not None and max_episodes < 1:
@@ -90,6 +95,7 @@ class LeRobotRecorder:
         self.append = append
         self.max_episodes = max_episodes
         self.keep_unfinished = keep_unfinished
+        self.buffer_bytes = buffer_bytes
         self.episodes_written = 0
         self.frames_written = 0
         self.dataset: Any = None
@@ -183,7 +189,8 @@ class LeRobotRecorder:
             self._end(row, save=self.keep_unfinished)
             episode = None
         if episode is None:
-            episode = EpisodeBuffer(self._spill, self._features, task, seed)
+            share = self.buffer_bytes // len(self._open)
+            episode = EpisodeBuffer(self._spill, self._features, task, seed, share)
             self._open[row] = episode
         episode.append(rows.step(row, step))
         if rows.done[row, step]:

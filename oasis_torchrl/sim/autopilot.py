@@ -32,6 +32,16 @@ CROSSING_MARGIN = 10.0
 #: Lateral clearance kept on each side of the car when judging a lane free, metres.
 CLEARANCE = 0.4
 SPEED_GAIN = 0.6
+#: Obstacles are looked for this many seconds of driving ahead (plus 15 m), at least
+#: MIN_LOOK_AHEAD metres.
+LOOK_AHEAD_TIME = 3.0
+MIN_LOOK_AHEAD = 25.0
+#: Reach of the check right in front of the car's actual lateral position, metres.
+IMMEDIATE_REACH = 12.0
+#: A lane to change to must be free from CHANGE_BEHIND metres behind the car to PASSING_MARGIN
+#: metres past the obstacle.
+CHANGE_BEHIND = 8.0
+PASSING_MARGIN = 25.0
 
 
 class Autopilot:
@@ -77,15 +87,14 @@ class Autopilot:
         """Throttle and steering for one frame from ``state``."""
         scene = self._require_scene()
         s, lateral = (float(value) for value in scene.road.locate(state.x, state.y, 2))
-        reach = max(25.0, 3.0 * abs(state.speed) + 15.0)
-        style = self._require_scene().style
-        blocked = self._blocked_distance(style.lane_offset(self._lane), s, reach)
+        reach = max(MIN_LOOK_AHEAD, LOOK_AHEAD_TIME * abs(state.speed) + 15.0)
+        blocked = self._blocked_distance(scene.style.lane_offset(self._lane), s, reach)
         if blocked is not None:
             free_lane = self._free_lane(s, blocked)
             if free_lane is not None:
                 self._lane = free_lane
                 blocked = None
-        ahead = self._blocked_distance(lateral, s, min(reach, 12.0))
+        ahead = self._blocked_distance(lateral, s, min(reach, IMMEDIATE_REACH))
         limits = [self._cruise_speed(), self._curve_speed(s, state.speed)]
         for distance, gap in ((blocked, STOP_GAP), (ahead, MIN_GAP)):
             if distance is not None:
@@ -107,6 +116,7 @@ class Autopilot:
         return float(np.clip(-steer_angle / params.max_steer, -1.0, 1.0))
 
     def _cruise_speed(self) -> float:
+        """The speed to hold on clear, straight road."""
         scene = self._require_scene()
         return self._target_speed or CRUISE_FRACTION * scene.style.speed_limit
 
@@ -118,6 +128,7 @@ class Autopilot:
         return math.sqrt(CURVE_ACCELERATION / max(curvature, 1e-6))
 
     def _nearest_lane(self, lateral: float) -> int:
+        """The lane whose centre is nearest to lateral offset ``lateral``."""
         style = self._require_scene().style
         offsets = np.array([style.lane_offset(lane) for lane in range(style.lanes)])
         return int(np.argmin(np.abs(offsets - lateral)))
@@ -151,10 +162,10 @@ class Autopilot:
             if lane == self._lane:
                 continue
             crossed = range(min(lane, self._lane) + 1, max(lane, self._lane))
-            reaches = [(lane, obstacle + 25.0)]
+            reaches = [(lane, obstacle + PASSING_MARGIN)]
             reaches += [(step, obstacle - CROSSING_MARGIN) for step in crossed]
             if all(
-                self._blocking(style.lane_offset(step), s, 8.0, reach).size == 0
+                self._blocking(style.lane_offset(step), s, CHANGE_BEHIND, reach).size == 0
                 for step, reach in reaches
             ):
                 return lane

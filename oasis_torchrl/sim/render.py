@@ -620,8 +620,11 @@ class Renderer:
 
         def convert(part: tuple[int, slice]) -> None:
             camera, rows = part
-            indices = _thread_scratch(rows.stop - rows.start, width)
-            np.copyto(indices, self._buffers.index[camera, rows, :width])
+            indices = self._buffers.index[camera, rows, :width]
+            if not indices.flags.c_contiguous:  # padded rows: gather the visible columns
+                scratch = _thread_scratch(rows.stop - rows.start, width)
+                np.copyto(scratch, indices)
+                indices = scratch
             self._palettes[camera].convert(indices.reshape(-1), out[CAMERAS[camera]][rows])
 
         _in_parallel(convert, self._rgb_parts, self._parallel)

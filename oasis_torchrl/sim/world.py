@@ -20,6 +20,8 @@ from oasis_torchrl.sim.vehicle import VehicleParams, VehicleState, step_vehicle
 OFF_ROAD_MARGIN = 0.5
 #: Length of the corridor ahead of the car in which obstacles are reported, metres.
 CORRIDOR_LENGTH = 60.0
+#: Obstacles whose centre is further along the road than this cannot touch the car, metres.
+COLLISION_REACH = 12.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,14 +167,9 @@ class World:
         self._road_position = self._locate()
         self.truth = self._measure()
 
-    @property
-    def collided(self) -> bool:
-        """Whether the car has crashed (it is then stopped for good)."""
-        return self._collided
-
-    def car_box(self, state: VehicleState | None = None) -> Box:
-        """The car's footprint at ``state`` (default: now)."""
-        state = state or self.state
+    def car_box(self) -> Box:
+        """The car's footprint now."""
+        state = self.state
         return Box(state.x, state.y, state.heading, self.params.length, self.params.width)
 
     def advance(self, throttle: float, steering: float) -> FrameTruth:
@@ -213,7 +210,8 @@ class World:
         """Stop the car for good if it hits an obstacle or leaves the road surface."""
         lateral = self._road_position[1]
         self._off_road = abs(lateral) > self.scene.style.road_half_width + OFF_ROAD_MARGIN
-        if self._off_road or bool(self._overlapping(self.car_box(), self._nearby(12.0)).any()):
+        near = self._nearby(COLLISION_REACH)
+        if self._off_road or bool(self._overlapping(self.car_box(), near).any()):
             self._collided = True
             self.state = VehicleState(self.state.x, self.state.y, self.state.heading, 0.0)
 

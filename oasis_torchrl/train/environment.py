@@ -75,14 +75,15 @@ def build_env(
     num_envs: int | None = None,
     prompts: Prompts | None = None,
     max_steps: int | None = None,
+    image_size: Sequence[int] | None = None,
     **env_kwargs: Any,
 ) -> TransformedEnv:
     """The transformed :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` config section.
 
     Args:
         cfg: the ``env`` section.
-        num_envs, prompts, max_steps: replace the section's values (evaluation uses one row
-            per episode and fixed per-row prompts).
+        num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
+            uses one row per episode, fixed per-row prompts and the policy's image size).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -92,7 +93,7 @@ def build_env(
         torch.Size([1])
         >>> env.close()
     """
-    height, width = cfg.image_size
+    height, width = image_size if image_size is not None else cfg.image_size
     return make_training_env(
         endpoint=cfg.endpoint,
         num_envs=num_envs or cfg.num_envs,

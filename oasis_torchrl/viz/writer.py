@@ -111,9 +111,10 @@ class RecordWriter:
             self._write_series(paths, record, i, first)
             self._write_frames(paths, state, record, i, first)
             self._at(first + _LAST)
-            self._write_step_values(paths, state, record, i, first + _LAST)
+            self._write_depth(paths, record, i)
             self._write_topdown(paths, state, record, i)
-            if not record.start:
+            if not record.start:  # a reset observation has no reward (its terms are zeros)
+                self._write_rewards(paths, state, record, i, first + _LAST)
                 self._write_episode_end(paths, state, record, i)
 
     # -- helpers -----------------------------------------------------------------------------
@@ -231,7 +232,7 @@ class RecordWriter:
                     image = frames[i, k if every else -1]
                     self.recording.log(paths.camera(camera), image_archetype(image, quality))
 
-    def _write_step_values(
+    def _write_rewards(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, last: int
     ) -> None:
         frame = np.array([last])
@@ -240,6 +241,8 @@ class RecordWriter:
             self._send(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
         for name, values in record.terms.items():
             self._send(paths.scalar("reward", name), frame, values[i : i + 1])
+
+    def _write_depth(self, paths: RowPaths, record: StepRecord, i: int) -> None:
         if self.options.depth:
             for camera, depth in record.depth.items():
                 self.recording.log(paths.depth(camera), depth_archetype(depth[i]))

@@ -1,0 +1,304 @@
+"""Evaluation: fixed prompts and seeds in; mean distance before collision, collision rate and
+return out.
+
+Each env row drives exactly one episode (no resets) until it ends (collision, or ``max_steps``)
+or every row has ended. The distance is the embedded server's odometer at the episode's last
+step (``("truth", "distance")``; NaN on servers without ground truth); a collision is the
+episode ending *terminated* (the ground-truth collision, or the reward's termination); the
+return sums the rewards up to and including that step. With the same policy, prompts, seeds
+and server, the numbers are the same run after run.
+
+The ``eval`` config section: ``prompts``, ``episodes`` (rows per prompt), ``seeds`` (one batch of
+episodes per seed), ``max_steps``, and optionally ``rerun`` (an ``.rrd`` path, ``spawn`` or a
+viewer URL) and ``lerobot`` (a dataset folder) to record the episodes.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig
+from tensordict import NonTensorData, TensorDictBase
+from torchrl.envs import EnvBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+from tqdm import tqdm
+
+from oasis_torchrl.models.actor_critic import IMAGES
+from oasis_torchrl.train.environment import build_env
+
+logger = logging.getLogger(__name__)
+
+Policy = Callable[[TensorDictBase], TensorDictBase]
+NEXT = "next"
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One evaluation episode."""
+
+    prompt: str
+    episode_seed: int
+    distance: float
+    collided: bool
+    episode_return: float
+    steps: int
+
+
+@dataclass
+class EvalReport:
+    """Episodes of an evaluation and their aggregates.
+
+    Example:
+        >>> report = EvalReport([EpisodeResult("urban", 1, 10.0, True, -5.0, 7),
+        ...                      EpisodeResult("urban", 2, 30.0, False, 3.0, 20)])
+        >>> report.mean_distance, report.collision_rate, report.mean_return
+        (20.0, 0.5, -1.0)
+    """
+
+    episodes: list[EpisodeResult] = field(default_factory=list)
+
+    @property
+    def mean_distance(self) -> float:
+        """Mean distance before collision, metres (NaN without ground truth)."""
+        return _mean([episode.distance for episode in self.episodes])
+
+    @property
+    def collision_rate(self) -> float:
+        """Fraction of episodes that ended in a collision."""
+        return _mean([float(episode.collided) for episode in self.episodes])
+
+    @property
+    def mean_return(self) -> float:
+        """Mean episode return."""
+        return _mean([episode.episode_return for episode in self.episodes])
+
+    def summary(self) -> dict[str, float]:
+        """The aggregates (for loggers and progress bars)."""
+        return {
+            "mean_distance": self.mean_distance,
+            "collision_rate": self.collision_rate,
+            "mean_return": self.mean_return,
+            "episodes": float(len(self.episodes)),
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Aggregates plus every episode, JSON-ready."""
+        return {**self.summary(), "per_episode": [asdict(e) for e in self.episodes]}
+
+    def write_json(self, path: str | Path) -> Path:
+        """Write :meth:`to_dict` as JSON."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=2))
+        return path
+
+
+def _mean(values: Sequence[float]) -> float:
+    return sum(values) / len(values) if values else math.nan
+
+
+def rollout_episodes(
+    env: EnvBase,
+    policy: Policy,
+    max_steps: int,
+    *,
+    on_reset: Callable[[TensorDictBase], None] | None = None,
+    on_step: Callable[[TensorDictBase], None] | None = None,
+) -> TensorDictBase:
+    """One episode per env row, no resets: steps ``[N, T]`` until every row is done.
+
+    Float policy images are dropped from the returned steps (uint8 pixels stay), so memory
+    stays small. ``on_reset(td)`` and ``on_step(td)`` see every reset and step (recorders).
+    The policy acts deterministically (``ExplorationType.DETERMINISTIC``).
+    """
+    rows = int(env.batch_size[0])
+    ended = torch.zeros(rows, dtype=torch.bool)
+    steps = []
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = env.reset()
+        if on_reset is not None:
+            on_reset(td)
+        for _ in range(max_steps):
+            td = env.step(policy(td))
+            if on_step is not None:
+                on_step(td)
+            steps.append(td.exclude(IMAGES, (NEXT, IMAGES)))
+            ended |= td.get((NEXT, "done")).reshape(rows).cpu()
+            if ended.all():
+                break
+            td = step_mdp(td)
+    return torch.stack(steps, dim=1)
+
+
+def _row_prompts(rollout: TensorDictBase) -> list[str]:
+    value = rollout[:, 0].get("prompt")
+    if isinstance(value, NonTensorData):
+        value = value.data
+    if isinstance(value, str):
+        return [value] * rollout.batch_size[0]
+    return [str(prompt) for prompt in value.tolist()]
+
+
+def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
+    """Per-row results of a :func:`rollout_episodes` output ``[N, T]``."""
+    done = rollout.get((NEXT, "done")).reshape(rollout.batch_size).cpu()
+    horizon = done.shape[1]
+    end = torch.where(done.any(1), done.float().argmax(1), horizon - 1)
+    rows = torch.arange(done.shape[0])
+    within = torch.arange(horizon).unsqueeze(0) <= end.unsqueeze(1)
+    reward = rollout.get((NEXT, "reward")).reshape(rollout.batch_size).cpu()
+    returns = (reward * within).sum(1)
+    collided = rollout.get((NEXT, "terminated")).reshape(rollout.batch_size).cpu()[rows, end]
+    truth = rollout.get((NEXT, "truth"), None)
+    if truth is not None:
+        distance = truth.get("distance")[rows, end, -1].cpu()
+        collided = collided | (truth.get("collided")[rows, end, -1].cpu() > 0.5)
+    else:
+        distance = torch.full((done.shape[0],), math.nan)
+    seeds = rollout.get("episode_seed")[:, 0].reshape(-1).tolist()
+    return [
+        EpisodeResult(prompt, int(seed), float(dist), bool(hit), float(ret), int(last) + 1)
+        for prompt, seed, dist, hit, ret, last in zip(
+            _row_prompts(rollout), seeds, distance, collided, returns, end, strict=True
+        )
+    ]
+
+
+class EpisodeRecorders:
+    """Where evaluation episodes go besides the metrics: rerun and/or a LeRobot dataset.
+
+    Args:
+        rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra).
+        lerobot: a dataset folder; episodes are appended (chunk rows at 5 fps, as the default
+            env returns one frame per chunk).
+
+    Example:
+        >>> recorders = EpisodeRecorders()
+        >>> recorders.close()
+    """
+
+    def __init__(self, rerun: str | None = None, lerobot: str | Path | None = None) -> None:
+        self.rerun = None
+        self.lerobot = None
+        if rerun:
+            from oasis_torchrl.viz import RolloutLogger
+
+            self.rerun = RolloutLogger(rerun)
+        if lerobot:
+            from oasis_torchrl.data import LeRobotRecorder
+
+            root = Path(lerobot)
+            self.lerobot = LeRobotRecorder(root, append=(root / "meta").exists())
+
+    def on_reset(self, td: TensorDictBase) -> None:
+        """Log the reset observations."""
+        if self.rerun is not None:
+            self.rerun.log_reset(td)
+
+    def on_step(self, td: TensorDictBase) -> None:
+        """Log one step (``td`` holds the action and ``"next"``)."""
+        if self.rerun is not None:
+            self.rerun.log_step(td.get(NEXT), td.get("action"))
+
+    def write_episodes(self, rollout: TensorDictBase, results: Sequence[EpisodeResult]) -> None:
+        """Write each row's episode, up to its last step, to the LeRobot dataset."""
+        if self.lerobot is None:
+            return
+        for row, result in enumerate(results):
+            self.lerobot.write(rollout[row : row + 1, : result.steps])
+
+    def close(self) -> None:
+        """Finish the rerun recording and finalize the dataset."""
+        if self.rerun is not None:
+            self.rerun.close()
+        if self.lerobot is not None:
+            self.lerobot.close()
+
+
+class Evaluator:
+    """Evaluates policies on fixed prompts and seeds, reusing one env (and server).
+
+    Args:
+        env_cfg: the ``env`` config section (endpoint, image size, server, reward).
+        eval_cfg: the ``eval`` section (prompts, episodes, seeds, max_steps, rerun, lerobot).
+        image_size: policy image size (default: ``env_cfg.image_size``).
+        progress: show a progress bar per evaluation.
+
+    Example:
+        >>> from oasis_torchrl.drivers import ScriptedDriver
+        >>> from oasis_torchrl.train.config import load_config
+        >>> cfg = load_config("eval", ["episodes=1", "max_steps=2", "env.image_size=[32,48]"])
+        >>> with Evaluator(cfg.env, cfg, progress=False) as evaluator:
+        ...     report = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
+        >>> len(report.episodes), report.mean_distance > 0
+        (1, True)
+    """
+
+    def __init__(
+        self,
+        env_cfg: DictConfig,
+        eval_cfg: DictConfig,
+        *,
+        image_size: tuple[int, int] | None = None,
+        progress: bool = True,
+    ) -> None:
+        if eval_cfg.episodes < 1 or not eval_cfg.seeds or not eval_cfg.prompts:
+            raise ValueError("eval needs episodes >= 1 and at least one prompt and one seed")
+        self.cfg = eval_cfg
+        self.progress = progress
+        row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
+        self.env = build_env(
+            env_cfg,
+            num_envs=len(row_prompts),
+            prompts=row_prompts,
+            max_steps=eval_cfg.max_steps,
+            image_size=image_size,
+        )
+        self.recorders = EpisodeRecorders(eval_cfg.get("rerun"), eval_cfg.get("lerobot"))
+
+    def evaluate(self, policy: Policy) -> EvalReport:
+        """Run one batch of episodes per seed; the report holds all of them."""
+        report = EvalReport()
+        seeds = [int(seed) for seed in self.cfg.seeds]
+        steps = len(seeds) * self.cfg.max_steps
+        with tqdm(total=steps, desc="evaluating", unit="step", disable=not self.progress) as bar:
+
+            def on_step(td: TensorDictBase) -> None:
+                self.recorders.on_step(td)
+                bar.update()
+
+            for index, seed in enumerate(seeds):
+                self.env.set_seed(seed)
+                rollout = rollout_episodes(
+                    self.env,
+                    policy,
+                    self.cfg.max_steps,
+                    on_reset=self.recorders.on_reset,
+                    on_step=on_step,
+                )
+                results = episode_results(rollout)
+                self.recorders.write_episodes(rollout, results)
+                report.episodes.extend(results)
+                bar.update((index + 1) * self.cfg.max_steps - bar.n)
+                bar.set_postfix(distance=f"{report.mean_distance:.1f}")
+        return report
+
+    def close(self) -> None:
+        """Close the recorders and the env."""
+        try:
+            self.recorders.close()
+        finally:
+            self.env.close()
+
+    def __enter__(self) -> Evaluator:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()

@@ -1,0 +1,321 @@
+"""PPO on :class:`~oasis_torchrl.envs.OasisEnv`, the TorchRL recipe.
+
+A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
+TanhNormal over the 4-action chunk); :class:`~torchrl.objectives.value.GAE` computes advantages
+with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared encoder) for a few
+epochs of minibatches per batch. Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar,
+checkpoints with resume, periodic deterministic evaluation episodes (recorded to rerun and/or a
+LeRobot dataset when configured), a warm start from a behaviour-cloning policy, and the final
+policy exported as a LeRobot policy folder. Config: ``configs/ppo.yaml``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
+from torchrl.collectors import Collector
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+from torchrl.record.loggers import Logger, get_logger
+from tqdm import tqdm
+
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.train.checkpoint import (
+    LATEST,
+    export_lerobot,
+    load_checkpoint,
+    load_net,
+    net_from_checkpoint,
+    save_checkpoint,
+)
+from oasis_torchrl.train.config import save_config
+from oasis_torchrl.train.environment import build_env
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+
+logger = logging.getLogger(__name__)
+
+LOSS_TERMS = ("loss_objective", "loss_critic", "loss_entropy")
+LOGGED_LOSS_KEYS = (*LOSS_TERMS, "entropy", "kl_approx", "clip_fraction", "explained_variance")
+
+
+@dataclass
+class PPOResult:
+    """What a PPO run leaves: the trained network, its files and its evaluation history."""
+
+    net: DrivingNet
+    checkpoint: Path
+    policy_dir: Path | None
+    final_eval: EvalReport | None
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
+    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> net = build_net(load_config("ppo"), ("left_forward", "front", "right_forward"))
+        >>> net.config.image_size
+        (64, 96)
+    """
+    image_size = tuple(int(size) for size in cfg.env.image_size)
+    if cfg.init_from:
+        net = load_net(cfg.init_from)
+        net.set_scale(cfg.warm_start_scale)
+        logger.info("warm start from %s (scale %.2f)", cfg.init_from, cfg.warm_start_scale)
+    else:
+        network = OmegaConf.to_container(cfg.network)
+        net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
+    if net.config.cameras != cameras or tuple(net.config.image_size) != image_size:
+        raise ValueError(
+            f"the network reads cameras {net.config.cameras} at {net.config.image_size}, the env "
+            f"gives {cameras} at {image_size}: set env.image_size to the network's size"
+        )
+    return net
+
+
+def episode_stats(batch: TensorDictBase) -> dict[str, float]:
+    """Mean return, distance and collision rate of the episodes that ended in ``batch``.
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> batch = TensorDict({"next": {"done": torch.tensor([[[False], [True]]]),
+        ...     "terminated": torch.tensor([[[False], [True]]]),
+        ...     "episode_reward": torch.tensor([[[1.0], [2.0]]])}}, batch_size=[1, 2])
+        >>> episode_stats(batch)
+        {'episodes': 1.0, 'episode_reward': 2.0, 'collision_rate': 1.0}
+    """
+    done = batch.get(("next", "done")).squeeze(-1)
+    ended = int(done.sum())
+    if not ended:
+        return {"episodes": 0.0}
+    stats = {
+        "episodes": float(ended),
+        "episode_reward": batch.get(("next", "episode_reward")).squeeze(-1)[done].mean().item(),
+        "collision_rate": batch.get(("next", "terminated")).squeeze(-1)[done].float().mean().item(),
+    }
+    truth = batch.get(("next", "truth"), None)
+    if truth is not None:
+        stats["episode_distance"] = truth.get("distance")[..., -1][done].mean().item()
+    return stats
+
+
+class PPOTrainer:
+    """One PPO run; :meth:`run` trains, evaluates, checkpoints and exports.
+
+    Args:
+        cfg: the resolved ``configs/ppo.yaml`` (with overrides).
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> cfg = load_config("ppo", ["collector.total_frames=0"])  # doctest: +SKIP
+        >>> PPOTrainer(cfg).run()  # doctest: +SKIP
+    """
+
+    def __init__(self, cfg: DictConfig) -> None:
+        self.cfg = cfg
+        self.output_dir = Path(cfg.output_dir)
+        self.checkpoint_dir = self.output_dir / "checkpoints"
+        torch.manual_seed(cfg.seed)
+        resumed = self._resume_state()
+        self.iteration = resumed.get("iteration", 0)
+        self.frames = resumed.get("frames", 0)
+        self.history: list[dict[str, float]] = resumed.get("history", [])
+        self.env = build_env(cfg.env)
+        self.env.set_seed(cfg.seed + self.iteration)
+        cameras = tuple(self.env.base_env.layout.cameras)
+        self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
+        self.modules = make_actor_critic(self.net)
+        self.loss = ClipPPOLoss(
+            self.modules.policy,
+            self.modules.value,
+            clip_epsilon=cfg.loss.clip_epsilon,
+            entropy_coeff=cfg.loss.entropy_coeff,
+            critic_coeff=cfg.loss.critic_coeff,
+            loss_critic_type=cfg.loss.loss_critic_type,
+            normalize_advantage=True,
+        )
+        self.advantage = GAE(
+            gamma=cfg.loss.gamma, lmbda=cfg.loss.lmbda, value_network=self.modules.value
+        )
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=cfg.optim.lr)
+        if resumed:
+            self.optimizer.load_state_dict(resumed["optimizer"])
+        self.logger: Logger = get_logger(
+            cfg.logger.backend,
+            logger_name=str(self.output_dir / "logs"),
+            experiment_name=cfg.logger.exp_name,
+        )
+        self._evaluator: Evaluator | None = None
+
+    def _resume_state(self) -> dict[str, Any]:
+        resume = self.cfg.resume
+        if not resume:
+            return {}
+        path = self.checkpoint_dir / LATEST if resume == "latest" else Path(resume)
+        state = load_checkpoint(path)
+        logger.info("resuming from %s at iteration %d", path, state["iteration"])
+        return state
+
+    # -- training ----------------------------------------------------------------------------
+
+    def run(self) -> PPOResult:
+        """Train until ``collector.total_frames`` env steps; evaluate and export at the end."""
+        cfg = self.cfg
+        save_config(cfg, self.output_dir / "config.yaml")
+        remaining = max(cfg.collector.total_frames - self.frames, 0)
+        try:
+            if remaining:
+                self._train(remaining)
+            final = self._evaluate() if cfg.eval.episodes else None
+            checkpoint = self._save_checkpoint()
+            policy_dir = self._export()
+        finally:
+            self.close()
+        return PPOResult(self.net, checkpoint, policy_dir, final, self.history)
+
+    def _train(self, remaining: int) -> None:
+        cfg = self.cfg
+        collector = Collector(
+            self.env,
+            self.modules.policy,
+            frames_per_batch=cfg.collector.frames_per_batch,
+            total_frames=remaining,
+        )
+        bar = tqdm(
+            total=cfg.collector.total_frames,
+            initial=self.frames,
+            desc="ppo",
+            unit="step",
+            disable=not cfg.progress,
+        )
+        try:
+            started = time.perf_counter()
+            for batch in collector:
+                self.frames += batch.numel()
+                self.iteration += 1
+                metrics = {**_prefixed("train", episode_stats(batch)), **self._update(batch)}
+                metrics["time/env_steps_per_s"] = self.frames / (time.perf_counter() - started)
+                if cfg.eval.every and self.iteration % cfg.eval.every == 0:
+                    metrics.update(_prefixed("eval", self._evaluate().summary()))
+                if self.iteration % cfg.checkpoint.every == 0:
+                    self._save_checkpoint()
+                self._log(metrics)
+                bar.update(batch.numel())
+                bar.set_postfix(_postfix(metrics))
+        finally:
+            bar.close()
+            collector.shutdown(close_env=False)
+
+    def _update(self, batch: TensorDictBase) -> dict[str, float]:
+        """Advantages, then ``optim.epochs`` passes of minibatch PPO updates."""
+        cfg = self.cfg
+        critic_only = self.iteration <= cfg.loss.critic_warmup_iters
+        lr = cfg.optim.lr
+        if cfg.optim.anneal_lr:
+            lr *= max(1.0 - self.frames / cfg.collector.total_frames, 0.05)
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+        with torch.no_grad():
+            batch = self.advantage(batch)
+        flat = batch.reshape(-1)
+        sums: dict[str, float] = {}
+        updates = 0
+        for _ in range(cfg.optim.epochs):
+            for index in torch.randperm(flat.numel()).split(cfg.optim.mini_batch_size):
+                losses = self.loss(flat[index])
+                terms = ("loss_critic",) if critic_only else LOSS_TERMS
+                total = sum(losses[key] for key in terms)
+                self.optimizer.zero_grad(set_to_none=True)
+                total.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(
+                    self.loss.parameters(), cfg.optim.max_grad_norm
+                )
+                self.optimizer.step()
+                updates += 1
+                sums["optim/grad_norm"] = sums.get("optim/grad_norm", 0.0) + float(grad_norm)
+                for key in LOGGED_LOSS_KEYS:
+                    if key in losses.keys():
+                        name = f"loss/{key}"
+                        sums[name] = sums.get(name, 0.0) + losses[key].mean().item()
+        metrics = {key: value / max(updates, 1) for key, value in sums.items()}
+        metrics["optim/lr"] = lr
+        metrics["policy/scale"] = self.net.log_scale.exp().mean().item()
+        return metrics
+
+    # -- evaluation, logging, files ----------------------------------------------------------
+
+    def _evaluate(self) -> EvalReport:
+        if self._evaluator is None:
+            self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
+        self.net.eval()
+        try:
+            report = self._evaluator.evaluate(self.modules.policy)
+        finally:
+            self.net.train()
+        summary = report.summary()
+        self.history.append({"iteration": self.iteration, "frames": self.frames, **summary})
+        logger.info("evaluation at %d env steps: %s", self.frames, summary)
+        return report
+
+    def _log(self, metrics: dict[str, float]) -> None:
+        for name, value in metrics.items():
+            self.logger.log_scalar(name, value, step=self.frames)
+
+    def _save_checkpoint(self) -> Path:
+        return save_checkpoint(
+            self.checkpoint_dir / LATEST,
+            self.net,
+            optimizer=self.optimizer.state_dict(),
+            iteration=self.iteration,
+            frames=self.frames,
+            history=self.history,
+            config=OmegaConf.to_container(self.cfg),
+        )
+
+    def _export(self) -> Path | None:
+        try:
+            return export_lerobot(self.net, self.output_dir / "policy")
+        except ImportError as error:
+            logger.warning("not exporting a LeRobot policy folder: %s", error)
+            return None
+
+    def close(self) -> None:
+        """Close the envs (and their embedded servers) and the evaluation recorders."""
+        try:
+            if self._evaluator is not None:
+                self._evaluator.close()
+        finally:
+            self._evaluator = None
+            if not self.env.is_closed:
+                self.env.close()
+
+
+def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
+    return {f"{prefix}/{key}": value for key, value in values.items()}
+
+
+def _postfix(metrics: dict[str, float]) -> dict[str, str]:
+    shown = {
+        "dist": "train/episode_distance",
+        "ret": "train/episode_reward",
+        "eval": "eval/mean_distance",
+    }
+    return {name: f"{metrics[key]:.1f}" for name, key in shown.items() if key in metrics}
+
+
+def train_ppo(cfg: DictConfig) -> PPOResult:
+    """Run PPO as configured (``configs/ppo.yaml``); see :class:`PPOTrainer`.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> result = train_ppo(load_config("ppo", ["env.num_envs=2"]))  # doctest: +SKIP
+    """
+    return PPOTrainer(cfg).run()
