@@ -68,7 +68,8 @@ def net_from_checkpoint(payload: dict[str, Any]) -> DrivingNet:
     return net
 
 
-def _plugin() -> Any:
+def lerobot_plugin() -> Any:
+    """The ``lerobot_policy_oasis`` plugin module, or an ImportError saying how to install it."""
     try:
         import lerobot_policy_oasis
     except ImportError as error:
@@ -86,7 +87,7 @@ def net_from_lerobot(path: str | Path) -> DrivingNet:
         ValueError: the policy normalises its inputs or actions (a TorchRL env feeds raw
             values, so only ``IDENTITY`` normalisation transfers as is).
     """
-    plugin = _plugin()
+    plugin = lerobot_plugin()
     policy = plugin.OasisPolicy.from_pretrained(str(path))
     modes = {str(key): getattr(mode, "value", mode) for key, mode in policy.config.normalization_mapping.items()}
     if any(mode != "IDENTITY" for mode in modes.values()):
@@ -121,7 +122,7 @@ def export_lerobot(net: DrivingNet, path: str | Path) -> Path:
         >>> sorted(p.name for p in out.iterdir())[:2]
         ['config.json', 'model.safetensors']
     """
-    plugin = _plugin()
+    plugin = lerobot_plugin()
     config = plugin.OasisConfig.from_net_config(net.config)
     policy = plugin.OasisPolicy(config)
     policy.model.load_state_dict(net.state_dict())

@@ -141,3 +141,21 @@ def test_max_episodes_and_a_missed_episode_boundary(tmp_path: Path, caplog) -> N
         assert "without a done flag" in caplog.text
         assert recorder.episodes_written == 1 and not recorder.full
     assert [(e.env_row, e.number) for e in episodes(open_dataset(root))] == [(0, 0), (0, 1)]
+
+
+def test_long_episodes_spill_to_disk_and_come_back_whole(tmp_path: Path) -> None:
+    root = tmp_path / "spilled"
+    run = FakeEnvRun([[3], [2]])
+    with LeRobotRecorder(root, buffer_bytes=50_000) as recorder:  # every episode spills
+        recorder.write(run.batch(3))
+        assert list(tmp_path.glob(".spilled-spill-*/episode-*")) == []  # both written already
+    dataset = open_dataset(root)
+    stored = episodes(dataset)
+    assert [(e.env_row, e.number, e.stop - e.start) for e in stored] == [(1, 0, 8), (0, 0, 12)]
+    for episode in stored:
+        expected = expected_frame_rows(
+            episode.env_row, 0, (episode.stop - episode.start) // 4, True
+        )
+        np.testing.assert_array_equal(episode.columns["action"], expected["action"])
+    sample = dataset[stored[1].start + 9]
+    assert psnr(sample["observation.images.right_forward"], frame(0, 0, 12, 2)) > MIN_PSNR

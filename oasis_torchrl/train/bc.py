@@ -1,0 +1,203 @@
+"""Behaviour cloning of the oasis driving policy on a LeRobot dataset.
+
+The same pieces as ``lerobot-train --policy.type=oasis``: LeRobot's ``make_policy`` (features
+from the dataset), the plugin's processors (resize and normalisation), ``policy.forward`` as
+the loss and the policy's AdamW preset. What differs: the dataset is decoded once into memory
+(:class:`~oasis_torchrl.train.bc_data.InMemoryBCDataset`; ``dataset.cache=false`` streams
+from the videos like ``lerobot-train``), optional random-shift image augmentation, TorchRL
+loggers, tqdm, and an evaluation in the env at the end. The output folder is a LeRobot policy
+folder (``save_pretrained`` weights, config and processors): it loads with
+``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``, and as a PPO warm start
+(``init_from``). Config: ``configs/bc.yaml``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from omegaconf import DictConfig, OmegaConf
+from torch.utils.data import DataLoader
+from torchrl.record.loggers import get_logger
+from tqdm import tqdm
+
+from oasis_torchrl.models import make_actor_critic
+from oasis_torchrl.train.bc_data import InMemoryBCDataset
+from oasis_torchrl.train.checkpoint import lerobot_plugin
+from oasis_torchrl.train.config import save_config
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+
+logger = logging.getLogger(__name__)
+
+IMAGE_PREFIX = "observation.images."
+
+
+@dataclass
+class BCResult:
+    """The trained LeRobot policy, its folder and its evaluation (if one was run)."""
+
+    policy: Any
+    policy_dir: Path
+    final_eval: EvalReport | None
+    final_loss: float
+
+
+def random_shift(images: torch.Tensor, pad: int) -> torch.Tensor:
+    """Shift each image ``[B, 3, H, W]`` by up to ``pad`` pixels (replicate padding, DrQ style).
+
+    Example:
+        >>> random_shift(torch.rand(2, 3, 8, 12), pad=2).shape
+        torch.Size([2, 3, 8, 12])
+    """
+    if pad <= 0:
+        return images
+    batch, _, height, width = images.shape
+    padded = F.pad(images, (pad, pad, pad, pad), mode="replicate")
+    offsets = torch.randint(0, 2 * pad + 1, (batch, 2))
+    rows = torch.arange(height).unsqueeze(0) + offsets[:, :1]  # [B, H]
+    cols = torch.arange(width).unsqueeze(0) + offsets[:, 1:]  # [B, W]
+    index = torch.arange(batch)[:, None, None]
+    return padded.permute(0, 2, 3, 1)[index, rows[:, :, None], cols[:, None, :]].permute(0, 3, 1, 2)
+
+
+def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:
+    """The LeRobot dataset of ``cfg.dataset`` with the policy's action delta timestamps."""
+    from lerobot.datasets.factory import resolve_delta_timestamps
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
+
+    from oasis_torchrl.data.loading import default_repo_id, default_video_backend
+
+    if not cfg.root:
+        raise ValueError("dataset.root is required: the LeRobot dataset folder to clone")
+    root = Path(cfg.root)
+    repo_id = cfg.repo_id or default_repo_id(root)
+    meta = LeRobotDatasetMetadata(repo_id, root=root)
+    return LeRobotDataset(
+        repo_id,
+        root=root,
+        episodes=list(cfg.episodes) if cfg.episodes is not None else None,
+        delta_timestamps=resolve_delta_timestamps(policy_config, meta),
+        video_backend=default_video_backend(),
+    )
+
+
+def _batches(loader: DataLoader) -> Iterator[dict[str, Any]]:
+    while True:
+        yield from loader
+
+
+class BCTrainer:
+    """One behaviour-cloning run; :meth:`run` trains, saves and evaluates.
+
+    Args:
+        cfg: the resolved ``configs/bc.yaml`` (with overrides).
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> cfg = load_config("bc", ["dataset.root=drives"])  # doctest: +SKIP
+        >>> BCTrainer(cfg).run().policy_dir  # doctest: +SKIP
+    """
+
+    def __init__(self, cfg: DictConfig) -> None:
+        from lerobot.policies.factory import make_policy, make_pre_post_processors
+
+        plugin = lerobot_plugin()
+        self.cfg = cfg
+        self.output_dir = Path(cfg.output_dir)
+        torch.manual_seed(cfg.seed)
+        policy_values = OmegaConf.to_container(cfg.policy)
+        policy_values["image_size"] = tuple(policy_values["image_size"])
+        policy_values["encoder_channels"] = tuple(policy_values["encoder_channels"])
+        policy_values["pool_grid"] = tuple(policy_values["pool_grid"])
+        self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
+        dataset = open_dataset(cfg.dataset, self.policy_config)
+        self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)
+        self.preprocessor, self.postprocessor = make_pre_post_processors(
+            self.policy_config, dataset_stats=dataset.meta.stats
+        )
+        data = InMemoryBCDataset(dataset, progress=cfg.progress) if cfg.dataset.cache else dataset
+        self.loader = DataLoader(
+            data,
+            batch_size=cfg.train.batch_size,
+            shuffle=True,
+            drop_last=len(data) > cfg.train.batch_size,
+            num_workers=cfg.train.num_workers,
+        )
+        self.optimizer = self.policy_config.get_optimizer_preset().build(
+            list(self.policy.get_optim_params())
+        )
+        self.logger = get_logger(
+            cfg.logger.backend,
+            logger_name=str(self.output_dir / "logs"),
+            experiment_name=cfg.logger.exp_name,
+        )
+        self.image_keys = [key for key in self.policy_config.image_features]
+
+    def run(self) -> BCResult:
+        """Train ``train.steps`` steps, save the policy folder, evaluate if configured."""
+        save_config(self.cfg, self.output_dir / "config.yaml")
+        loss = self._train()
+        policy_dir = self.save(self.output_dir / "policy")
+        final = self._evaluate() if self.cfg.eval.episodes else None
+        return BCResult(self.policy, policy_dir, final, loss)
+
+    def _train(self) -> float:
+        cfg = self.cfg.train
+        clip = self.policy_config.optimizer_grad_clip_norm
+        parameters = list(self.policy.get_optim_params())
+        self.policy.train()
+        average = float("nan")
+        batches = _batches(self.loader)
+        with tqdm(range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress) as bar:
+            for step in bar:
+                batch = self.preprocessor(next(batches))
+                for key in self.image_keys:
+                    batch[key] = random_shift(batch[key], cfg.shift_pad)
+                loss, info = self.policy.forward(batch)
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)
+                self.optimizer.step()
+                value = loss.item()
+                average = value if step == 1 else 0.98 * average + 0.02 * value
+                if step % cfg.log_every == 0 or step == cfg.steps:
+                    self.logger.log_scalar("bc/loss", value, step=step)
+                    self.logger.log_scalar("bc/grad_norm", float(grad_norm), step=step)
+                    bar.set_postfix(loss=f"{average:.4f}")
+                if cfg.save_every and step % cfg.save_every == 0:
+                    self.save(self.output_dir / "policy")
+        return average
+
+    def save(self, path: Path) -> Path:
+        """Write the LeRobot policy folder: weights, config and both processors."""
+        self.policy.save_pretrained(path)
+        self.preprocessor.save_pretrained(path)
+        self.postprocessor.save_pretrained(path)
+        return path
+
+    def _evaluate(self) -> EvalReport:
+        net = self.policy.model.eval()
+        image_size = tuple(net.config.image_size)
+        with Evaluator(
+            self.cfg.env, self.cfg.eval, image_size=image_size, progress=self.cfg.progress
+        ) as evaluator:
+            report = evaluator.evaluate(make_actor_critic(net).policy)
+        for name, value in report.summary().items():
+            self.logger.log_scalar(f"eval/{name}", value, step=self.cfg.train.steps)
+        logger.info("behaviour-cloning evaluation: %s", report.summary())
+        return report
+
+
+def train_bc(cfg: DictConfig) -> BCResult:
+    """Run behaviour cloning as configured (``configs/bc.yaml``); see :class:`BCTrainer`.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> train_bc(load_config("bc", ["dataset.root=drives"]))  # doctest: +SKIP
+    """
+    return BCTrainer(cfg).run()
