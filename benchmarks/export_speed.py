@@ -45,7 +45,7 @@ from tensordict import TensorDictBase
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.data.chunk_rows import batch_to_rows, infer_layout
 from oasis_torchrl.data.episode_buffer import EpisodeBuffer
-from oasis_torchrl.data.features import build_features
+from oasis_torchrl.data.features import build_features, check_columns
 from oasis_torchrl.data.writer import open_dataset, write_episode
 from oasis_torchrl.drivers import Autopilot
 from oasis_torchrl.envs import OasisEnv
@@ -134,15 +134,19 @@ def time_recorder(rollout: TensorDictBase, vcodec: str, root: Path) -> float:
 
 
 def our_overheads(rollout: TensorDictBase, repeats: int, spill: Path) -> dict[str, float]:
-    """Seconds of the recorder's own work: mapping + validation, and the spill round trip."""
+    """Seconds of the recorder's own work: mapping + validation, and buffering the episodes
+    (in memory, as these short episodes are, and spilled to disk, as long ones are)."""
     layout = infer_layout(rollout)
     features = build_features(layout)
-    mapping = best_of(repeats, lambda: _timed(lambda: batch_to_rows(rollout, layout)))
+
+    def mapping() -> None:
+        check_columns(batch_to_rows(rollout, layout).columns, features, leading=3)
+
     rows = batch_to_rows(rollout, layout)
 
-    def spill_round_trip() -> None:
+    def buffer_round_trip(memory_limit: int) -> None:
         for row in range(rows.shape[0]):
-            buffer = EpisodeBuffer(spill, features, "benchmark", 0)
+            buffer = EpisodeBuffer(spill, features, "benchmark", 0, memory_limit)
             for step in range(rows.shape[1]):
                 buffer.append(rows.step(row, step))
             for item in buffer.rows():
@@ -150,8 +154,9 @@ def our_overheads(rollout: TensorDictBase, repeats: int, spill: Path) -> dict[st
             buffer.discard()
 
     return {
-        "mapping_s": mapping,
-        "spill_round_trip_s": best_of(repeats, lambda: _timed(spill_round_trip)),
+        "mapping_and_checks_s": best_of(repeats, lambda: _timed(mapping)),
+        "buffer_in_memory_s": best_of(repeats, lambda: _timed(lambda: buffer_round_trip(1 << 40))),
+        "buffer_spilled_s": best_of(repeats, lambda: _timed(lambda: buffer_round_trip(0))),
     }
 
 
@@ -265,7 +270,7 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=768)
     parser.add_argument("--height", type=int, default=512)
     parser.add_argument("--codecs", default="h264,libsvtav1")
-    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     av.logging.set_libav_level(av.logging.ERROR)
     os.environ.setdefault("SVT_LOG", "1")  # libsvtav1 prints its banner per episode otherwise

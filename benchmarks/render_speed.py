@@ -4,8 +4,9 @@ Drives the autopilot through a few scenes, then replays each drive: every step i
 (4 frames x 3 cameras) and its front frames are encoded with libvpx-vp9 realtime
 (deadline=realtime, cpu-used=8, lag-in-frames=0, row-mt=1, 2 Mb/s, from ``rgb24`` ndarrays, the
 embedded server's settings), alternating so both see the same machine load. Prints JSON:
-milliseconds per camera-frame to render and per frame to encode (median of the repeats) at
-768x512 and 192x128, and their ratio (the target at 768x512 is <= 0.5).
+milliseconds per camera-frame to render and per frame to encode (median of the repeats), as
+wall time and as process CPU time (all threads), at 768x512 and 192x128, and their ratios
+(the target at 768x512 is <= 0.5).
 
 Run: ``python benchmarks/render_speed.py [--steps 40] [--repeats 3]``
 """
@@ -50,29 +51,30 @@ def new_encoder(width: int, height: int) -> av.CodecContext:
     return codec
 
 
-def replay(simulator: Simulator, prompt: str, chunks: list[np.ndarray]) -> tuple[float, float]:
-    """Milliseconds per camera-frame to render, and per frame to encode, over one replay.
+def replay(simulator: Simulator, prompt: str, chunks: list[np.ndarray]) -> np.ndarray:
+    """Wall and CPU milliseconds per camera-frame to render, and per frame to encode, over
+    one replay: ``[render wall, encode wall, render cpu, encode cpu]``.
 
     Rendering a step and encoding its front frames alternate, so both see the same machine
-    load (the ratio stays meaningful on a busy machine).
+    load (the ratio stays meaningful on a busy machine). CPU time is the process's, all threads.
     """
     simulator.reset(prompt, seed=0)
     codec = new_encoder(simulator.width, simulator.height)
-    render = encode = 0.0
+    totals = np.zeros(4)
     frames = 0
     for chunk in chunks:
-        start = time.perf_counter()
+        start = np.array([time.perf_counter(), time.process_time()])
         rgb = simulator.step(chunk).rgb["front"]
-        rendered = time.perf_counter()
+        rendered = np.array([time.perf_counter(), time.process_time()])
         for frame in rgb:
             video_frame = av.VideoFrame.from_ndarray(frame, format="rgb24")
             video_frame.pts = frames
             codec.encode(video_frame)
             frames += 1
-        render += rendered - start
-        encode += time.perf_counter() - rendered
+        encoded = np.array([time.perf_counter(), time.process_time()])
+        totals += np.concatenate([rendered - start, encoded - rendered])[[0, 2, 1, 3]]
     codec.encode(None)
-    return render * 1000 / (frames * len(CAMERA_NAMES)), encode * 1000 / frames
+    return totals * 1000 / (frames * np.array([len(CAMERA_NAMES), 1, len(CAMERA_NAMES), 1]))
 
 
 def main() -> None:
@@ -87,18 +89,26 @@ def main() -> None:
         for prompt in PROMPTS:
             chunks = drive(simulator, prompt, args.steps)
             runs = np.array([replay(simulator, prompt, chunks) for _ in range(args.repeats)])
-            render, encode = np.median(runs, axis=0)
+            render, encode, render_cpu, encode_cpu = np.median(runs, axis=0)
             per_scene[prompt] = {
                 "render_ms": round(float(render), 3),
                 "encode_ms": round(float(encode), 3),
                 "ratio": round(float(render / encode), 3),
+                "render_cpu_ms": round(float(render_cpu), 3),
+                "encode_cpu_ms": round(float(encode_cpu), 3),
+                "cpu_ratio": round(float(render_cpu / encode_cpu), 3),
             }
-        render = float(np.mean([scene["render_ms"] for scene in per_scene.values()]))
-        encode = float(np.mean([scene["encode_ms"] for scene in per_scene.values()]))
+        mean = {
+            key: float(np.mean([scene[key] for scene in per_scene.values()]))
+            for key in ("render_ms", "encode_ms", "render_cpu_ms", "encode_cpu_ms")
+        }
         results[f"{width}x{height}"] = {
-            "render_ms_per_camera_frame": round(render, 3),
-            "vp9_encode_ms_per_frame": round(encode, 3),
-            "ratio_render_to_encode": round(render / encode, 3),
+            "render_ms_per_camera_frame": round(mean["render_ms"], 3),
+            "vp9_encode_ms_per_frame": round(mean["encode_ms"], 3),
+            "ratio_render_to_encode": round(mean["render_ms"] / mean["encode_ms"], 3),
+            "render_cpu_ms_per_camera_frame": round(mean["render_cpu_ms"], 3),
+            "vp9_encode_cpu_ms_per_frame": round(mean["encode_cpu_ms"], 3),
+            "cpu_ratio_render_to_encode": round(mean["render_cpu_ms"] / mean["encode_cpu_ms"], 3),
             "scenes": per_scene,
         }
     print(json.dumps(results, indent=2))

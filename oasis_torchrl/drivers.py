@@ -44,6 +44,14 @@ class Driver(ABC):
 
     Args:
         chunk_actions: write ``[N, 4, 2]`` chunks; if false, ``[N, 2]`` (the chunk's first).
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> class Stop(Driver):
+        ...     def chunks(self, td):
+        ...         return torch.zeros(td.batch_size[0], 4, 2)
+        >>> Stop(chunk_actions=False)(TensorDict(batch_size=[3]))["action"].shape
+        torch.Size([3, 2])
     """
 
     def __init__(self, *, chunk_actions: bool = True) -> None:

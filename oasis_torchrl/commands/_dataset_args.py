@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import re
+import signal
+import threading
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 _SIZE = re.compile(r"^(\d+)x(\d+)$")
@@ -26,7 +30,14 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
-    """Output flags: dataset folder, repo id, stored size, codec, append."""
+    """Output flags: dataset folder, repo id, stored size, codec, append.
+
+    Example:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_dataset_arguments(parser)
+        >>> parser.parse_args(["--root", "out", "--image-size", "128x192"]).image_size
+        (128, 192)
+    """
     parser.add_argument("--root", type=Path, required=True, help="dataset folder to write")
     parser.add_argument("--repo-id", help="LeRobot repo id (default local/<folder name>)")
     parser.add_argument(
@@ -43,13 +54,39 @@ def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--append", action="store_true", help="add episodes to the dataset")
 
 
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Let SIGTERM stop a writing command the way Ctrl-C does, so the dataset is finalized.
+
+    Example:
+        >>> with sigterm_as_interrupt():
+        ...     pass
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def _not_lerobot_chatter(record: logging.LogRecord) -> bool:
     # LeRobot logs through the root logger, so its INFO lines can only be told by their file.
     return record.levelno >= logging.WARNING or f"{os.sep}lerobot{os.sep}" not in record.pathname
 
 
 def quiet_dataset_libraries() -> None:
-    """Keep LeRobot's and ``datasets``' per-episode chatter and bars out of our progress bar."""
+    """Keep LeRobot's and ``datasets``' per-episode chatter and bars out of our progress bar.
+
+    Example:
+        >>> quiet_dataset_libraries()
+    """
     import datasets
 
     datasets.disable_progress_bars()

@@ -14,6 +14,7 @@ from oasis_torchrl.commands._dataset_args import (
     add_dataset_arguments,
     parse_size,
     quiet_dataset_libraries,
+    sigterm_as_interrupt,
 )
 
 logger = logging.getLogger(__name__)
@@ -41,7 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Import; exit code 0 (all imported), 1 (some skipped), 2 (nothing imported or bad flags)."""
+    """Import; exit code 0 (all imported), 1 (some skipped), 2 (nothing imported or bad flags),
+    130 when interrupted (SIGINT or SIGTERM; the episodes imported so far are kept)."""
     from tqdm import tqdm
 
     from oasis_torchrl.data import import_recordings
@@ -50,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     quiet_dataset_libraries()
     try:
         total = len(find_episodes(args.source))
-        with tqdm(total=total, unit="episode", desc="importing") as bar:
+        with sigterm_as_interrupt(), tqdm(total=total, unit="episode", desc="importing") as bar:
             report = import_recordings(
                 args.source,
                 args.root,
@@ -67,6 +69,9 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileExistsError, FileNotFoundError) as error:
         logger.error("cannot import: %s", error)
         return 2
+    except KeyboardInterrupt:
+        logger.warning("interrupted; %s keeps every episode imported so far", args.root)
+        return 130
     for error in report.skipped:
         logger.warning("skipped: %s", error)
     logger.info(

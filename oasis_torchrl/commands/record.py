@@ -15,7 +15,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from oasis_torchrl.commands._dataset_args import add_dataset_arguments, quiet_dataset_libraries
+from oasis_torchrl.commands._dataset_args import (
+    add_dataset_arguments,
+    quiet_dataset_libraries,
+    sigterm_as_interrupt,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -143,8 +147,9 @@ def record(args: argparse.Namespace) -> int:
             td = env.reset()
             while not recorder.full:
                 td, next_td = env.step_and_maybe_reset(driver(td))
-                bar.update(recorder.write(td.unsqueeze(-1)))
-                bar.set_postfix(rows=recorder.frames_written)
+                completed = recorder.write(td.unsqueeze(-1))
+                bar.set_postfix(rows=recorder.rows_written, refresh=False)
+                bar.update(completed)
                 td = next_td
     finally:
         env.close()
@@ -152,13 +157,15 @@ def record(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Record; exit code 0, 2 on bad settings, 130 when interrupted (completed episodes kept)."""
+    """Record; exit code 0, 2 on bad settings, 130 when interrupted (SIGINT or SIGTERM; the
+    completed episodes are kept)."""
     if args.episodes < 1 or args.num_envs < 1:
         logger.error("--episodes and --num-envs must be >= 1")
         return 2
     quiet_dataset_libraries()
     try:
-        written = record(args)
+        with sigterm_as_interrupt():
+            written = record(args)
     except (ValueError, TypeError, KeyError, FileExistsError, FileNotFoundError) as error:
         logger.error("cannot record: %s", error)
         return 2

@@ -55,6 +55,12 @@ class RowBatch:
 
     ``columns`` maps each dataset key to a numpy array ``[B, T, R, *feature_shape]``;
     ``tasks`` is ``[B][T]`` prompts, ``seeds`` int64 ``[B, T]`` and ``done`` bool ``[B, T]``.
+
+    Example:
+        >>> rows = RowBatch({"action": np.zeros((1, 2, 4, 2), np.float32)}, [["city"] * 2],
+        ...                 np.zeros((1, 2), np.int64), np.array([[False, True]]))
+        >>> rows.shape, rows.step(0, 1)["action"].shape
+        ((1, 2), (4, 2))
     """
 
     columns: dict[str, np.ndarray]
@@ -123,7 +129,15 @@ def infer_layout(batch: TensorDictBase, image_size: tuple[int, int] | None = Non
 
 
 def rows_per_step(batch: TensorDictBase) -> int:
-    """4 for frame rows (pixels ``[..., 4, H, W, 3]``), 1 for chunk rows."""
+    """4 for frame rows (pixels ``[..., 4, H, W, 3]``), 1 for chunk rows.
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> steps = TensorDict({"pixels": {"front": torch.zeros(2, 3, 48, 64, 3,
+        ...     dtype=torch.uint8)}}, batch_size=[2, 3])
+        >>> rows_per_step(steps), frame_size(steps)
+        (1, (48, 64))
+    """
     steps = _as_steps(batch)
     pixels = _get(steps, (PIXELS, _cameras(steps)[0]), "the camera frames")
     return pixels.shape[2] if pixels.dim() == 6 else 1
@@ -199,7 +213,8 @@ def _tasks(steps: TensorDictBase) -> list[list[str]]:
 
 
 def frame_size(batch: TensorDictBase) -> tuple[int, int]:
-    """``(height, width)`` of the batch's frames (before any resizing)."""
+    """``(height, width)`` of the batch's frames (before any resizing); see
+    :func:`rows_per_step` for an example."""
     steps = _as_steps(batch)
     pixels = _get(steps, (PIXELS, _cameras(steps)[0]), "the camera frames")
     return tuple(pixels.shape[-3:-1])

@@ -104,7 +104,13 @@ def _action_names(actions_per_row: int) -> list[str]:
 
 
 def build_features(layout: DatasetLayout) -> dict[str, Feature]:
-    """The LeRobot ``features`` dict of ``layout`` (to pass to ``LeRobotDataset.create``)."""
+    """The LeRobot ``features`` dict of ``layout`` (to pass to ``LeRobotDataset.create``).
+
+    Example:
+        >>> features = build_features(DatasetLayout(("front",), (48, 64), actions_per_row=4))
+        >>> features["action"]["shape"], features["action"]["names"][:3]
+        ((8,), ['throttle_0', 'steering_0', 'throttle_1'])
+    """
     height, width = layout.image_size
     features: dict[str, Feature] = {
         image_key(camera): {"dtype": "video", "shape": (height, width, 3), "names": IMAGE_NAMES}

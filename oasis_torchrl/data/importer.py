@@ -65,7 +65,12 @@ class RecordingError(ValueError):
 
 @dataclass(frozen=True)
 class RecordedStep:
-    """One manifest line: the chunk the driver chose and the frame file of each camera."""
+    """One manifest line: the chunk the driver chose and the frame file of each camera.
+
+    Example:
+        >>> RecordedStep(1, np.zeros((4, 2), np.float32), {"front": Path("f.png")}).line
+        1
+    """
 
     line: int
     action: np.ndarray
@@ -74,7 +79,12 @@ class RecordedStep:
 
 @dataclass
 class ImportReport:
-    """What an import did: episodes imported, episodes skipped (with why), rows written."""
+    """What an import did: episodes imported, episodes skipped (with why), rows written.
+
+    Example:
+        >>> ImportReport().rows
+        0
+    """
 
     imported: list[Path] = field(default_factory=list)
     skipped: list[RecordingError] = field(default_factory=list)
@@ -151,6 +161,12 @@ def read_manifest(
 
     Raises:
         RecordingError: the first problem found, with the file and line.
+
+    Example:
+        >>> read_manifest(Path("no_such_episode"))
+        Traceback (most recent call last):
+        ...
+        oasis_torchrl.data.importer.RecordingError: no_such_episode/manifest.jsonl: missing file
     """
     manifest = episode / MANIFEST
     if not manifest.is_file():
@@ -205,7 +221,17 @@ def _load_frame(path: Path, size: tuple[int, int], manifest: Path, line: int) ->
 def episode_rows(
     steps: Sequence[RecordedStep], manifest: Path, image_size: tuple[int, int]
 ) -> Iterator[dict[str, np.ndarray]]:
-    """The dataset rows of an episode, decoding each step's frames as it goes."""
+    """The dataset rows of an episode, decoding each step's frames as it goes.
+
+    Example:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> Image.new("RGBA", (8, 6)).save(folder / "f.png")
+        >>> step = RecordedStep(1, np.ones((4, 2), np.float32), {"front": folder / "f.png"})
+        >>> row = next(episode_rows([step], folder / MANIFEST, (6, 8)))
+        >>> row["observation.images.front"].shape, row["action"].shape, bool(row["next.done"])
+        ((6, 8, 3), (8,), True)
+    """
     previous = np.zeros(2, np.float32)
     for index, step in enumerate(steps):
         row = {

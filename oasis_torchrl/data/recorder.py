@@ -12,7 +12,7 @@ import shutil
 import tempfile
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING
 
 from tensordict import TensorDictBase
 
@@ -28,10 +28,14 @@ from oasis_torchrl.data.features import (
     ACTIONS_PER_CHUNK,
     DEFAULT_FPS,
     DatasetLayout,
+    Feature,
     build_features,
     check_columns,
 )
 from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+
+if TYPE_CHECKING:
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 logger = logging.getLogger(__name__)
 
@@ -63,12 +67,16 @@ class LeRobotRecorder:
             episode past its share keeps its frames in a spill file instead.
         spill_dir: folder for spill files (default: beside ``root``).
 
-    Example:
-        >>> from oasis_torchrl.envs import OasisEnv  # doctest: +SKIP
-        >>> env = OasisEnv("local", num_envs=2, all_frames=True)  # doctest: +SKIP
-        >>> with LeRobotRecorder("drives") as recorder:  # doctest: +SKIP
-        ...     recorder.write(env.rollout(50, break_when_any_done=False))
-        >>> # as a collector hook: Collector(env, policy, ..., post_collect_hook=recorder)
+    Example (as a collector hook: ``Collector(env, policy, ..., post_collect_hook=recorder)``):
+        >>> import tempfile
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> from oasis_torchrl.sim.config import ServerConfig
+        >>> env = OasisEnv("local", num_envs=2, all_frames=True, max_steps=2,
+        ...                server=ServerConfig(width=64, height=48))
+        >>> with LeRobotRecorder(Path(tempfile.mkdtemp()) / "drives") as recorder:
+        ...     recorder.write(env.rollout(4, break_when_any_done=False))  # episodes completed
+        4
+        >>> env.close()
     """
 
     def __init__(
@@ -76,7 +84,7 @@ class LeRobotRecorder:
         root: str | Path,
         *,
         repo_id: str | None = None,
-        fps: int = DEFAULT_FPS,
+        fps: float = DEFAULT_FPS,
         image_size: tuple[int, int] | None = None,
         vcodec: str = DEFAULT_VCODEC,
         append: bool = False,
@@ -87,25 +95,38 @@ class LeRobotRecorder:
     ) -> None:
         if max_episodes is not None and max_episodes < 1:
             raise ValueError(f"max_episodes must be >= 1, got {max_episodes}")
+        if fps <= 0 or int(fps) != fps:
+            raise ValueError(
+                f"fps must be a positive whole number (LeRobot stores an int), got {fps}"
+            )
         self.root = Path(root)
         self.repo_id = repo_id
-        self.fps = fps
+        self.fps = int(fps)
         self.image_size = image_size
         self.vcodec = vcodec
         self.append = append
         self.max_episodes = max_episodes
         self.keep_unfinished = keep_unfinished
         self.buffer_bytes = buffer_bytes
-        self.episodes_written = 0
-        self.frames_written = 0
-        self.dataset: Any = None
+        self.dataset: LeRobotDataset | None = None
+        self._existing = (0, 0)  # (episodes, rows) already in an appended dataset
         self.layout: DatasetLayout | None = None
-        self._features: dict[str, Any] = {}
+        self._features: dict[str, Feature] = {}
         self._source_size: tuple[int, int] | None = None
-        self._spill_parent = Path(spill_dir) if spill_dir is not None else self.root.parent
-        self._spill: Path | None = None
+        self._spill_root = Path(spill_dir) if spill_dir is not None else self.root.parent
+        self._spill_dir: Path | None = None
         self._open: list[EpisodeBuffer | None] = []
         self._closed = False
+
+    @property
+    def episodes_written(self) -> int:
+        """Episodes this recorder has saved (counted by the dataset itself)."""
+        return 0 if self.dataset is None else self.dataset.meta.total_episodes - self._existing[0]
+
+    @property
+    def rows_written(self) -> int:
+        """Dataset rows this recorder has saved."""
+        return 0 if self.dataset is None else self.dataset.meta.total_frames - self._existing[1]
 
     @property
     def full(self) -> bool:
@@ -149,7 +170,7 @@ class LeRobotRecorder:
         return self.episodes_written - before
 
     def _start(
-        self, layout: DatasetLayout, features: dict[str, Any], rows_per_step: int, env_rows: int
+        self, layout: DatasetLayout, features: dict[str, Feature], rows_per_step: int, env_rows: int
     ) -> None:
         """Open the dataset for the first batch's layout."""
         if rows_per_step == 1 and self.fps % ACTIONS_PER_CHUNK:
@@ -165,9 +186,10 @@ class LeRobotRecorder:
             vcodec=self.vcodec,
             append=self.append,
         )
+        self._existing = (self.dataset.meta.total_episodes, self.dataset.meta.total_frames)
         self.layout, self._features = layout, features
-        self._spill = Path(
-            tempfile.mkdtemp(prefix=f".{self.root.name}-spill-", dir=self._spill_parent)
+        self._spill_dir = Path(
+            tempfile.mkdtemp(prefix=f".{self.root.name}-spill-", dir=self._spill_root)
         )
         self._open = [None] * env_rows
         logger.info(
@@ -190,7 +212,7 @@ class LeRobotRecorder:
             episode = None
         if episode is None:
             share = self.buffer_bytes // len(self._open)
-            episode = EpisodeBuffer(self._spill, self._features, task, seed, share)
+            episode = EpisodeBuffer(self._spill_dir, self._features, task, seed, share)
             self._open[row] = episode
         episode.append(rows.step(row, step))
         if rows.done[row, step]:
@@ -200,12 +222,19 @@ class LeRobotRecorder:
         episode, self._open[row] = self._open[row], None
         try:
             if save and not self.full:
-                self.frames_written += write_episode(self.dataset, episode.rows(), episode.task)
-                self.episodes_written += 1
+                write_episode(self.dataset, episode.rows(), episode.task)
         finally:
             episode.discard()
 
-    # -- closing ---------------------------------------------------------------------------
+    # -- ending and closing ----------------------------------------------------------------
+
+    def end_episodes(self, *, save: bool = True) -> None:
+        """End every running episode now: save it as it is (no done flag on its last row), or
+        drop it. For callers that know their rollout stops here, e.g. a fixed-length evaluation;
+        the env rows' next steps then start new episodes."""
+        for row, episode in enumerate(self._open):
+            if episode is not None:
+                self._end(row, save=save)
 
     def close(self, *, keep_unfinished: bool | None = None) -> None:
         """Save (or drop) the running episodes, then finalize the dataset; always finalizes."""
@@ -214,23 +243,21 @@ class LeRobotRecorder:
         self._closed = True
         keep = self.keep_unfinished if keep_unfinished is None else keep_unfinished
         try:
-            for row, episode in enumerate(self._open):
-                if episode is not None:
-                    self._end(row, save=keep)
+            self.end_episodes(save=keep)
         finally:
             for row, episode in enumerate(self._open):
                 if episode is not None:
                     episode.discard()
                     self._open[row] = None
-            if self._spill is not None:
-                shutil.rmtree(self._spill, ignore_errors=True)
+            if self._spill_dir is not None:
+                shutil.rmtree(self._spill_dir, ignore_errors=True)
             if self.dataset is not None:
                 self.dataset.finalize()
             logger.info(
                 "closed %s: %d episodes, %d rows written",
                 self.root,
                 self.episodes_written,
-                self.frames_written,
+                self.rows_written,
             )
 
     def __enter__(self) -> LeRobotRecorder:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import queue
 import signal
 import threading
 import time
@@ -29,8 +30,9 @@ from oasis_torchrl.data.loading import default_repo_id, default_video_backend
 logger = logging.getLogger(__name__)
 
 DEFAULT_VCODEC = "h264"
-"""libx264 through PyAV: about 2.5x faster than LeRobot's default libsvtav1 here, smaller files
-at the same settings, and read back by both pyav and torchcodec."""
+"""libx264 through PyAV: about twice as fast here as LeRobot's default libsvtav1 at LeRobot's
+settings (crf 30, keyframe every 2 frames), somewhat lower quality (PSNR about 35 vs 40 dB on
+768x512 simulator frames), decoded by both pyav and torchcodec (benchmarks/export_speed.py)."""
 ROBOT_TYPE = "oasis_car"
 
 
@@ -63,6 +65,8 @@ def open_dataset(
     Raises:
         FileExistsError: ``root`` holds data and ``append`` is false.
         ValueError: appending with another fps or other features (naming the key).
+
+    See :func:`write_episode` for an example.
     """
     root = Path(root)
     repo_id = repo_id or default_repo_id(root)
@@ -101,17 +105,17 @@ def open_dataset(
     )
 
 
-def _encoder_queues(dataset: LeRobotDataset) -> Iterator[tuple[object, threading.Thread]]:
+def _encoder_queues(dataset: LeRobotDataset) -> Iterator[tuple[queue.Queue, threading.Thread]]:
     # LeRobot exposes no public hook for this; see the module docstring for why it is needed.
     encoder = dataset._streaming_encoder
     if encoder is None:
         return iter(())
-    return ((queue, encoder._threads[key]) for key, queue in encoder._frame_queues.items())
+    return ((frames, encoder._threads[key]) for key, frames in encoder._frame_queues.items())
 
 
 def _wait_for_encoder_room(dataset: LeRobotDataset) -> None:
-    for queue, thread in _encoder_queues(dataset):
-        while queue.full() and thread.is_alive():
+    for frames, thread in _encoder_queues(dataset):
+        while frames.full() and thread.is_alive():
             time.sleep(0.001)
 
 
@@ -124,18 +128,22 @@ def _check_no_dropped_frames(dataset: LeRobotDataset) -> None:
 
 @contextlib.contextmanager
 def _interrupts_deferred() -> Iterator[None]:
-    """Hold Ctrl-C until the block ends, so an episode is saved whole or not at all."""
+    """Hold SIGINT and SIGTERM until the block ends, so an episode is saved whole or not at all."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     received: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    previous = {
+        signum: signal.signal(signum, lambda signum, frame: received.append(signum))
+        for signum in (signal.SIGINT, signal.SIGTERM)
+    }
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-        if received and callable(previous):
-            previous(signal.SIGINT, None)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in dict.fromkeys(received):
+            signal.raise_signal(signum)  # now handled as it would have been
 
 
 def write_episode(
@@ -148,6 +156,18 @@ def write_episode(
 
     Returns:
         The number of rows written.
+
+    Example:
+        >>> import tempfile
+        >>> from oasis_torchrl.data.features import DatasetLayout, build_features
+        >>> layout = DatasetLayout(("front",), (16, 16), with_reward=False, with_seed=False)
+        >>> dataset = open_dataset(Path(tempfile.mkdtemp()) / "demo", build_features(layout), 20)
+        >>> row = {"observation.images.front": np.zeros((16, 16, 3), np.uint8),
+        ...        "observation.state": np.zeros(2, np.float32),
+        ...        "action": np.zeros(2, np.float32), "next.done": np.array([False])}
+        >>> write_episode(dataset, [row] * 3, "parking")
+        3
+        >>> dataset.finalize()
     """
     count = 0
     try:

@@ -66,7 +66,8 @@ class DrivingNetConfig:
             raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
         if len(self.encoder_channels) != 3:
             raise ValueError(
-                f"DrivingNetConfig.encoder_channels needs 3 values, got {list(self.encoder_channels)}"
+                "DrivingNetConfig.encoder_channels needs 3 values, "
+                f"got {list(self.encoder_channels)}"
             )
         positive = {
             "image_size": self.image_size,

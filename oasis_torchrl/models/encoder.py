@@ -58,9 +58,7 @@ class MultiCameraEncoder(nn.Module):
         layers.append(nn.AdaptiveAvgPool2d(config.pool_grid))
         self.convs = nn.Sequential(*layers)
         pooled = in_channels * config.pool_grid[0] * config.pool_grid[1]
-        self.project_weight = nn.Parameter(
-            torch.empty(self.groups, pooled, config.camera_features)
-        )
+        self.project_weight = nn.Parameter(torch.empty(self.groups, pooled, config.camera_features))
         self.project_bias = nn.Parameter(torch.zeros(self.groups, config.camera_features))
         bound = pooled**-0.5  # nn.Linear's default initialisation, per camera
         nn.init.uniform_(self.project_weight, -bound, bound)

@@ -56,13 +56,13 @@ def random_shift(images: torch.Tensor, pad: int) -> torch.Tensor:
     """
     if pad <= 0:
         return images
-    batch, _, height, width = images.shape
+    height, width = images.shape[-2:]
     padded = F.pad(images, (pad, pad, pad, pad), mode="replicate")
-    offsets = torch.randint(0, 2 * pad + 1, (batch, 2))
-    rows = torch.arange(height).unsqueeze(0) + offsets[:, :1]  # [B, H]
-    cols = torch.arange(width).unsqueeze(0) + offsets[:, 1:]  # [B, W]
-    index = torch.arange(batch)[:, None, None]
-    return padded.permute(0, 2, 3, 1)[index, rows[:, :, None], cols[:, None, :]].permute(0, 3, 1, 2)
+    offsets = torch.randint(0, 2 * pad + 1, (images.shape[0], 2)).tolist()
+    # One slice copy per image is several times faster than a gather over every pixel.
+    return torch.stack(
+        [image[:, r : r + height, c : c + width] for image, (r, c) in zip(padded, offsets)]
+    )
 
 
 def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:
@@ -153,12 +153,14 @@ class BCTrainer:
         self.policy.train()
         average = float("nan")
         batches = _batches(self.loader)
-        with tqdm(range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress) as bar:
+        with tqdm(
+            range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress
+        ) as bar:
             for step in bar:
                 batch = self.preprocessor(next(batches))
                 for key in self.image_keys:
                     batch[key] = random_shift(batch[key], cfg.shift_pad)
-                loss, info = self.policy.forward(batch)
+                loss, _ = self.policy.forward(batch)
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)

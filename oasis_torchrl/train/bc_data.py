@@ -40,14 +40,18 @@ class InMemoryBCDataset(Dataset):
 
     def __init__(self, dataset: Any, *, progress: bool = True) -> None:
         if not dataset.delta_indices or ACTION not in dataset.delta_indices:
-            raise ValueError("open the dataset with delta_timestamps for 'action' (an action chunk)")
+            raise ValueError(
+                "open the dataset with delta_timestamps for 'action' (an action chunk)"
+            )
         self.camera_keys = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
         self.action_deltas = torch.tensor(dataset.delta_indices[ACTION])
         columns = dataset.hf_dataset.with_format("torch", columns=list(_COLUMNS))[:]
         self.columns = {key: torch.as_tensor(columns[key]) for key in _COLUMNS}
         # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
         # indices (what episode bounds use) to positions in it.
-        self._position = {int(index): position for position, index in enumerate(self.columns["index"])}
+        self._position = {
+            int(index): position for position, index in enumerate(self.columns["index"])
+        }
         episodes = sorted(set(self.columns["episode_index"].tolist()))
         self.bounds = {
             ep: (
@@ -56,7 +60,9 @@ class InMemoryBCDataset(Dataset):
             )
             for ep in episodes
         }
-        self.frames = {key: self._decode(dataset, key, episodes, progress) for key in self.camera_keys}
+        self.frames = {
+            key: self._decode(dataset, key, episodes, progress) for key in self.camera_keys
+        }
 
     def _decode(self, dataset: Any, key: str, episodes: list[int], progress: bool) -> torch.Tensor:
         """uint8 ``[rows, 3, H, W]`` of one camera, in hf-dataset row order."""

@@ -57,7 +57,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         raise FileNotFoundError(f"no checkpoint at {path}")
     payload = torch.load(path, map_location="cpu", weights_only=False)
     if not isinstance(payload, dict) or payload.get("version") != CHECKPOINT_VERSION:
-        raise ValueError(f"{path} is not an oasis-torchrl checkpoint (version {CHECKPOINT_VERSION})")
+        raise ValueError(
+            f"{path} is not an oasis-torchrl checkpoint (version {CHECKPOINT_VERSION})"
+        )
     return payload
 
 
@@ -89,7 +91,10 @@ def net_from_lerobot(path: str | Path) -> DrivingNet:
     """
     plugin = lerobot_plugin()
     policy = plugin.OasisPolicy.from_pretrained(str(path))
-    modes = {str(key): getattr(mode, "value", mode) for key, mode in policy.config.normalization_mapping.items()}
+    modes = {
+        str(key): getattr(mode, "value", mode)
+        for key, mode in policy.config.normalization_mapping.items()
+    }
     if any(mode != "IDENTITY" for mode in modes.values()):
         raise ValueError(
             f"{path} was trained with normalization {modes}; only IDENTITY transfers to TorchRL "

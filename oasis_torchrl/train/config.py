@@ -59,7 +59,9 @@ def load_config(name_or_path: str | Path, overrides: Sequence[str] = ()) -> Dict
     return apply_overrides(cfg, overrides, source=path.name)
 
 
-def apply_overrides(cfg: DictConfig, overrides: Sequence[str], source: str = "config") -> DictConfig:
+def apply_overrides(
+    cfg: DictConfig, overrides: Sequence[str], source: str = "config"
+) -> DictConfig:
     """A resolved copy of ``cfg`` with dotted ``key=value`` overrides merged, in struct mode.
 
     Example:

@@ -88,15 +88,15 @@ class EvalReport:
             "episodes": float(len(self.episodes)),
         }
 
-    def to_dict(self) -> dict[str, Any]:
-        """Aggregates plus every episode, JSON-ready."""
-        return {**self.summary(), "per_episode": [asdict(e) for e in self.episodes]}
+    def to_dict(self, **extra: Any) -> dict[str, Any]:
+        """``extra`` items, the aggregates and every episode, JSON-ready."""
+        return {**extra, **self.summary(), "per_episode": [asdict(e) for e in self.episodes]}
 
-    def write_json(self, path: str | Path) -> Path:
+    def write_json(self, path: str | Path, **extra: Any) -> Path:
         """Write :meth:`to_dict` as JSON."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
+        path.write_text(json.dumps(self.to_dict(**extra), indent=2))
         return path
 
 

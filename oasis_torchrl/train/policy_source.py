@@ -36,10 +36,10 @@ def load_policy(spec: str | Path) -> PolicySource:
     Example:
         >>> load_policy("constant:throttle=1.0").image_size is None
         True
-        >>> load_policy("nowhere.pt")
+        >>> load_policy("nowhere.pt")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: policy 'nowhere.pt' is neither 'autopilot', 'constant:<spec>' nor an existing path
+        ValueError: policy 'nowhere.pt' is neither 'autopilot', 'constant:<spec>' nor ...
     """
     from oasis_torchrl.drivers import Autopilot, ScriptedDriver
 

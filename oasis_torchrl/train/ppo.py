@@ -154,6 +154,7 @@ class PPOTrainer:
             experiment_name=cfg.logger.exp_name,
         )
         self._evaluator: Evaluator | None = None
+        self._last_eval: tuple[int, EvalReport] | None = None
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -174,7 +175,7 @@ class PPOTrainer:
         try:
             if remaining:
                 self._train(remaining)
-            final = self._evaluate() if cfg.eval.episodes else None
+            final = self._final_evaluation() if cfg.eval.episodes else None
             checkpoint = self._save_checkpoint()
             policy_dir = self._export()
         finally:
@@ -188,6 +189,7 @@ class PPOTrainer:
             self.modules.policy,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
+            auto_register_policy_transforms=False,
         )
         bar = tqdm(
             total=cfg.collector.total_frames,
@@ -252,6 +254,12 @@ class PPOTrainer:
 
     # -- evaluation, logging, files ----------------------------------------------------------
 
+    def _final_evaluation(self) -> EvalReport:
+        """The evaluation of the final policy (reusing the last one if nothing changed since)."""
+        if self._last_eval is not None and self._last_eval[0] == self.frames:
+            return self._last_eval[1]
+        return self._evaluate()
+
     def _evaluate(self) -> EvalReport:
         if self._evaluator is None:
             self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
@@ -260,6 +268,7 @@ class PPOTrainer:
             report = self._evaluator.evaluate(self.modules.policy)
         finally:
             self.net.train()
+        self._last_eval = (self.frames, report)
         summary = report.summary()
         self.history.append({"iteration": self.iteration, "frames": self.frames, **summary})
         logger.info("evaluation at %d env steps: %s", self.frames, summary)

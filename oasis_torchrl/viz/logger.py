@@ -16,13 +16,16 @@ bounded and the env does not wait for the encoder.
 
 from __future__ import annotations
 
-import logging
+import atexit
+import functools
+import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import rerun as rr
 import torch
 from tensordict import TensorDictBase
 
@@ -34,8 +37,6 @@ from oasis_torchrl.viz.writer import RecordWriter
 
 if TYPE_CHECKING:
     from oasis_torchrl.viz.hooks import RerunFrameConsumer, RerunTransform
-
-logger = logging.getLogger(__name__)
 
 
 class RolloutLogger:
@@ -73,18 +74,25 @@ class RolloutLogger:
         memory_limit: str = DEFAULT_MEMORY_LIMIT,
     ) -> None:
         self.options = options if options is not None else LogOptions()
-        self.target = target
-        self.recording = open_recording(
+        recording = open_recording(
             target,
             application_id=application_id,
             recording_id=recording_id,
             memory_limit=memory_limit,
         )
-        self._writer = RecordWriter(self.recording, self.options)
+        self._writer: RecordWriter | None = RecordWriter(recording, self.options)
         self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
         self._tick = 0
         self._pending_starts: np.ndarray | None = None
-        self._closed = False
+        # Closing before interpreter teardown: rerun cannot flush a stream once its modules
+        # are torn down. A weak reference, so an open logger can still be garbage-collected.
+        self._close_at_exit = functools.partial(_close_if_alive, weakref.ref(self))
+        atexit.register(self._close_at_exit)
+
+    @property
+    def recording(self) -> rr.RecordingStream:
+        """This logger's own recording stream (e.g. to log more next to the rollouts)."""
+        return self._open_writer().recording
 
     # -- ways in -----------------------------------------------------------------------------
 
@@ -161,21 +169,23 @@ class RolloutLogger:
 
     def flush(self) -> None:
         """Wait until everything submitted is logged and handed to the sink."""
+        writer = self._open_writer()
         if self._worker is not None:
             self._worker.drain()
-        self.recording.flush()
+        writer.recording.flush()
 
     def close(self) -> None:
         """Flush and release the sink (an ``.rrd`` file is complete afterwards). Idempotent."""
-        if self._closed:
+        writer, self._writer = self._writer, None
+        if writer is None:
             return
-        self._closed = True
+        atexit.unregister(self._close_at_exit)
         try:
             if self._worker is not None:
                 self._worker.close()
         finally:
-            self.recording.flush()
-            self.recording.disconnect()
+            writer.recording.flush()
+            writer.recording.disconnect()
 
     def __enter__(self) -> RolloutLogger:
         return self
@@ -213,13 +223,23 @@ class RolloutLogger:
         allowed = set(range(n) if rows is None else rows)
         return [row for row in chosen if row in allowed]
 
-    def _submit(self, record: StepRecord) -> None:
-        if self._closed:
+    def _open_writer(self) -> RecordWriter:
+        if self._writer is None:
             raise RuntimeError("this RolloutLogger is closed")
+        return self._writer
+
+    def _submit(self, record: StepRecord) -> None:
+        writer = self._open_writer()
         if not record.rows:
             return
         tick, self._tick = self._tick, self._tick + 1
         if self._worker is None:
-            self._writer.write(record, tick)
+            writer.write(record, tick)
         else:
-            self._worker.submit(self._writer.write, record, tick)
+            self._worker.submit(writer.write, record, tick)
+
+
+def _close_if_alive(reference: weakref.ref) -> None:
+    rollout_logger = reference()
+    if rollout_logger is not None:
+        rollout_logger.close()

@@ -79,5 +79,5 @@ def open_recording(
         path = Path(target)
         path.parent.mkdir(parents=True, exist_ok=True)
         recording.save(path, default_blueprint=blueprint)
-    logger.info("rerun recording %s -> %s", recording.get_recording_id(), target)
+    logger.info("rerun recording -> %s", target)
     return recording

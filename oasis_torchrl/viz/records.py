@@ -65,11 +65,12 @@ def batch_rows(td: TensorDictBase) -> int:
     return int(td.batch_size[0])
 
 
-def _numpy(value: torch.Tensor, index: torch.Tensor) -> np.ndarray:
-    return value[index].detach().cpu().numpy()
+def _numpy(value: torch.Tensor, index: np.ndarray) -> np.ndarray:
+    # numpy's fancy indexing copies rows at memcpy speed; torch's uint8 gather is ~30x slower.
+    return value.detach().cpu().numpy()[index]
 
 
-def _group(td: TensorDictBase, group: str, index: torch.Tensor) -> dict[str, np.ndarray]:
+def _group(td: TensorDictBase, group: str, index: np.ndarray) -> dict[str, np.ndarray]:
     sub = td.get(group, None)
     if sub is None:
         return {}
@@ -77,7 +78,7 @@ def _group(td: TensorDictBase, group: str, index: torch.Tensor) -> dict[str, np.
 
 
 def _frames(
-    td: TensorDictBase, index: torch.Tensor, cameras: Sequence[str] | None
+    td: TensorDictBase, index: np.ndarray, cameras: Sequence[str] | None
 ) -> dict[str, np.ndarray]:
     pixels = td.get(PIXELS, None)
     if pixels is None:
@@ -97,7 +98,7 @@ def _frames(
     return out
 
 
-def _actions(action: torch.Tensor, index: torch.Tensor) -> np.ndarray:
+def _actions(action: torch.Tensor, index: np.ndarray) -> np.ndarray:
     """``[R, 4, 2]`` from a chunk ``[N, 4, 2]`` or a single action ``[N, 2]`` (repeated)."""
     array = _numpy(action, index).astype(np.float32, copy=False)
     if array.shape[1:] == (2,):
@@ -110,7 +111,7 @@ def _actions(action: torch.Tensor, index: torch.Tensor) -> np.ndarray:
     return array
 
 
-def _flag(td: TensorDictBase, key: str, index: torch.Tensor) -> np.ndarray | None:
+def _flag(td: TensorDictBase, key: str, index: np.ndarray) -> np.ndarray | None:
     value = td.get(key, None)
     return None if value is None else _numpy(value, index).reshape(len(index)).astype(bool)
 
@@ -156,7 +157,7 @@ def read_step(
     bad = [row for row in rows if not 0 <= row < n]
     if bad:
         raise ValueError(f"env rows {bad} are outside the batch of {n} rows")
-    index = torch.as_tensor(list(rows), dtype=torch.long)
+    index = np.asarray(rows, dtype=np.int64)
     reward = td.get("reward", None)
     seeds = td.get("episode_seed", None)
     return StepRecord(

@@ -78,9 +78,7 @@ class RecordWriter:
     Example:
         >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
         >>> record = StepRecord(rows=[0], start=True, prompts=["rural road"], seeds=[1])
-        >>> writer.write(record, tick=0)
-        >>> writer.episode(0)
-        0
+        >>> writer.write(record, tick=0)  # logs "episode 0 starts: 'rural road', seed 1"
     """
 
     def __init__(self, recording: rr.RecordingStream, options: LogOptions) -> None:
@@ -91,11 +89,6 @@ class RecordWriter:
         self._depth_cameras: list[str] = []
         self._topdown = False
         self._layout: tuple | None = None
-
-    def episode(self, row: int) -> int:
-        """Number of the current episode of ``row`` (0 for the first; -1 before any)."""
-        state = self._rows.get(row)
-        return -1 if state is None else state.episode
 
     def write(self, record: StepRecord, tick: int) -> None:
         """Log ``record`` as step ``tick`` (frames ``4 * tick`` to ``4 * tick + 3``)."""
@@ -143,7 +136,7 @@ class RecordWriter:
                 default_blueprint(
                     rows,
                     self._cameras,
-                    depth_cameras=self._depth_cameras if self.options.depth else (),
+                    depth_cameras=self._depth_cameras,
                     topdown=self._topdown,
                 )
             )
@@ -243,9 +236,8 @@ class RecordWriter:
             self._send(paths.scalar("reward", name), frame, values[i : i + 1])
 
     def _write_depth(self, paths: RowPaths, record: StepRecord, i: int) -> None:
-        if self.options.depth:
-            for camera, depth in record.depth.items():
-                self.recording.log(paths.depth(camera), depth_archetype(depth[i]))
+        for camera, depth in record.depth.items():
+            self.recording.log(paths.depth(camera), depth_archetype(depth[i]))
 
     # -- top-down ----------------------------------------------------------------------------
 

@@ -38,8 +38,8 @@ class OasisPolicy(PreTrainedPolicy):
         >>> features = {f"observation.images.{c}": PolicyFeature(FeatureType.VISUAL, (3, 64, 96))
         ...             for c in ("left_forward", "front", "right_forward")}
         >>> features["observation.state"] = PolicyFeature(FeatureType.STATE, (2,))
-        >>> config = OasisConfig(device="cpu", input_features=features,
-        ...                      output_features={"action": PolicyFeature(FeatureType.ACTION, (2,))})
+        >>> action = {"action": PolicyFeature(FeatureType.ACTION, (2,))}
+        >>> config = OasisConfig(device="cpu", input_features=features, output_features=action)
         >>> policy = OasisPolicy(config)
         >>> batch = {key: torch.rand(1, *ft.shape) for key, ft in features.items()}
         >>> policy.predict_action_chunk(batch).shape, policy.select_action(batch).shape

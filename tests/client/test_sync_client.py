@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import logging
+import shutil
 import socket
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import grpc
 import numpy as np
@@ -23,6 +26,7 @@ from oasis_torchrl.client import (
     RetryPolicy,
     SequenceError,
     SessionLostError,
+    SessionPool,
     TransportError,
     UnsupportedFeatureError,
 )
@@ -149,30 +153,32 @@ def test_frame_consumer_gets_every_chunk_and_clip(local_server: LocalServer) -> 
     assert events == ["new_clip", chunk, chunk, "new_clip", chunk]
 
 
+def initialize_error(endpoint: str, kind: type, **client_kwargs: object) -> Exception:
+    """The error ``with A2VClient(...)`` raises on entry (its channel is released)."""
+    with pytest.raises(kind) as raised, A2VClient(endpoint, **client_kwargs):
+        pass
+    return raised.value
+
+
 def test_initialize_errors(
     local_server: LocalServer, server_factory: Callable[..., LocalServer]
 ) -> None:
     endpoint, key = local_server.endpoint, local_server.api_key
-    with pytest.raises(DecartRoboticsError, match="API key is required"):
-        A2VClient(endpoint, api_key="").initialize()
-    expect_a2v_error(
-        A2VClient(endpoint, api_key="wrong-key").initialize,
-        PermanentA2VError,
-        ErrorCode.INVALID_API_KEY,
-    )
-    expect_a2v_error(
-        A2VClient(endpoint, api_key=key, client_sdk_version="latest").initialize,
-        PermanentA2VError,
-        ErrorCode.UNSUPPORTED_SDK_VERSION,
-    )
+    error = initialize_error(endpoint, DecartRoboticsError, api_key="")
+    assert "API key is required" in str(error)
+    error = initialize_error(endpoint, PermanentA2VError, api_key="wrong-key")
+    assert error.code == ErrorCode.INVALID_API_KEY
+    error = initialize_error(endpoint, PermanentA2VError, api_key=key, client_sdk_version="latest")
+    assert error.code == ErrorCode.UNSUPPORTED_SDK_VERSION
     jpeg_only = server_factory(formats=(JPEG,))
-    expect_a2v_error(
-        A2VClient(jpeg_only.endpoint, api_key=key, accepted_formats=(VP9,)).initialize,
-        PermanentA2VError,
-        ErrorCode.INVALID_FORMAT,
+    error = initialize_error(
+        jpeg_only.endpoint, PermanentA2VError, api_key=key, accepted_formats=(VP9,)
     )
-    with pytest.raises(DecartRoboticsError, match="required streams: rear"):
-        A2VClient(endpoint, api_key=key, required_streams=("front", "rear")).initialize()
+    assert error.code == ErrorCode.INVALID_FORMAT
+    error = initialize_error(
+        endpoint, DecartRoboticsError, api_key=key, required_streams=("front", "rear")
+    )
+    assert "required streams: rear" in str(error)
 
 
 def test_session_errors(local_server: LocalServer, stub_factory: Callable) -> None:
@@ -238,16 +244,13 @@ def test_transport_errors_after_retries(server_factory: Callable[..., LocalServe
     server = server_factory(max_sessions=1)
     policy = RetryPolicy(max_attempts=3, base_delay=0.001, max_delay=0.002)
     with A2VClient(server.endpoint, api_key=server.api_key):
-        second = A2VClient(server.endpoint, api_key=server.api_key, retry=policy)
-        with pytest.raises(TransportError) as raised:
-            second.initialize()
-        assert raised.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
-        assert raised.value.attempts == 3
-        second.close()
-    with pytest.raises(grpc.RpcError) as raised:  # what official-SDK callers catch
-        A2VClient(dead_endpoint(), api_key="k", retry=policy).initialize()
-    assert raised.value.code() == grpc.StatusCode.UNAVAILABLE
-    assert "after 3 attempts" in str(raised.value)
+        error = initialize_error(
+            server.endpoint, TransportError, api_key=server.api_key, retry=policy
+        )
+        assert error.code() == grpc.StatusCode.RESOURCE_EXHAUSTED and error.attempts == 3
+    # What official-SDK callers catch: a grpc.RpcError with a status code.
+    error = initialize_error(dead_endpoint(), grpc.RpcError, api_key="k", retry=policy)
+    assert error.code() == grpc.StatusCode.UNAVAILABLE and "after 3 attempts" in str(error)
 
 
 def test_api_key_never_appears_in_logs_reprs_or_errors(
@@ -270,19 +273,25 @@ def test_api_key_never_appears_in_logs_reprs_or_errors(
         (dead_endpoint(), {"api_key": key, "retry": RetryPolicy.never()}),
     ]
     for endpoint, client_kwargs in failing:
-        with pytest.raises(DecartRoboticsError) as raised:
-            A2VClient(endpoint, **client_kwargs).initialize()
-        messages.append(f"{raised.value!s} {raised.value!r}")
+        error = initialize_error(endpoint, DecartRoboticsError, **client_kwargs)
+        messages.append(f"{error!s} {error!r}")
     assert len(messages) == 5 and "***" in messages[0]
     for text in [*messages, caplog.text]:
         assert key not in text
 
 
 def test_ping(local_server: LocalServer, a2v_only_endpoint: str) -> None:
-    assert A2VClient(local_server.endpoint, api_key="k").ping() is True
-    assert A2VClient(dead_endpoint(), api_key="k").ping() is False
+    def ping(endpoint: str) -> bool:
+        client = A2VClient(endpoint, api_key="k")
+        try:
+            return client.ping()
+        finally:
+            client.close()
+
+    assert ping(local_server.endpoint) is True
+    assert ping(dead_endpoint()) is False
     with pytest.raises(UnsupportedFeatureError, match=r"grpc\.health\.v1\.Health"):
-        A2VClient(a2v_only_endpoint, api_key="k").ping()
+        ping(a2v_only_endpoint)
 
 
 def test_depth(local_server: LocalServer, a2v_only_endpoint: str) -> None:
@@ -309,3 +318,39 @@ def test_from_env(monkeypatch: pytest.MonkeyPatch, local_server: LocalServer) ->
     monkeypatch.delenv("DECART_ROBOTICS_ENDPOINT")
     with pytest.raises(DecartRoboticsError, match="DECART_ROBOTICS_ENDPOINT is not set"):
         A2VClient.from_env(default_endpoint=None)
+
+
+@pytest.fixture(scope="module")
+def certificate(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A self-signed certificate and key for 127.0.0.1 (needs the openssl command)."""
+    openssl = shutil.which("openssl")
+    if openssl is None:
+        pytest.skip("the openssl command is not installed")
+    folder = tmp_path_factory.mktemp("client-tls")
+    cert, key = folder / "cert.pem", folder / "key.pem"
+    subprocess.run(
+        [openssl, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+         "-keyout", str(key), "-out", str(cert), "-subj", "/CN=localhost",
+         "-addext", "subjectAltName=IP:127.0.0.1"],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return cert, key
+
+
+def test_tls_endpoints(
+    server_factory: Callable[..., LocalServer], certificate: tuple[Path, Path]
+) -> None:
+    cert, key = certificate
+    server = server_factory(tls_cert=str(cert), tls_key=str(key))
+    assert server.endpoint.startswith("https://")
+    trusted = grpc.ssl_channel_credentials(root_certificates=cert.read_bytes())
+    with A2VClient(server.endpoint, api_key=server.api_key, tls=trusted) as client:
+        client.prompt(PROMPT)
+        assert client.infer(ZERO_CHUNK).sequence_num == 0
+    with SessionPool(server.endpoint, 2, api_key=server.api_key, tls=trusted) as pool:
+        assert pool.reset(None, [PROMPT] * 2).status.tolist() == [0, 0]
+    plaintext = server.endpoint.replace("https://", "http://")  # wrong: the server wants TLS
+    error = initialize_error(
+        plaintext, TransportError, api_key=server.api_key, retry=RetryPolicy.never()
+    )
+    assert error.code() == grpc.StatusCode.UNAVAILABLE

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +117,31 @@ def test_record_cli_writes_and_appends(tmp_path: Path, small_server) -> None:
     first = dataset[1]["action"]  # frame 1 of the scripted chunk: sin(2 pi / 16) * 0.3
     assert first.tolist() == pytest.approx([0.6, 0.3 * np.sin(2 * np.pi / 16)], abs=1e-6)
     _assert_no_secrets(root)
+
+
+def _episodes_saved(root: Path) -> int:
+    try:
+        return json.loads((root / "meta" / "info.json").read_text())["total_episodes"]
+    except (FileNotFoundError, json.JSONDecodeError):  # not there yet, or being rewritten
+        return 0
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupting_the_cli_keeps_a_readable_dataset(tmp_path: Path, signum: int) -> None:
+    root = tmp_path / "interrupted"
+    command = [sys.executable, "-m", "oasis_torchrl", "record", "--root", str(root)]
+    command += ["--episodes", "1000", "--width", "64", "--height", "48", "--max-steps", "2"]
+    process = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 120
+    while _episodes_saved(root) < 2:
+        assert process.poll() is None and time.monotonic() < deadline, process.stderr.read()
+        time.sleep(0.2)
+    process.send_signal(signum)  # lands mid-episode or mid-save; both must be safe
+    _, errors = process.communicate(timeout=60)
+    assert process.returncode == 130, errors[-3000:]
+    dataset = open_dataset(root)
+    assert dataset.num_episodes >= 2
+    assert all(episode.stop - episode.start == 8 for episode in episodes(dataset))
+    assert not list(tmp_path.glob(".interrupted-spill-*"))

@@ -134,13 +134,18 @@ def test_max_episodes_and_a_missed_episode_boundary(tmp_path: Path, caplog) -> N
     later = FakeEnvRun([[1, 9]])
     later.batch(1)
     switched = later.batch(2)  # ... then rows of episode (0, 1) arrive without a done flag
-    with LeRobotRecorder(root, max_episodes=2) as recorder:
+    with LeRobotRecorder(root, max_episodes=3) as recorder:
         recorder.write(first)
         with caplog.at_level(logging.WARNING):
             recorder.write(switched)
         assert "without a done flag" in caplog.text
-        assert recorder.episodes_written == 1 and not recorder.full
-    assert [(e.env_row, e.number) for e in episodes(open_dataset(root))] == [(0, 0), (0, 1)]
+        assert recorder.episodes_written == 1 and recorder.running_episodes == 1
+        recorder.end_episodes()  # e.g. a fixed-length evaluation that stops here
+        assert recorder.episodes_written == 2 and recorder.running_episodes == 0
+        recorder.write(FakeEnvRun([[1, 1]]).batch(2))  # one more, then full
+        assert recorder.full and recorder.rows_written == 8 + 8 + 4
+    stored = [(e.env_row, e.number) for e in episodes(open_dataset(root))]
+    assert stored == [(0, 0), (0, 1), (0, 0)]
 
 
 def test_long_episodes_spill_to_disk_and_come_back_whole(tmp_path: Path) -> None:
@@ -148,11 +153,14 @@ def test_long_episodes_spill_to_disk_and_come_back_whole(tmp_path: Path) -> None
     run = FakeEnvRun([[3], [2]])
     with LeRobotRecorder(root, buffer_bytes=50_000) as recorder:  # every episode spills
         recorder.write(run.batch(3))
-        assert list(tmp_path.glob(".spilled-spill-*/episode-*")) == []  # both written already
+        spilled = list(tmp_path.glob(".spilled-spill-*/episode-*"))
+        assert len(spilled) == 1  # episode (1, 1), still running; the ended two are written
     dataset = open_dataset(root)
     stored = episodes(dataset)
-    assert [(e.env_row, e.number, e.stop - e.start) for e in stored] == [(1, 0, 8), (0, 0, 12)]
-    for episode in stored:
+    lengths = [(e.env_row, e.number, e.stop - e.start) for e in stored]
+    assert lengths == [(1, 0, 8), (0, 0, 12), (1, 1, 4)]
+    assert not spilled[0].exists()
+    for episode in stored[:2]:
         expected = expected_frame_rows(
             episode.env_row, 0, (episode.stop - episode.start) // 4, True
         )

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from torchrl.collectors import Collector
 
 from oasis_torchrl.client import A2VClient
 from oasis_torchrl.envs import OasisEnv
@@ -137,12 +138,38 @@ def test_collector_hook_continues_episodes_across_batches(tmp_path: Path) -> Non
     batches = Readback(tmp_path / "batches.rrd")
 
     for row in (0, 1):
-        assert batches.images(f"env/{row}/camera/front")[0] == (
-            whole.images(f"env/{row}/camera/front")[0]
+        assert (
+            batches.images(f"env/{row}/camera/front")[0]
+            == (whole.images(f"env/{row}/camera/front")[0])
         )
         assert batches.texts(f"env/{row}/events") == whole.texts(f"env/{row}/events")
     assert batches.texts("env/0/events")[0] == [0, 14, 15, 16]  # start, collision, end, start
     assert batches.images("env/1/camera/front")[0] == [3, 7, 11, 15, 23, 27, 31]
+
+
+def test_postproc_hook_of_a_real_collector(tmp_path: Path) -> None:
+    small = ServerConfig(width=64, height=48)
+    env = OasisEnv("local", num_envs=2, prompts="highway", server=small, max_steps=3)
+    with RolloutLogger(tmp_path / "collector.rrd") as rerun_logger:
+        collector = Collector(
+            env, policy=None, frames_per_batch=8, total_frames=16, postproc=rerun_logger
+        )
+        try:
+            batches = list(collector)
+        finally:
+            collector.shutdown()
+    readback = Readback(tmp_path / "collector.rrd")
+
+    assert len(batches) == 2
+    for row in (0, 1):
+        _, texts = readback.texts(f"env/{row}/events")
+        assert sum("starts" in t for t in texts) == 3  # 8 steps, episodes of 3 steps
+        assert sum("(truncated)" in t for t in texts) == 2
+        frames, rewards = readback.scalars(f"env/{row}/reward/total")
+        assert len(frames) == 8
+        logged = torch.cat([b["next", "reward"][row].flatten() for b in batches]).numpy()
+        np.testing.assert_allclose(rewards, logged, atol=1e-6)
+        assert len(readback.images(f"env/{row}/camera/front")[0]) == 8 + 3
 
 
 def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) -> None:
@@ -218,9 +245,9 @@ def _free_port() -> int:
 def test_live_viewer_over_grpc(tmp_path: Path) -> None:
     """A headless rerun server stands in for the viewer: it saves what it receives."""
     port, received = _free_port(), tmp_path / "received.rrd"
+    command = [sys.executable, "-m", "rerun", "--bind", "127.0.0.1", "--port", str(port)]
     server = subprocess.Popen(
-        [sys.executable, "-m", "rerun", "--bind", "127.0.0.1", "--port", str(port)]
-        + ["--save", str(received), "--memory-limit", "100MB"],
+        [*command, "--save", str(received), "--memory-limit", "100MB"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -232,7 +259,8 @@ def test_live_viewer_over_grpc(tmp_path: Path) -> None:
     finally:
         server.terminate()
         server.wait(timeout=10)
-    assert readback.scalars("env/1/reward/total")[1] == pytest.approx([reward(1, t) for t in range(2)])
+    expected = [reward(1, t) for t in range(2)]
+    assert readback.scalars("env/1/reward/total")[1] == pytest.approx(expected)
 
 
 def _wait_for_port(port: int, timeout: float = 20.0) -> None:
@@ -295,6 +323,24 @@ def test_bad_input_is_named(tmp_path: Path) -> None:
             rerun_logger.log_rollout(td.unsqueeze(0))
         with pytest.raises(ValueError, match=r"reset rows \[7\]"):
             rerun_logger.log_reset(td[:, 0], rows=[7])
-    with pytest.raises(ValueError, match="action must be"):
-        with RolloutLogger(tmp_path / "bad3.rrd") as rerun_logger:
-            rerun_logger.log_step(td[:, 0]["next"].exclude("pixels"), torch.zeros(2, 3))
+    with (
+        pytest.raises(ValueError, match="action must be"),
+        RolloutLogger(tmp_path / "bad3.rrd") as rerun_logger,
+    ):
+        rerun_logger.log_step(td[:, 0]["next"].exclude("pixels"), torch.zeros(2, 3))
+
+
+def test_a_logger_left_open_is_closed_at_exit(tmp_path: Path) -> None:
+    out = tmp_path / "open.rrd"
+    script = (
+        f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+        "from viz._rollouts import rollout\n"
+        "from oasis_torchrl.viz import RolloutLogger\n"
+        f"rerun_logger = RolloutLogger({str(out)!r})\n"
+        "rerun_logger.log_rollout(rollout(1, 2))\n"
+    )
+    command = [sys.executable, "-c", script]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert "Exception ignored" not in run.stderr
+    assert Readback(out).images("env/0/camera/front")[0] == [3, 7, 11]

@@ -57,7 +57,7 @@ def dataset_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
                 row["next.done"] = np.array([frame == EPISODE_FRAMES - 1])
                 row["episode_seed"] = np.array([100 + episode])
                 dataset.add_frame(row | {"task": f"task {episode}"})
-            dataset.save_episode()
+            dataset.save_episode(parallel_encoding=False)  # no process pool: fast tests
     finally:
         dataset.finalize()
     return root

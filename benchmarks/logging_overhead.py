@@ -1,0 +1,112 @@
+"""Env steps per second with and without the rerun logger (default settings), same run.
+
+One ``OasisEnv("local")`` (768x512, 4 rows, the embedded server in this process) is stepped in
+alternating blocks: through the bare env, then through the same env with a ``RolloutLogger``
+transform appended (default ``LogOptions``: every row, JPEG 85, ground truth, top-down map,
+background writer) writing an ``.rrd`` file. Alternating cancels drift in machine load; each
+logged block ends with ``flush()`` so the writer's backlog is paid inside the timing.
+Target: at most 10% slower with the logger.
+
+Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 8 --rounds 3]``; prints JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase
+
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.viz import LogOptions, RolloutLogger
+
+PROMPTS = ["urban street", "rural road", "highway at sunset", "city at night"]
+TARGET_MAX_SLOWDOWN = 0.10
+
+
+def run_block(
+    env: EnvBase, td: TensorDictBase, steps: int, generator: torch.Generator
+) -> tuple[TensorDictBase, float]:
+    """Step ``env`` ``steps`` times (resetting finished rows); returns the last td and seconds."""
+    started = time.perf_counter()
+    for _ in range(steps):
+        action = torch.rand(env.action_spec.shape, generator=generator)
+        action[..., 0] = action[..., 0] * 0.6 + 0.2  # mostly forward: the car moves
+        action[..., 1] = action[..., 1] * 0.4 - 0.2
+        _, td = env.step_and_maybe_reset(td.set("action", action))
+    return td, time.perf_counter() - started
+
+
+def measure(args: argparse.Namespace, rrd: Path) -> dict[str, float]:
+    """Seconds and steps per side, over ``rounds`` alternating blocks."""
+    env = OasisEnv(
+        "local",
+        args.envs,
+        PROMPTS[: args.envs],
+        server=ServerConfig(width=args.width, height=args.height),
+    )
+    rerun_logger = RolloutLogger(rrd, LogOptions())
+    logged_env = env.append_transform(rerun_logger.transform())
+    generator = torch.Generator().manual_seed(0)
+    seconds = {"bare": 0.0, "logged": 0.0}
+    try:
+        td = logged_env.reset()
+        td, _ = run_block(env, td, args.warmup, generator)
+        for _ in range(args.rounds):
+            td, elapsed = run_block(env, td, args.steps, generator)
+            seconds["bare"] += elapsed
+            started = time.perf_counter()
+            td, _ = run_block(logged_env, td, args.steps, generator)
+            rerun_logger.flush()
+            seconds["logged"] += time.perf_counter() - started
+    finally:
+        rerun_logger.close()
+        env.close()
+    return seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--envs", type=int, default=4, choices=range(1, len(PROMPTS) + 1))
+    parser.add_argument("--width", type=int, default=768)
+    parser.add_argument("--height", type=int, default=512)
+    parser.add_argument("--steps", type=int, default=8, help="steps per block")
+    parser.add_argument("--rounds", type=int, default=3, help="bare/logged block pairs")
+    parser.add_argument("--warmup", type=int, default=3)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as folder:
+        rrd = Path(folder) / "overhead.rrd"
+        seconds = measure(args, rrd)
+        rrd_bytes = rrd.stat().st_size
+    steps = args.steps * args.rounds
+    bare, logged = steps / seconds["bare"], steps / seconds["logged"]
+    options = LogOptions()
+    report = {
+        "benchmark": "logging_overhead",
+        "num_envs": args.envs,
+        "frame_size": [args.height, args.width],
+        "steps_per_side": steps,
+        "logger": {
+            "jpeg_quality": options.jpeg_quality,
+            "background": options.background,
+            "topdown": options.topdown,
+            "rows": "all",
+        },
+        "env_steps_per_s_without_logger": round(bare, 3),
+        "env_steps_per_s_with_logger": round(logged, 3),
+        "slowdown": round(1 - logged / bare, 4),
+        "target_max_slowdown": TARGET_MAX_SLOWDOWN,
+        "meets_target": 1 - logged / bare <= TARGET_MAX_SLOWDOWN,
+        "rrd_bytes_per_logged_step": round(rrd_bytes / (steps + 1)),
+    }
+    print(json.dumps(report, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,166 @@
+"""The LeRobot plugin: registration, the action queue, save/load, the loss, lerobot-train."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+from lerobot.utils.import_utils import register_third_party_plugins
+from lerobot_policy_oasis import OasisConfig, OasisPolicy
+
+from oasis_torchrl.data.loading import default_video_backend
+
+CAMERAS = ("left_forward", "front", "right_forward")
+SIZE = (32, 48)
+VENV_BIN = Path(sys.executable).parent
+
+
+def _config(action_dim: int = 2, **overrides: object) -> OasisConfig:
+    inputs = {
+        f"observation.images.{camera}": PolicyFeature(FeatureType.VISUAL, (3, *SIZE))
+        for camera in CAMERAS
+    }
+    inputs["observation.state"] = PolicyFeature(FeatureType.STATE, (2,))
+    outputs = {"action": PolicyFeature(FeatureType.ACTION, (action_dim,))}
+    return OasisConfig(
+        device="cpu", input_features=inputs, output_features=outputs, image_size=SIZE, **overrides
+    )
+
+
+def _batch(size: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
+    generator = torch.Generator().manual_seed(seed)
+    batch = {
+        f"observation.images.{camera}": torch.rand(size, 3, *SIZE, generator=generator)
+        for camera in CAMERAS
+    }
+    batch["observation.state"] = torch.rand(size, 2, generator=generator) * 2 - 1
+    return batch
+
+
+def _policy(**overrides: object) -> OasisPolicy:
+    torch.manual_seed(0)
+    policy = OasisPolicy(_config(**overrides))
+    with torch.no_grad():
+        policy.model.actor[-1].weight.normal_()  # leave the near-zero initialisation
+    return policy.eval()
+
+
+def test_lerobot_discovers_the_plugin() -> None:
+    register_third_party_plugins()
+    assert get_policy_class("oasis") is OasisPolicy
+    pre, post = make_pre_post_processors(_config())
+    assert any(type(step).__name__ == "ImageCropResizeProcessorStep" for step in pre.steps)
+    assert type(post.steps[0]).__name__ == "UnnormalizerProcessorStep"
+
+
+def test_select_action_serves_the_queued_chunk() -> None:
+    policy = _policy()
+    first = _batch(seed=1)
+    chunk = policy.predict_action_chunk(first)
+    served = [policy.select_action(first if k == 0 else _batch(seed=10 + k)) for k in range(4)]
+    torch.testing.assert_close(torch.stack(served, dim=1), chunk)  # later observations ignored
+    new = _batch(seed=2)
+    torch.testing.assert_close(policy.select_action(new), policy.predict_action_chunk(new)[:, 0])
+    policy.reset()
+    torch.testing.assert_close(policy.select_action(first), chunk[:, 0])
+
+
+def test_n_action_steps_limits_the_queue() -> None:
+    policy = _policy(n_action_steps=2)
+    first, second = _batch(seed=1), _batch(seed=2)
+    chunk = policy.predict_action_chunk(first)
+    served = [policy.select_action(first), policy.select_action(second)]
+    torch.testing.assert_close(torch.stack(served, dim=1), chunk[:, :2])
+    torch.testing.assert_close(
+        policy.select_action(second), policy.predict_action_chunk(second)[:, 0]
+    )
+
+
+def test_save_and_load_round_trip(tmp_path: Path) -> None:
+    policy = _policy(shared_encoder=False, camera_features=32)
+    policy.save_pretrained(tmp_path)
+    loaded = OasisPolicy.from_pretrained(tmp_path)
+    assert loaded.config.shared_encoder is False and loaded.config.camera_features == 32
+    batch = _batch()
+    torch.testing.assert_close(
+        loaded.predict_action_chunk(batch), policy.predict_action_chunk(batch)
+    )
+
+
+def test_forward_masks_padded_actions() -> None:
+    policy = _policy()
+    batch = _batch()
+    target = policy.predict_action_chunk(batch).clone()
+    batch["action"] = target.clone()
+    batch["action"][:, 2:] = 5.0  # wrong, but padding
+    batch["action_is_pad"] = torch.tensor([[False, False, True, True]] * 2)
+    loss, info = policy.forward(batch)
+    assert loss.item() == pytest.approx(0.0, abs=1e-6) and "l1_loss" in info
+    batch["action_is_pad"][:, 2] = False
+    loss, _ = policy.forward(batch)
+    assert loss.item() > 0.5
+    per_sample, _ = policy.forward(batch, reduction="none")
+    assert per_sample.shape == (2,)
+    loss.backward()
+    assert policy.model.encoder.convs[0].weight.grad is not None
+
+
+def test_bad_features_are_named() -> None:
+    with pytest.raises(ValueError, match="needs 'action' of shape \\(2,\\)"):
+        _config(action_dim=8).net_config()
+    with pytest.raises(ValueError, match="n_action_steps must be in"):
+        OasisConfig(device="cpu", n_action_steps=5)
+
+
+def _record(root: Path) -> None:
+    """A tiny dataset through the ``oasis-torchrl record`` command (frame rows)."""
+    command = [
+        str(VENV_BIN / "oasis-torchrl"),
+        "record",
+        "--root",
+        str(root),
+        "--episodes",
+        "2",
+        "--num-envs",
+        "2",
+        "--max-steps",
+        "3",
+        "--width",
+        "48",
+        "--height",
+        "32",
+    ]
+    subprocess.run(command, check=True, capture_output=True, timeout=120)
+
+
+def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
+    root = tmp_path / "drives"
+    _record(root)
+    output = tmp_path / "train"
+    command = [
+        str(VENV_BIN / "lerobot-train"),
+        "--policy.type=oasis",
+        "--dataset.repo_id=local/drives",
+        f"--dataset.root={root}",
+        "--policy.image_size=[32,48]",
+        "--steps=2",
+        "--batch_size=4",
+        "--num_workers=0",
+        "--save_freq=2",
+        f"--output_dir={output}",
+    ]
+    if default_video_backend() == "pyav":  # torchcodec installed but its FFmpeg cannot load
+        command.append("--dataset.video_backend=pyav")
+    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
+    done = subprocess.run(command, capture_output=True, text=True, timeout=180, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    folder = output / "checkpoints" / "last" / "pretrained_model"
+    loaded = OasisPolicy.from_pretrained(folder)
+    assert loaded.config.image_size == SIZE
+    assert (folder / "policy_preprocessor.json").exists()

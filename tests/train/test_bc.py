@@ -1,0 +1,75 @@
+"""Behaviour cloning on a tiny autopilot dataset: updates, the LeRobot folder, the data cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from lerobot_policy_oasis import OasisConfig, OasisPolicy
+
+from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
+from oasis_torchrl.train.bc_data import InMemoryBCDataset
+from oasis_torchrl.train.checkpoint import load_net
+from oasis_torchrl.train.config import load_config
+
+
+def _bc_config(dataset: Path, output: Path, *extra: str):
+    return load_config(
+        "bc",
+        [
+            f"dataset.root={dataset}",
+            f"output_dir={output}",
+            "policy.image_size=[32,48]",
+            "train.steps=4",
+            "train.batch_size=8",
+            "train.log_every=1",
+            "eval.episodes=0",
+            "progress=false",
+            *extra,
+        ],
+    )
+
+
+def test_bc_steps_train_the_actor_and_save_a_lerobot_policy(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
+    trainer = BCTrainer(_bc_config(tiny_dataset, tmp_path))
+    before = {key: value.clone() for key, value in trainer.policy.model.state_dict().items()}
+    result = trainer.run()
+
+    assert torch.isfinite(torch.tensor(result.final_loss))
+    after = result.policy.model.state_dict()
+    assert not torch.equal(before["encoder.convs.0.weight"], after["encoder.convs.0.weight"])
+    assert not torch.equal(before["actor.2.weight"], after["actor.2.weight"])
+    torch.testing.assert_close(before["critic.2.weight"], after["critic.2.weight"])
+
+    batch = trainer.preprocessor(next(iter(trainer.loader)))
+    loaded = OasisPolicy.from_pretrained(result.policy_dir)
+    torch.testing.assert_close(
+        loaded.predict_action_chunk(batch), result.policy.eval().predict_action_chunk(batch)
+    )
+    net = load_net(result.policy_dir)
+    torch.testing.assert_close(net.state_dict()["actor.2.bias"], after["actor.2.bias"])
+
+
+def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: Path) -> None:
+    dataset = open_dataset(_bc_config(tiny_dataset, tmp_path).dataset, OasisConfig(device="cpu"))
+    cached = InMemoryBCDataset(dataset, progress=False)
+    assert len(cached) == len(dataset) == 32
+    for index in (0, 13, 15, 31):  # 15 and 31 end an episode: padded actions
+        expected, actual = dataset[index], cached[index]
+        for key in ("observation.state", "action", "action_is_pad", "index", "episode_index"):
+            torch.testing.assert_close(actual[key], expected[key], msg=key)
+        for key in cached.camera_keys:
+            torch.testing.assert_close(actual[key], expected[key], atol=1 / 255, rtol=0)
+    assert cached[15]["action_is_pad"].tolist() == [False, True, True, True]
+
+
+def test_random_shift_moves_content_within_the_pad() -> None:
+    image = torch.zeros(64, 1, 9, 9)
+    image[:, :, 4, 4] = 1.0
+    shifted = random_shift(image, pad=2)
+    positions = shifted[:, 0].flatten(1).argmax(1)
+    rows, cols = positions // 9, positions % 9
+    assert rows.min() >= 2 and rows.max() <= 6 and cols.min() >= 2 and cols.max() <= 6
+    assert len(set(positions.tolist())) > 5

@@ -1,0 +1,87 @@
+"""PPO on the embedded server at tiny resolution: updates, checkpoints, resume, warm start."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig
+from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
+from oasis_torchrl.train.config import load_config
+from oasis_torchrl.train.ppo import PPOTrainer, build_net
+
+from .conftest import TINY_ENV
+
+CAMERAS = ("left_forward", "front", "right_forward")
+
+
+def _ppo_config(output: Path, total: int, *extra: str):
+    return load_config(
+        "ppo",
+        [
+            *TINY_ENV,
+            "env.num_envs=2",
+            "env.max_steps=6",
+            f"output_dir={output}",
+            "collector.frames_per_batch=16",
+            f"collector.total_frames={total}",
+            "optim.mini_batch_size=8",
+            "optim.epochs=2",
+            "eval.every=1",
+            "eval.episodes=1",
+            "eval.max_steps=2",
+            "progress=false",
+            *extra,
+        ],
+    )
+
+
+def _csv_values(path: Path) -> list[float]:
+    with path.open() as handle:
+        return [float(row[1]) for row in csv.reader(handle)]
+
+
+def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
+    trainer = PPOTrainer(_ppo_config(tmp_path, 16))
+    before = {key: value.clone() for key, value in trainer.net.state_dict().items()}
+    result = trainer.run()
+
+    after = result.net.state_dict()
+    for key in ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "log_scale"):
+        assert not torch.equal(before[key], after[key]), key
+    scalars = tmp_path / "logs" / "ppo" / "scalars"
+    for name in ("loss_objective", "loss_critic", "loss_entropy"):
+        values = _csv_values(scalars / "loss" / f"{name}.csv")
+        assert values and all(math.isfinite(v) for v in values), name
+    assert _csv_values(scalars / "eval" / "mean_distance.csv")
+
+    state = load_checkpoint(result.checkpoint)
+    assert (state["iteration"], state["frames"]) == (1, 16)
+    restored = load_net(result.checkpoint)
+    for key, value in after.items():
+        torch.testing.assert_close(restored.state_dict()[key], value)
+    exported = load_net(result.policy_dir)
+    torch.testing.assert_close(exported.state_dict()["actor.2.bias"], after["actor.2.bias"])
+
+    resumed = PPOTrainer(_ppo_config(tmp_path, 32, "resume=latest")).run()
+    state = load_checkpoint(resumed.checkpoint)
+    assert (state["iteration"], state["frames"]) == (2, 32)
+    assert [entry["frames"] for entry in resumed.history] == [16, 32]
+    assert not torch.equal(resumed.net.state_dict()["actor.0.weight"], after["actor.0.weight"])
+
+
+def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
+    source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=1.5))
+    folder = export_lerobot(source, tmp_path / "bc_policy")
+    cfg = load_config("ppo", [*TINY_ENV, f"init_from={folder}", "warm_start_scale=0.25"])
+    net = build_net(cfg, CAMERAS)
+    torch.testing.assert_close(net.encoder.convs[0].weight, source.encoder.convs[0].weight)
+    assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.25] * 8)
+
+    wrong_size = load_config("ppo", [f"init_from={folder}"])  # the env's default 64x96
+    with pytest.raises(ValueError, match=r"set env\.image_size to the network's size"):
+        build_net(wrong_size, CAMERAS)
