@@ -1,12 +1,16 @@
 """Per-stream frame decoders (VP9 and JPEG) that write RGB straight into caller-owned arrays.
 
-A decoder turns one packet into one ``uint8`` RGB ``[H, W, 3]`` image written into ``out``; the
-output size is ``out``'s, so a decode-time resize costs nothing extra:
+A decoder turns one packet into one ``uint8`` RGB ``[H, W, 3]`` image written into ``out`` at
+``out``'s size, so a resize happens during decoding, with no separate pass or full-size copy:
 
 - VP9: PyAV decodes the packet, then one libswscale pass converts YUV to RGB *and* scales it
-  (``VideoReformatter.reformat``, reused per decoder so the scaler context is built once). The
-  only copy is from swscale's output frame into ``out``: PyAV cannot scale into a caller buffer.
-  At the native size the pixels are exactly what ``frame.to_ndarray(format="rgb24")`` gives.
+  (``VideoReformatter``, reused per decoder so its context is built once). At the native size
+  this is swscale's unscaled SIMD path and the pixels are exactly what
+  ``frame.to_ndarray(format="rgb24")`` gives. Scaling leaves that path for swscale's generic
+  filter chain, which costs more than the unscaled conversion (shrinking the YUV planes first is
+  cheaper but halves the chroma resolution); decoding dominates either way, so resizing buys
+  smaller arrays rather than speed (numbers: benchmarks/decode_speed.py). The
+  only copy is from swscale's output frame into ``out``: PyAV cannot write into a caller buffer.
 - JPEG: PIL's ``draft`` makes libjpeg decode at 1/2, 1/4 or 1/8 scale (DCT scaling, far cheaper
   than a full decode), then a bilinear resize covers any remaining ratio.
 
@@ -30,7 +34,7 @@ from oasis_torchrl.client.errors import DecodeError
 from oasis_torchrl.client.types import FrameFormat
 
 # AREA averages every source pixel of a destination pixel: no aliasing when shrinking, and
-# (measured in benchmarks/decode_speed.py) faster than swscale's BILINEAR for large ratios.
+# faster than swscale's BILINEAR for large ratios.
 RESIZE_INTERPOLATION = Interpolation.AREA
 
 

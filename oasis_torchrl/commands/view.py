@@ -40,6 +40,18 @@ def parse_indices(text: str) -> tuple[int, ...]:
     return values
 
 
+def parse_quality(text: str) -> int:
+    """A JPEG quality, 1-100.
+
+    Example:
+        >>> parse_quality("70")
+        70
+    """
+    if not text.isdigit() or not 1 <= int(text) <= 100:
+        raise argparse.ArgumentTypeError(f"JPEG quality must be an integer 1-100, got {text!r}")
+    return int(text)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """PATH, what to show, and where to send it."""
     parser.add_argument(
@@ -59,10 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy",
     )
     parser.add_argument(
-        "--memory-limit", default="25%", help="memory limit of a spawned viewer (e.g. 4GB, 25%%)"
+        "--memory-limit", help="memory limit of a spawned viewer, e.g. 4GB or 50%% (default 25%%)"
     )
     parser.add_argument(
-        "--jpeg-quality", type=int, default=85, help="JPEG quality 1-100 of logged frames"
+        "--jpeg-quality", type=parse_quality, help="JPEG quality 1-100 of frames (default 85)"
     )
 
 
@@ -72,13 +84,18 @@ def _target(args: argparse.Namespace) -> str:
     return args.connect or "spawn"
 
 
+def _given(args: argparse.Namespace, *names: str) -> dict[str, object]:
+    """The options among ``names`` set on the command line (the library defaults the rest)."""
+    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+
+
 def _replay_dataset(args: argparse.Namespace) -> None:
     from oasis_torchrl.viz.lerobot_replay import DatasetReplay
     from oasis_torchrl.viz.recording import open_recording
 
-    recording = open_recording(_target(args), memory_limit=args.memory_limit)
+    recording = open_recording(_target(args), **_given(args, "memory_limit"))
     try:
-        replay = DatasetReplay(args.path, recording, jpeg_quality=args.jpeg_quality)
+        replay = DatasetReplay(args.path, recording, **_given(args, "jpeg_quality"))
         replay.log(args.episodes)
     finally:
         recording.flush()
@@ -90,8 +107,8 @@ def _replay_rollout(args: argparse.Namespace) -> None:
     from oasis_torchrl.viz.options import LogOptions
     from oasis_torchrl.viz.replay import replay_rollout
 
-    options = LogOptions(rows=args.rows, jpeg_quality=args.jpeg_quality)
-    with RolloutLogger(_target(args), options, memory_limit=args.memory_limit) as rollout_logger:
+    options = LogOptions(**_given(args, "rows", "jpeg_quality"))
+    with RolloutLogger(_target(args), options, **_given(args, "memory_limit")) as rollout_logger:
         replay_rollout(args.path, rollout_logger)
 
 
@@ -104,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         if kind == RRD:
             if args.save is not None or args.connect is not None:
                 raise ValueError(f"{args.path} is already a recording: open it without --save")
-            open_in_viewer(args.path, args.memory_limit)
+            open_in_viewer(args.path, **_given(args, "memory_limit"))
         elif kind == DATASET:
             _replay_dataset(args)
         else:

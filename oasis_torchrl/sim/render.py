@@ -334,18 +334,18 @@ ROADSIDE_TEXEL = 0.25
 @dataclass(frozen=True)
 class _RowPattern:
     """Which wall heights (texel rows ``h``) use a column's second material:
-    ``(h & mask) - low < span`` in uint8 arithmetic."""
+    ``(h & mask) - low < span`` in uint16 arithmetic, or ``h < span`` without a mask."""
 
-    mask: int
-    low: int
     span: int
+    mask: int | None = None
+    low: int = 0
 
 
 #: Windows 1.5-3.5 m up every 4 m floor; tree trunks below 2.5 m; rail posts below 0.5 m.
 _ROW_PATTERNS = {
-    "building": _RowPattern(15, 6, 8),
-    "trees": _RowPattern(255, 0, 10),
-    "rail": _RowPattern(255, 0, 2),
+    "building": _RowPattern(8, mask=15, low=6),
+    "trees": _RowPattern(10),
+    "rail": _RowPattern(2),
 }
 
 
@@ -509,7 +509,7 @@ class _WallPlan:
     pattern: _RowPattern
     first_material: np.ndarray
     difference: np.ndarray
-    see_through: np.ndarray | None
+    see_through: bool
     depth: np.ndarray
     top: np.ndarray
 
@@ -834,7 +834,6 @@ class Renderer:
         bands = depth_bands(depth, OBJECT_BANDS, self._look.band_distance)
         along = np.floor(np.where(visible, s, 0.0) / ROADSIDE_TEXEL).astype(np.intp)
         first_material, second_material = _roadside_materials(layer.kind, along, variant, bands)
-        see_through = second_material == TRANSPARENT
         return _WallPlan(
             rows=tuple(slice(int(a), int(b)) for a, b in zip(first_row, last_row, strict=True)),
             texels_per_row=texels_per_row.astype(np.float32),
@@ -842,7 +841,7 @@ class Renderer:
             pattern=_ROW_PATTERNS[layer.kind],
             first_material=first_material,
             difference=first_material ^ second_material,
-            see_through=see_through if see_through.any() else None,
+            see_through=bool(np.any(second_material == TRANSPARENT)),
             depth=depth.astype(np.float32),
             top=top,
         )
@@ -871,16 +870,16 @@ class Renderer:
         opaque, second = buffers.opaque[camera, rows], buffers.second[camera, rows]
         np.less(texel, plan.top_texel[camera], out=opaque)
         pattern = plan.pattern
-        texel &= pattern.mask
-        texel -= pattern.low
+        if pattern.mask is not None:
+            texel &= pattern.mask
+            texel -= pattern.low
         np.less(texel, pattern.span, out=second)
-        if plan.see_through is not None:
-            np.logical_and(second, plan.see_through[camera], out=second)
-            np.greater(opaque, second, out=opaque)
-            np.less(texel, pattern.span, out=second)
         value, index = buffers.value[camera, rows], buffers.index[camera, rows]
         np.multiply(second.view(np.uint8), plan.difference[camera], out=value)
         value ^= plan.first_material[camera]
+        if plan.see_through:
+            np.not_equal(value, TRANSPARENT, out=second)
+            opaque &= second
         value -= index
         value *= opaque.view(np.uint8)
         index += value

@@ -10,6 +10,7 @@ road map and a fixed-size path buffer), never frames.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,26 +52,6 @@ class _RowState:
     anchor: np.ndarray | None = None
 
 
-def send_series(
-    recording: rr.RecordingStream, path: str, frames: np.ndarray, values: np.ndarray, fps: float
-) -> None:
-    """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
-
-    Example:
-        >>> recording = rr.RecordingStream("doc")
-        >>> send_series(recording, "env/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
-    """
-    values = np.asarray(values, dtype=np.float64).reshape(-1)
-    recording.send_columns(
-        path,
-        indexes=[
-            rr.TimeColumn(FRAME_TIMELINE, sequence=frames),
-            rr.TimeColumn(TIME_TIMELINE, duration=np.asarray(frames) / fps),
-        ],
-        columns=rr.Scalars.columns(scalars=np.where(np.isfinite(values), values, np.nan)),
-    )
-
-
 class RecordWriter:
     """Logs step records of env rows under ``env/<row>``; sends the default blueprint as rows,
     cameras, depth maps and the top-down view appear.
@@ -101,13 +82,12 @@ class RecordWriter:
                 self._start_episode(paths, state, record, i, first)
             else:
                 state.step += 1
-            self._write_series(paths, record, i, first)
             self._write_frames(paths, state, record, i, first)
             self._at(first + _LAST)
             self._write_depth(paths, record, i)
             self._write_topdown(paths, state, record, i)
             if not record.start:  # a reset observation has no reward (its terms are zeros)
-                self._write_rewards(paths, state, record, i, first + _LAST)
+                self._write_rewards(paths, state, record, i)
                 self._write_episode_end(paths, state, record, i)
 
     # -- helpers -----------------------------------------------------------------------------
@@ -119,8 +99,10 @@ class RecordWriter:
     def _event(self, paths: RowPaths, text: str, level: str) -> None:
         self.recording.log(paths.events, rr.TextLog(text, level=level))
 
-    def _send(self, path: str, frames: np.ndarray, values: np.ndarray) -> None:
-        send_series(self.recording, path, frames, values, self.options.fps)
+    def _scalar(self, path: str, value: float) -> None:
+        """One value of a time series at the current time (non-finite: NaN, "no value")."""
+        value = float(value)
+        self.recording.log(path, rr.Scalars(value if math.isfinite(value) else math.nan))
 
     # -- blueprint ---------------------------------------------------------------------------
 
@@ -193,24 +175,32 @@ class RecordWriter:
 
     # -- per-frame and per-step values -------------------------------------------------------
 
-    def _write_series(self, paths: RowPaths, record: StepRecord, i: int, first: int) -> None:
-        frames = np.arange(first, first + CHUNK)
+    def _frame_series(
+        self, paths: RowPaths, record: StepRecord, i: int
+    ) -> list[tuple[str, np.ndarray]]:
+        """``(entity, 4 values)`` of the per-frame series: actions and chosen ground truth."""
+        series = []
         if record.actions is not None:
             for column, name in enumerate(ACTION_NAMES):
-                self._send(paths.scalar("action", name), frames, record.actions[i, :, column])
+                series.append((paths.scalar("action", name), record.actions[i, :, column]))
         for name in self.options.truth_series:
             if name in record.truth:
-                self._send(paths.scalar("truth", name), frames, record.truth[name][i])
+                series.append((paths.scalar("truth", name), record.truth[name][i]))
+        return series
 
     def _write_frames(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
     ) -> None:
-        """Per frame of the chunk: the first collision event and the camera images."""
+        """Per frame of the chunk: actions, ground truth, the first collision and the images."""
+        # One rr.log per value beats send_columns here: 4 values per series, many series.
+        series = self._frame_series(paths, record, i)
         quality = self.options.jpeg_quality
         collided = record.truth.get("collided")
         off_road = record.truth.get("off_road")
         for k in range(CHUNK):
             self._at(first + k)
+            for path, values in series:
+                self._scalar(path, values[k])
             if collided is not None and collided[i, k] > 0.5 and not state.collided:
                 state.collided = True
                 what = (
@@ -225,15 +215,12 @@ class RecordWriter:
                     image = frames[i, k if every else -1]
                     self.recording.log(paths.camera(camera), image_archetype(image, quality))
 
-    def _write_rewards(
-        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, last: int
-    ) -> None:
-        frame = np.array([last])
+    def _write_rewards(self, paths: RowPaths, state: _RowState, record: StepRecord, i: int) -> None:
         if record.reward is not None:
             state.episode_return += float(record.reward[i])
-            self._send(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
+            self._scalar(paths.scalar("reward", "total"), record.reward[i])
         for name, values in record.terms.items():
-            self._send(paths.scalar("reward", name), frame, values[i : i + 1])
+            self._scalar(paths.scalar("reward", name), values[i])
 
     def _write_depth(self, paths: RowPaths, record: StepRecord, i: int) -> None:
         for camera, depth in record.depth.items():

@@ -1,0 +1,238 @@
+"""Learning benchmark: do the policies really learn to drive in the world model?
+
+On the embedded server, "urban" prompt, the demo's resolution (96x64 frames, 64x96 policy
+images), fixed evaluation seeds, one episode per env row of up to ``--max-steps`` chunks:
+
+1. references: the autopilot (privileged expert) and constant actions (straight ahead, a sweep
+   of throttles; the best one is "the best constant action");
+2. behaviour cloning on autopilot demonstrations; target: at least 70% of the autopilot's mean
+   distance before collision;
+3. PPO from scratch for ``--ppo-frames`` env steps; target: at least 1.5x the best constant
+   action's mean distance;
+4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning alone.
+
+Prints JSON (every evaluation, the targets and whether they are met, the exact settings and
+wall times) and writes it with a PNG of the learning curves to ``--results``. Stages cache
+their outputs under ``--work`` (a rerun reuses finished stages). Budgets are stated in env
+steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps).
+
+Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 40960]``
+(tens of minutes on 2 CPU cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+from PIL import Image, ImageDraw
+
+from oasis_torchrl.train.bc import train_bc
+from oasis_torchrl.train.config import load_config
+from oasis_torchrl.train.evaluate import Evaluator
+from oasis_torchrl.train.pipeline import evaluate_all, record_demonstrations, stage_configs
+from oasis_torchrl.train.policy_source import load_policy
+from oasis_torchrl.train.ppo import train_ppo
+
+logger = logging.getLogger("benchmarks.learning")
+
+CONSTANT_THROTTLES = (0.25, 0.5, 0.75, 1.0)
+COLORS = {
+    "autopilot": (40, 40, 40),
+    "best constant": (150, 150, 150),
+    "bc": (31, 119, 180),
+    "ppo (scratch)": (214, 39, 40),
+    "bc + ppo": (44, 160, 44),
+}
+
+
+def benchmark_config(args: argparse.Namespace) -> DictConfig:
+    """The pipeline config of the benchmark (``configs/demo.yaml`` with benchmark budgets)."""
+    return load_config(
+        "demo",
+        [
+            f"output_dir={args.work}",
+            f"env.max_steps={args.max_steps}",
+            f"record.episodes={args.demo_episodes}",
+            f"bc.train.steps={args.bc_steps}",
+            f"eval.max_steps={args.max_steps}",
+            f"eval.episodes={args.eval_episodes}",
+            f"eval.seeds=[{','.join(str(seed) for seed in args.eval_seeds)}]",
+            "eval.reference=[]",
+            "progress=false",
+        ],
+    )
+
+
+def ppo_config(
+    cfg: DictConfig, base: DictConfig, name: str, frames: int, **values: Any
+) -> DictConfig:
+    """A PPO stage config: ``base`` with its own output folder, budget and evaluation cadence."""
+    return OmegaConf.merge(
+        base,
+        {
+            "output_dir": str(Path(cfg.output_dir) / name),
+            "collector": {"total_frames": frames},
+            "eval": {"every": 10},
+            **values,
+        },
+    )
+
+
+def run_ppo(cfg: DictConfig) -> list[dict[str, float]]:
+    """Train (or reuse) a PPO stage; its evaluation history."""
+    checkpoint = Path(cfg.output_dir) / "checkpoints" / "latest.pt"
+    if (Path(cfg.output_dir) / "policy" / "model.safetensors").exists():
+        import torch
+
+        return torch.load(checkpoint, weights_only=False)["history"]
+    if checkpoint.exists():
+        cfg.resume = "latest"
+    return train_ppo(cfg).history
+
+
+def train_curve(output_dir: str | Path, name: str = "ppo") -> list[tuple[float, float]]:
+    """``(env steps, mean training-episode distance)`` rows of a PPO run's CSV log."""
+    path = Path(output_dir) / "logs" / name / "scalars" / "train" / "episode_distance.csv"
+    if not path.exists():
+        return []
+    with path.open() as handle:
+        return [(float(step), float(value)) for step, value in csv.reader(handle)]
+
+
+def plot(
+    curves: dict[str, list[tuple[float, float]]], levels: dict[str, float], path: Path
+) -> None:
+    """Eval distance vs env steps (lines) and reference levels (horizontal), as a PNG."""
+    width, height, margin = 900, 520, 70
+    image = Image.new("RGB", (width, height), "white")
+    draw = ImageDraw.Draw(image)
+    points = [point for curve in curves.values() for point in curve]
+    x_max = max((x for x, _ in points), default=1.0) or 1.0
+    y_max = 1.1 * max([y for _, y in points] + list(levels.values()) + [1.0])
+
+    def to_pixel(x: float, y: float) -> tuple[float, float]:
+        return (
+            margin + (width - 2 * margin) * x / x_max,
+            height - margin - (height - 2 * margin) * y / y_max,
+        )
+
+    draw.rectangle([margin, margin, width - margin, height - margin], outline="black")
+    for k in range(6):
+        y = y_max * k / 5
+        draw.text((8, to_pixel(0, y)[1] - 6), f"{y:.0f} m", fill="black")
+        x = x_max * k / 5
+        draw.text((to_pixel(x, 0)[0] - 15, height - margin + 8), f"{x:.0f}", fill="black")
+    draw.text((width / 2 - 90, height - 30), "env steps (4 frames each)", fill="black")
+    draw.text((margin, 20), "mean distance before collision (eval seeds)", fill="black")
+    legend_y = margin + 8
+    for name, level in levels.items():
+        color = COLORS.get(name, (0, 0, 0))
+        y = to_pixel(0, level)[1]
+        for x in range(margin, width - margin, 12):
+            draw.line([x, y, x + 6, y], fill=color, width=2)
+        draw.text((width - margin - 170, legend_y), f"- - {name} {level:.0f} m", fill=color)
+        legend_y += 16
+    for name, curve in curves.items():
+        color = COLORS.get(name, (0, 0, 0))
+        pixels = [to_pixel(x, y) for x, y in curve]
+        if len(pixels) > 1:
+            draw.line(pixels, fill=color, width=3)
+        for px, py in pixels:
+            draw.ellipse([px - 3, py - 3, px + 3, py + 3], fill=color)
+        draw.text((width - margin - 170, legend_y), f"--- {name}", fill=color)
+        legend_y += 16
+    path.parent.mkdir(parents=True, exist_ok=True)
+    image.save(path)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, default=Path("outputs/learning"))
+    parser.add_argument("--results", type=Path, default=Path("benchmarks/results"))
+    parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
+    parser.add_argument("--eval-episodes", type=int, default=16)
+    parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
+    parser.add_argument("--demo-episodes", type=int, default=32)
+    parser.add_argument("--bc-steps", type=int, default=2000)
+    parser.add_argument("--ppo-frames", type=int, default=40960, help="PPO from scratch, env steps")
+    parser.add_argument("--finetune-frames", type=int, default=8192, help="BC + PPO, env steps")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+
+    cfg = benchmark_config(args)
+    seconds: dict[str, float] = {}
+    started = time.perf_counter()
+    constants = {f"constant:throttle={t},steering=0.0": f"constant {t}" for t in CONSTANT_THROTTLES}
+    references = evaluate_all(cfg, {"autopilot": "autopilot", **constants})
+    best_constant = max(
+        (name for name in references if name != "autopilot"),
+        key=lambda name: references[name]["mean_distance"],
+    )
+    seconds["references"] = time.perf_counter() - started
+
+    started = time.perf_counter()
+    dataset = record_demonstrations(cfg, Path(cfg.output_dir) / "demos")
+    seconds["record"] = time.perf_counter() - started
+    bc_cfg, finetune_base = stage_configs(cfg, dataset)
+    bc_policy = Path(bc_cfg.output_dir) / "policy"
+    started = time.perf_counter()
+    if not (bc_policy / "model.safetensors").exists():
+        train_bc(bc_cfg)
+    seconds["bc"] = time.perf_counter() - started
+    with Evaluator(cfg.env, cfg.eval, progress=False) as evaluator:
+        bc_eval = evaluator.evaluate(load_policy(bc_policy).policy).summary()
+
+    scratch_base = OmegaConf.merge(load_config("ppo"), {"env": cfg.env, "eval": cfg.eval})
+    scratch_base.eval.pop("reference")
+    scratch = ppo_config(cfg, scratch_base, "ppo_scratch", args.ppo_frames)
+    started = time.perf_counter()
+    scratch_history = run_ppo(scratch)
+    seconds["ppo_scratch"] = time.perf_counter() - started
+    finetune = ppo_config(cfg, finetune_base, "bc_ppo", args.finetune_frames)
+    started = time.perf_counter()
+    finetune_history = run_ppo(finetune)
+    seconds["bc_ppo"] = time.perf_counter() - started
+
+    autopilot = references["autopilot"]["mean_distance"]
+    constant = references[best_constant]["mean_distance"]
+    scratch_final = scratch_history[-1]["mean_distance"]
+    finetune_final = finetune_history[-1]["mean_distance"]
+    report = {
+        "settings": {**vars(args), "work": str(args.work), "results": str(args.results)},
+        "config": OmegaConf.to_container(cfg),
+        "references": references,
+        "best_constant": best_constant,
+        "bc": bc_eval,
+        "ppo_scratch": scratch_history,
+        "bc_ppo": finetune_history,
+        "targets": {
+            "bc_over_autopilot": bc_eval["mean_distance"] / autopilot,
+            "bc_target_met": bc_eval["mean_distance"] >= 0.7 * autopilot,
+            "ppo_scratch_over_best_constant": scratch_final / constant,
+            "ppo_scratch_target_met": scratch_final >= 1.5 * constant,
+            "bc_ppo_over_bc": finetune_final / bc_eval["mean_distance"],
+            "bc_ppo_target_met": finetune_final > bc_eval["mean_distance"],
+        },
+        "seconds": {name: round(value, 1) for name, value in seconds.items()},
+    }
+    curves = {
+        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in scratch_history],
+        "bc + ppo": [(0.0, bc_eval["mean_distance"])]
+        + [(h["frames"], h["mean_distance"]) for h in finetune_history],
+    }
+    levels = {"autopilot": autopilot, "best constant": constant, "bc": bc_eval["mean_distance"]}
+    args.results.mkdir(parents=True, exist_ok=True)
+    plot(curves, levels, args.results / "learning.png")
+    (args.results / "learning.json").write_text(json.dumps(report, indent=2))
+    print(json.dumps(report, indent=2))
+
+
+if __name__ == "__main__":
+    main()
