@@ -46,6 +46,8 @@ from oasis_torchrl.sim.simulator import CAMERA_NAMES
 logger = logging.getLogger(__name__)
 
 LOCAL = "local"
+DEFAULT_FPS = 20.0
+"""Frame rate assumed for servers that do not say (the protocol has no field for it)."""
 
 
 class OasisEnv(EnvBase):
@@ -128,6 +130,8 @@ class OasisEnv(EnvBase):
         self._tls = tls
         self._api_key = api_key
         self._server_config = server if server is not None else ServerConfig()
+        # The A2V protocol does not advertise a frame rate; the hosted model's preview uses 20.
+        self.fps = self._server_config.fps if self.is_local else DEFAULT_FPS
         self._planner = EpisodePlanner(prompts, num_envs)
         self.ground_truth = self.is_local if ground_truth is None else ground_truth
         self._reward = _resolve_reward(reward, self.ground_truth)
