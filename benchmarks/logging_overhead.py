@@ -4,16 +4,19 @@ One ``OasisEnv("local")`` (768x512, 4 rows, the embedded server in this process)
 alternating blocks: through the bare env, then through the same env with a ``RolloutLogger``
 transform appended (default ``LogOptions``: every row, JPEG 85, ground truth, top-down map,
 background writer) writing an ``.rrd`` file. Alternating cancels drift in machine load; each
-logged block ends with ``flush()`` so the writer's backlog is paid inside the timing.
+logged block ends with ``flush()`` so the writer's backlog is paid inside the timing. On a
+shared machine the load drifts between blocks, so besides the totals the report gives the median
+of the per-round slowdowns, which one load spike cannot move much.
 Target: at most 10% slower with the logger.
 
-Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 8 --rounds 3]``; prints JSON.
+Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 4 --rounds 8]``; prints JSON.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -43,8 +46,8 @@ def run_block(
     return td, time.perf_counter() - started
 
 
-def measure(args: argparse.Namespace, rrd: Path) -> dict[str, float]:
-    """Seconds and steps per side, over ``rounds`` alternating blocks."""
+def measure(args: argparse.Namespace, rrd: Path) -> dict[str, list[float]]:
+    """Seconds of each bare and each logged block, over ``rounds`` alternating pairs."""
     env = OasisEnv(
         "local",
         args.envs,
@@ -54,17 +57,17 @@ def measure(args: argparse.Namespace, rrd: Path) -> dict[str, float]:
     rerun_logger = RolloutLogger(rrd, LogOptions())
     logged_env = env.append_transform(rerun_logger.transform())
     generator = torch.Generator().manual_seed(0)
-    seconds = {"bare": 0.0, "logged": 0.0}
+    seconds: dict[str, list[float]] = {"bare": [], "logged": []}
     try:
         td = logged_env.reset()
         td, _ = run_block(env, td, args.warmup, generator)
         for _ in range(args.rounds):
             td, elapsed = run_block(env, td, args.steps, generator)
-            seconds["bare"] += elapsed
+            seconds["bare"].append(elapsed)
             started = time.perf_counter()
             td, _ = run_block(logged_env, td, args.steps, generator)
             rerun_logger.flush()
-            seconds["logged"] += time.perf_counter() - started
+            seconds["logged"].append(time.perf_counter() - started)
     finally:
         rerun_logger.close()
         env.close()
@@ -76,8 +79,8 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=4, choices=range(1, len(PROMPTS) + 1))
     parser.add_argument("--width", type=int, default=768)
     parser.add_argument("--height", type=int, default=512)
-    parser.add_argument("--steps", type=int, default=8, help="steps per block")
-    parser.add_argument("--rounds", type=int, default=3, help="bare/logged block pairs")
+    parser.add_argument("--steps", type=int, default=4, help="steps per block")
+    parser.add_argument("--rounds", type=int, default=8, help="bare/logged block pairs")
     parser.add_argument("--warmup", type=int, default=3)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
@@ -85,7 +88,9 @@ def main() -> None:
         seconds = measure(args, rrd)
         rrd_bytes = rrd.stat().st_size
     steps = args.steps * args.rounds
-    bare, logged = steps / seconds["bare"], steps / seconds["logged"]
+    bare, logged = steps / sum(seconds["bare"]), steps / sum(seconds["logged"])
+    pair_slowdowns = [1 - b / g for b, g in zip(seconds["bare"], seconds["logged"], strict=True)]
+    median_slowdown = statistics.median(pair_slowdowns)
     options = LogOptions()
     report = {
         "benchmark": "logging_overhead",
@@ -101,8 +106,9 @@ def main() -> None:
         "env_steps_per_s_without_logger": round(bare, 3),
         "env_steps_per_s_with_logger": round(logged, 3),
         "slowdown": round(1 - logged / bare, 4),
+        "median_pair_slowdown": round(median_slowdown, 4),
         "target_max_slowdown": TARGET_MAX_SLOWDOWN,
-        "meets_target": 1 - logged / bare <= TARGET_MAX_SLOWDOWN,
+        "meets_target": median_slowdown <= TARGET_MAX_SLOWDOWN,
         "rrd_bytes_per_logged_step": round(rrd_bytes / (steps + 1)),
     }
     print(json.dumps(report, indent=2))

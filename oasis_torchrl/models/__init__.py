@@ -4,7 +4,12 @@
 >>> modules = make_actor_critic(DrivingNet(DrivingNetConfig(shared_encoder=False)))
 """
 
-from oasis_torchrl.models.actor_critic import ActorCritic, make_actor_critic, observation_keys
+from oasis_torchrl.models.actor_critic import (
+    ActorCritic,
+    as_float_frames,
+    make_actor_critic,
+    observation_keys,
+)
 from oasis_torchrl.models.config import CAMERAS, CHUNK, POLICY_IMAGE_SIZE, DrivingNetConfig
 from oasis_torchrl.models.encoder import MultiCameraEncoder
 from oasis_torchrl.models.network import DrivingNet
@@ -14,6 +19,7 @@ __all__ = [
     "CHUNK",
     "POLICY_IMAGE_SIZE",
     "ActorCritic",
+    "as_float_frames",
     "DrivingNet",
     "DrivingNetConfig",
     "MultiCameraEncoder",

@@ -1,8 +1,12 @@
 """TorchRL modules around :class:`~oasis_torchrl.models.DrivingNet`: the PPO actor and critic.
 
-Keys (those of :func:`oasis_torchrl.envs.make_training_env`): ``("images", <camera>)`` float
-``[*B, 3, H, W]`` and ``"state"`` ``[*B, 2]`` in; ``"features"`` (shared), ``"loc"``, ``"scale"``,
-``"action"`` ``[*B, 4, 2]``, ``"action_log_prob"`` and ``"state_value"`` out.
+Keys in: each camera's frames and ``"state"`` ``[*B, 2]``. Frames are read from
+``("pixels", <camera>)`` by default: the env's uint8 ``[*B, 4, H, W, 3]`` (``all_frames=True``,
+as :func:`oasis_torchrl.train.environment.build_env` makes it) or ``[*B, H, W, 3]``, converted
+to float in the module, so rollouts store compact uint8 frames; ``image_key="images"`` reads
+float ``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (:func:`oasis_torchrl.envs.make_training_env`).
+Keys out: ``"features"`` (shared), ``"loc"``, ``"scale"``, ``"action"`` ``[*B, 4, 2]``,
+``"action_log_prob"`` and ``"state_value"``.
 """
 
 from __future__ import annotations
@@ -17,20 +21,33 @@ from torchrl.modules import ActorValueOperator, ProbabilisticActor, TanhNormal, 
 
 from oasis_torchrl.models.network import DrivingNet
 
+PIXELS = "pixels"
 IMAGES = "images"
 STATE = "state"
 FEATURES = "features"
 
 
+def as_float_frames(frames: torch.Tensor) -> torch.Tensor:
+    """uint8 ``[..., H, W, 3]`` -> float ``[..., 3, H, W]`` in ``[0, 1]``; float passes through.
+
+    Example:
+        >>> as_float_frames(torch.full((2, 4, 8, 12, 3), 255, dtype=torch.uint8)).shape
+        torch.Size([2, 4, 3, 8, 12])
+    """
+    if frames.dtype != torch.uint8:
+        return frames
+    return frames.movedim(-1, -3).float().div_(255.0)
+
+
 class _Features(nn.Module):
-    """``(*images, state) -> features`` for a TensorDictModule (positional in_keys)."""
+    """``(*frames, state) -> features`` for a TensorDictModule (positional in_keys)."""
 
     def __init__(self, net: DrivingNet) -> None:
         super().__init__()
         self.net = net
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        return self.net.features(inputs[:-1], inputs[-1])
+        return self.net.features([as_float_frames(x) for x in inputs[:-1]], inputs[-1])
 
 
 class _ChunkParams(nn.Module):
@@ -56,14 +73,14 @@ class _Value(nn.Module):
         return self.net.value(features)
 
 
-def observation_keys(net: DrivingNet) -> list[str | tuple[str, str]]:
+def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tuple[str, str]]:
     """The observation keys the network reads, in its order.
 
     Example:
         >>> observation_keys(DrivingNet())
-        [('images', 'left_forward'), ('images', 'front'), ('images', 'right_forward'), 'state']
+        [('pixels', 'left_forward'), ('pixels', 'front'), ('pixels', 'right_forward'), 'state']
     """
-    return [(IMAGES, camera) for camera in net.config.cameras] + [STATE]
+    return [(image_key, camera) for camera in net.config.cameras] + [STATE]
 
 
 @dataclass
@@ -82,15 +99,20 @@ class ActorCritic:
     value: ValueOperator
 
 
-def make_actor_critic(net: DrivingNet) -> ActorCritic:
+def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:
     """Wrap ``net`` as the TorchRL actor and critic of the PPO recipe.
+
+    Args:
+        net: the network (shared by the three modules).
+        image_key: ``"pixels"`` (uint8 env frames) or ``"images"`` (float, see module doc).
 
     Example:
         >>> from tensordict import TensorDict
         >>> from oasis_torchrl.models import DrivingNetConfig
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
         >>> modules = make_actor_critic(net)
-        >>> td = TensorDict({"images": {c: torch.rand(3, 3, 32, 48) for c in net.config.cameras},
+        >>> frames = torch.zeros(3, 4, 32, 48, 3, dtype=torch.uint8)
+        >>> td = TensorDict({"pixels": {c: frames for c in net.config.cameras},
         ...                  "state": torch.zeros(3, 2)}, batch_size=[3])
         >>> td = modules.policy(td)
         >>> td["action"].shape, td["action_log_prob"].shape
@@ -99,7 +121,9 @@ def make_actor_critic(net: DrivingNet) -> ActorCritic:
         torch.Size([3, 1])
     """
     cfg = net.config
-    common = TensorDictModule(_Features(net), in_keys=observation_keys(net), out_keys=[FEATURES])
+    common = TensorDictModule(
+        _Features(net), in_keys=observation_keys(net, image_key), out_keys=[FEATURES]
+    )
     params = TensorDictModule(_ChunkParams(net), in_keys=[FEATURES], out_keys=["loc", "scale"])
     spec = Bounded(-1.0, 1.0, (cfg.chunk, cfg.action_dim))
     actor_head = ProbabilisticActor(

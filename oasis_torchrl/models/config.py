@@ -27,6 +27,9 @@ class DrivingNetConfig:
         cameras: camera names, in the order the network reads them.
         image_size: ``(height, width)`` of the images (any size works: the encoder pools to a
             fixed grid; this is the size the policies resize to).
+        frames: consecutive frames per camera the network sees, oldest first (stacked along
+            the channels). Two frames show motion: a single frame cannot tell a standing car
+            from a moving one, and the speed decides whether to accelerate or brake.
         shared_encoder: one convolutional encoder for every camera (``True``) or one per camera.
         encoder_channels: channels of the three convolutions (a 4x4 stride-4 patch stem, then
             3x3 stride 2, then 3x3 stride 1).
@@ -48,6 +51,7 @@ class DrivingNetConfig:
 
     cameras: tuple[str, ...] = CAMERAS
     image_size: tuple[int, int] = POLICY_IMAGE_SIZE
+    frames: int = 2
     shared_encoder: bool = True
     encoder_channels: tuple[int, int, int] = (24, 48, 64)
     pool_grid: tuple[int, int] = (4, 6)
@@ -71,6 +75,7 @@ class DrivingNetConfig:
             )
         positive = {
             "image_size": self.image_size,
+            "frames": (self.frames,),
             "encoder_channels": self.encoder_channels,
             "pool_grid": self.pool_grid,
             "camera_features": (self.camera_features,),

@@ -21,15 +21,16 @@ _LAYOUT = ((4, 4, 0), (3, 2, 1), (3, 1, 1))
 
 
 class MultiCameraEncoder(nn.Module):
-    """Encode ``C`` camera images ``[..., 3, H, W]`` (float in [0, 1]) into ``[..., C * F]``.
+    """Encode ``C`` cameras' frames ``[..., T, 3, H, W]`` (float in [0, 1]) into ``[..., C * F]``.
 
-    Per camera: conv 4x4/4 -> ReLU -> conv 3x3/2 -> ReLU -> conv 3x3/1 -> ReLU -> average pool
-    to ``pool_grid`` -> linear to ``camera_features`` -> ReLU.
+    Per camera, the ``T = config.frames`` frames stacked along the channels: conv 4x4/4 -> ReLU
+    -> conv 3x3/2 -> ReLU -> conv 3x3/1 -> ReLU -> average pool to ``pool_grid`` -> linear to
+    ``F = camera_features`` -> ReLU.
 
     Example:
-        >>> config = DrivingNetConfig(image_size=(32, 48), camera_features=16)
+        >>> config = DrivingNetConfig(image_size=(32, 48), frames=2, camera_features=16)
         >>> encoder = MultiCameraEncoder(config)
-        >>> images = [torch.rand(5, 3, 32, 48) for _ in config.cameras]
+        >>> images = [torch.rand(5, 2, 3, 32, 48) for _ in config.cameras]
         >>> encoder(images).shape
         torch.Size([5, 48])
     """
@@ -37,9 +38,10 @@ class MultiCameraEncoder(nn.Module):
     def __init__(self, config: DrivingNetConfig) -> None:
         super().__init__()
         self.num_cameras = len(config.cameras)
+        self.frames = config.frames
         self.groups = 1 if config.shared_encoder else self.num_cameras
         layers: list[nn.Module] = []
-        in_channels = 3
+        in_channels = 3 * config.frames
         for out_channels, (kernel, stride, padding) in zip(
             config.encoder_channels, _LAYOUT, strict=True
         ):
@@ -65,15 +67,18 @@ class MultiCameraEncoder(nn.Module):
         self.out_features = self.num_cameras * config.camera_features
 
     def forward(self, images: Sequence[torch.Tensor]) -> torch.Tensor:
-        """Features ``[..., C * F]`` of one image ``[..., 3, H, W]`` per camera."""
+        """Features ``[..., C * F]`` of the frames ``[..., T, 3, H, W]`` of each camera."""
         if len(images) != self.num_cameras:
             raise ValueError(f"expected {self.num_cameras} camera images, got {len(images)}")
         first = images[0]
-        if first.dim() < 4 or first.shape[-3] != 3:
-            raise ValueError(f"camera images must be [..., 3, H, W], got {list(first.shape)}")
-        leading, (height, width) = first.shape[:-3], first.shape[-2:]
-        stacked = torch.stack(list(images), dim=-4)  # [..., C, 3, H, W]
-        channels = 3 * self.groups  # shared: cameras folded into the batch; else stacked
+        if first.dim() < 5 or first.shape[-4:-2] != (self.frames, 3):
+            raise ValueError(
+                f"camera frames must be [..., {self.frames}, 3, H, W], got {list(first.shape)}"
+            )
+        leading, (height, width) = first.shape[:-4], first.shape[-2:]
+        stacked = torch.stack(list(images), dim=-5)  # [..., C, T, 3, H, W]
+        # Shared weights fold the cameras into the batch; separate ones stack them as groups.
+        channels = 3 * self.frames * self.groups
         x = (stacked.reshape(-1, channels, height, width) - _IMAGE_MEAN) / _IMAGE_STD
         pooled = self.convs(x).reshape(-1, self.groups, self.project_weight.shape[1])
         features = torch.relu(

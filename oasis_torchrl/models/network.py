@@ -25,15 +25,17 @@ def _mlp(in_features: int, hidden: int, out_features: int) -> nn.Sequential:
 
 
 class DrivingNet(nn.Module):
-    """Camera images and the previous action in; an action chunk distribution and a value out.
+    """Camera frames and the previous action in; an action chunk distribution and a value out.
 
-    ``features`` (shared) = camera features ++ state. The actor MLP gives ``loc`` ``[..., 4, 2]``
+    Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` (the
+    last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1; the state
+    is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state. The actor MLP gives ``loc`` ``[..., 4, 2]``
     (before the tanh); the scale is a learned, observation-independent ``[4, 2]`` parameter (the
     usual choice for PPO; behaviour cloning leaves it untouched). The critic MLP gives the value.
 
     Example:
-        >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
-        >>> images = [torch.rand(2, 3, 32, 48) for _ in net.config.cameras]
+        >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), frames=2))
+        >>> images = [torch.rand(2, 2, 3, 32, 48) for _ in net.config.cameras]
         >>> chunk = net(images, torch.zeros(2, 2))
         >>> chunk.shape, bool(chunk.abs().max() < 1)
         (torch.Size([2, 4, 2]), True)
@@ -56,12 +58,25 @@ class DrivingNet(nn.Module):
             self.actor[-1].bias.zero_()
 
     def features(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
-        """Shared features ``[..., features_dim]`` from one image per camera and the state."""
+        """Shared features ``[..., features_dim]`` from each camera's frames and the state."""
         if state.shape[-1] != self.config.state_dim:
             raise ValueError(
                 f"state must end in {self.config.state_dim} values, got {list(state.shape)}"
             )
-        return torch.cat([self.encoder(images), state.to(images[0].dtype)], dim=-1)
+        frames = [self.last_frames(image, state.dim() - 1) for image in images]
+        return torch.cat([self.encoder(frames), state.to(frames[0].dtype)], dim=-1)
+
+    def last_frames(self, image: torch.Tensor, batch_dims: int) -> torch.Tensor:
+        """``[*B, frames, 3, H, W]``: the last ``frames`` of a camera's frames."""
+        wanted = self.config.frames
+        if image.dim() == batch_dims + 3:  # a single frame, no time axis
+            image = image.unsqueeze(-4)
+        if image.dim() != batch_dims + 4 or image.shape[-4] < wanted:
+            raise ValueError(
+                f"camera frames must be [*B, >={wanted}, 3, H, W] with {batch_dims} batch dims "
+                f"(or [*B, 3, H, W] when frames is 1), got {list(image.shape)}"
+            )
+        return image[..., -wanted:, :, :, :]
 
     def action_loc(self, features: torch.Tensor) -> torch.Tensor:
         """Location ``[..., chunk, action_dim]`` of the chunk distribution, before the tanh."""

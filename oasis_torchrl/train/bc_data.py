@@ -4,9 +4,10 @@
 sample (about 13 ms per 3-camera sample here, far more than a training step of the oasis
 network). :class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass
 through LeRobot's own decoder, keeps the frames as uint8, and serves the same sample dict
-(``observation.images.<camera>`` float ``[3, H, W]`` in ``[0, 1]``, ``observation.state``,
-``action`` ``[horizon, 2]`` and ``action_is_pad``, indices) by LeRobot's delta-index rules: the
-next actions of the same episode, clamped at its end and marked as padding there.
+(``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``, the
+``<key>_is_pad`` masks and the indices) by LeRobot's delta-index rules: a key with delta
+indices stacks the rows at those offsets within the same episode, clamped at its ends and
+marked as padding there (e.g. the previous frame and the next 4 actions).
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ _COLUMNS = (OBS_STATE, ACTION, "episode_index", "index", "frame_index", "timesta
 
 
 class InMemoryBCDataset(Dataset):
-    """Every row of a ``LeRobotDataset`` (opened with ``delta_timestamps`` for ``action``).
+    """Every row of a ``LeRobotDataset`` (opened with ``delta_timestamps``, at least for
+    ``action``).
 
     Args:
         dataset: the LeRobot dataset (its ``delta_indices`` say which action rows to stack).
@@ -44,7 +46,7 @@ class InMemoryBCDataset(Dataset):
                 "open the dataset with delta_timestamps for 'action' (an action chunk)"
             )
         self.camera_keys = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
-        self.action_deltas = torch.tensor(dataset.delta_indices[ACTION])
+        self.deltas = {key: torch.tensor(d) for key, d in dataset.delta_indices.items()}
         columns = dataset.hf_dataset.with_format("torch", columns=list(_COLUMNS))[:]
         self.columns = {key: torch.as_tensor(columns[key]) for key in _COLUMNS}
         # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
@@ -88,14 +90,19 @@ class InMemoryBCDataset(Dataset):
     def __getitem__(self, position: int) -> dict[str, Any]:
         index = int(self.columns["index"][position])
         start, end = self.bounds[int(self.columns["episode_index"][position])]
-        wanted = index + self.action_deltas
-        rows = [self._position[int(row)] for row in wanted.clamp(start, end - 1)]
-        sample: dict[str, Any] = {
-            key: self.frames[key][position].float().div_(255) for key in self.camera_keys
-        }
-        sample[OBS_STATE] = self.columns[OBS_STATE][position]
-        sample[ACTION] = self.columns[ACTION][rows]
-        sample[f"{ACTION}_is_pad"] = (wanted < start) | (wanted >= end)
+        sources = {**self.frames, OBS_STATE: self.columns[OBS_STATE], ACTION: self.columns[ACTION]}
+        sample: dict[str, Any] = {}
+        for key, source in sources.items():
+            deltas = self.deltas.get(key)
+            if deltas is None:
+                sample[key] = source[position]
+                continue
+            wanted = index + deltas
+            rows = [self._position[int(row)] for row in wanted.clamp(start, end - 1)]
+            sample[key] = source[rows]
+            sample[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
+        for key in self.camera_keys:
+            sample[key] = sample[key].float().div_(255)
         for key in ("episode_index", "index", "frame_index", "timestamp"):
             sample[key] = self.columns[key][position]
         return sample

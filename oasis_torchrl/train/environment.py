@@ -1,5 +1,11 @@
 """The training env of a config's ``env`` section (shared by PPO, evaluation and the pipeline).
 
+The env returns all 4 frames of each chunk (``all_frames=True``), decoded straight to the policy
+size and kept as uint8 ``("pixels", <camera>)`` ``[N, 4, H, W, 3]``: the policy modules convert
+the frames they use (:mod:`oasis_torchrl.models.actor_critic`), so collector batches stay
+compact, and evaluation episodes recorded to LeRobot get one row per frame, as BC data does.
+A reward sum (``"episode_reward"``) and a step count are added.
+
 ``env`` keys: ``endpoint`` (``local`` or an A2V URL), ``prompts`` (a list; one prompt is used
 for every episode, several are drawn from per episode), ``num_envs``, ``max_steps`` (chunks per
 episode), ``image_size`` ``[height, width]`` of the policy images, ``server`` (``width``,
@@ -15,9 +21,9 @@ from typing import Any
 
 import numpy as np
 from omegaconf import DictConfig
-from torchrl.envs import TransformedEnv
+from torchrl.envs import Compose, RewardSum, StepCounter, TransformedEnv
 
-from oasis_torchrl.envs import make_training_env
+from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.envs.episodes import Prompts
 from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, RewardModule
 from oasis_torchrl.sim.config import ServerConfig
@@ -78,7 +84,7 @@ def build_env(
     image_size: Sequence[int] | None = None,
     **env_kwargs: Any,
 ) -> TransformedEnv:
-    """The transformed :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` config section.
+    """The :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` config section, transformed.
 
     Args:
         cfg: the ``env`` section.
@@ -94,13 +100,15 @@ def build_env(
         >>> env.close()
     """
     height, width = image_size if image_size is not None else cfg.image_size
-    return make_training_env(
-        endpoint=cfg.endpoint,
-        num_envs=num_envs or cfg.num_envs,
-        prompts=prompts if prompts is not None else episode_prompts(cfg.prompts),
-        image_size=(int(height), int(width)),
+    env = OasisEnv(
+        cfg.endpoint,
+        num_envs or cfg.num_envs,
+        prompts if prompts is not None else episode_prompts(cfg.prompts),
         server=ServerConfig(width=cfg.server.width, height=cfg.server.height),
+        frame_size=(int(height), int(width)),
+        all_frames=True,
         max_steps=max_steps or cfg.max_steps,
         reward=make_reward(cfg.reward),
         **env_kwargs,
     )
+    return TransformedEnv(env, Compose(RewardSum(), StepCounter()))

@@ -30,7 +30,7 @@ from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from tqdm import tqdm
 
-from oasis_torchrl.models.actor_critic import IMAGES
+from oasis_torchrl.models.actor_critic import PIXELS
 from oasis_torchrl.train.environment import build_env
 
 logger = logging.getLogger(__name__)
@@ -109,15 +109,18 @@ def rollout_episodes(
     policy: Policy,
     max_steps: int,
     *,
+    keep_pixels: bool = False,
     on_reset: Callable[[TensorDictBase], None] | None = None,
     on_step: Callable[[TensorDictBase], None] | None = None,
 ) -> TensorDictBase:
     """One episode per env row, no resets: steps ``[N, T]`` until every row is done.
 
-    Float policy images are dropped from the returned steps (uint8 pixels stay), so memory
-    stays small. ``on_reset(td)`` and ``on_step(td)`` see every reset and step (recorders).
-    The policy acts deterministically (``ExplorationType.DETERMINISTIC``).
+    Camera frames are dropped from the returned steps unless ``keep_pixels`` (a LeRobot
+    recording needs them), so memory stays small. ``on_reset(td)`` and ``on_step(td)`` see every
+    reset and step (recorders). The policy acts deterministically
+    (``ExplorationType.DETERMINISTIC``).
     """
+    dropped = () if keep_pixels else (PIXELS, (NEXT, PIXELS))
     rows = int(env.batch_size[0])
     ended = torch.zeros(rows, dtype=torch.bool)
     steps = []
@@ -129,7 +132,7 @@ def rollout_episodes(
             td = env.step(policy(td))
             if on_step is not None:
                 on_step(td)
-            steps.append(td.exclude(IMAGES, (NEXT, IMAGES)))
+            steps.append(td.exclude(*dropped))
             ended |= td.get((NEXT, "done")).reshape(rows).cpu()
             if ended.all():
                 break
@@ -176,8 +179,7 @@ class EpisodeRecorders:
 
     Args:
         rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra).
-        lerobot: a dataset folder; episodes are appended (chunk rows at 5 fps, as the default
-            env returns one frame per chunk).
+        lerobot: a dataset folder; episodes are appended (one row per frame at 20 fps).
 
     Example:
         >>> recorders = EpisodeRecorders()
@@ -280,6 +282,7 @@ class Evaluator:
                     self.env,
                     policy,
                     self.cfg.max_steps,
+                    keep_pixels=self.recorders.lerobot is not None,
                     on_reset=self.recorders.on_reset,
                     on_step=on_step,
                 )

@@ -18,6 +18,7 @@ from oasis_torchrl.viz.hooks import RerunFrameConsumer, RerunTransform
 from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.paths import FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.replay import load_rollout, save_rollout
 from oasis_torchrl.viz.topdown import local_scene
 
 __all__ = [
@@ -29,5 +30,7 @@ __all__ = [
     "RolloutLogger",
     "RowPaths",
     "default_blueprint",
+    "load_rollout",
     "local_scene",
+    "save_rollout",
 ]

@@ -53,12 +53,13 @@ def image_archetype(frame: np.ndarray, jpeg_quality: int | None) -> rr.EncodedIm
 
 
 def depth_archetype(depth: np.ndarray) -> rr.DepthImage:
-    """A metric ``DepthImage`` (metres); sky (+inf) and unknown (NaN) become 0, rerun's "none".
+    """A metric ``DepthImage`` (metres, float16: half the size, millimetres up close); sky
+    (+inf) and unknown (NaN) become 0, rerun's "no depth".
 
     Example:
         >>> image = depth_archetype(np.array([[1.0, np.inf]], np.float32))
         >>> type(image).__name__
         'DepthImage'
     """
-    finite = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32, copy=False)
+    finite = np.where(np.isfinite(depth), depth, 0.0).astype(np.float16)
     return rr.DepthImage(finite, meter=1.0)

@@ -21,6 +21,7 @@ import rerun as rr
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.series import send_series
 
 logger = logging.getLogger(__name__)
 
@@ -69,26 +70,6 @@ def video_frames(
             produced += 1
             if produced == count:
                 return
-
-
-def send_series(
-    recording: rr.RecordingStream, path: str, frames: np.ndarray, values: np.ndarray, fps: float
-) -> None:
-    """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
-
-    Example:
-        >>> recording = rr.RecordingStream("doc")
-        >>> send_series(recording, "episode/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
-    """
-    values = np.asarray(values, dtype=np.float64).reshape(-1)
-    recording.send_columns(
-        path,
-        indexes=[
-            rr.TimeColumn(FRAME_TIMELINE, sequence=frames),
-            rr.TimeColumn(TIME_TIMELINE, duration=np.asarray(frames) / fps),
-        ],
-        columns=rr.Scalars.columns(scalars=np.where(np.isfinite(values), values, np.nan)),
-    )
 
 
 def _names(feature: dict[str, Any], width: int) -> list[str]:

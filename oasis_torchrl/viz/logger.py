@@ -170,8 +170,7 @@ class RolloutLogger:
     def flush(self) -> None:
         """Wait until everything submitted is logged and handed to the sink."""
         writer = self._open_writer()
-        if self._worker is not None:
-            self._worker.drain()
+        self._drain(writer)
         writer.recording.flush()
 
     def close(self) -> None:
@@ -181,9 +180,10 @@ class RolloutLogger:
             return
         atexit.unregister(self._close_at_exit)
         try:
+            self._drain(writer)
+        finally:
             if self._worker is not None:
                 self._worker.close()
-        finally:
             writer.recording.flush()
             writer.recording.disconnect()
 
@@ -222,6 +222,13 @@ class RolloutLogger:
             raise ValueError(f"LogOptions.rows {self.options.rows} exceed the {n} env rows")
         allowed = set(range(n) if rows is None else rows)
         return [row for row in chosen if row in allowed]
+
+    def _drain(self, writer: RecordWriter) -> None:
+        """Write everything queued, then send the buffered series (the worker is idle then;
+        series carry their own timestamps, so any thread may send them)."""
+        if self._worker is not None:
+            self._worker.drain()
+        writer.flush()
 
     def _open_writer(self) -> RecordWriter:
         if self._writer is None:

@@ -55,7 +55,7 @@ class LogOptions:
     fps: float = 20.0
     scene_source: SceneSource | None = local_scene
     topdown_radius: float = 60.0
-    trail_frames: int = 600
+    trail_frames: int = 200
     background: bool = True
     max_pending: int = 2
 

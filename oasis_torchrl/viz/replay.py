@@ -71,14 +71,30 @@ def save_rollout(rollout: TensorDictBase, path: str | Path) -> Path:
 
 
 def load_rollout(path: str | Path) -> TensorDictBase:
-    """A rollout saved by :func:`save_rollout`, memory-mapped (nothing is read until used)."""
+    """A rollout saved by :func:`save_rollout`, memory-mapped (nothing is read until used).
+
+    Example:
+        >>> import tempfile, torch
+        >>> rollout = TensorDict({"reward": torch.ones(1, 2, 1)}, [1, 2])
+        >>> folder = save_rollout(rollout, f"{tempfile.mkdtemp()}/run")
+        >>> load_rollout(folder)["reward"].sum().item()
+        2.0
+    """
     if source_kind(path) != ROLLOUT:
         raise ValueError(f"{path} is not a saved rollout folder")
     return TensorDict.load_memmap(path)
 
 
 def replay_rollout(path: str | Path, rollout_logger: RolloutLogger) -> None:
-    """Log a saved rollout with ``rollout_logger`` (every row starts an episode at ``t = 0``)."""
+    """Log a saved rollout with ``rollout_logger`` (every row starts an episode at ``t = 0``).
+
+    Example:
+        >>> import tempfile, torch
+        >>> rollout = TensorDict({("next", "reward"): torch.ones(1, 2, 1)}, [1, 2])
+        >>> folder = save_rollout(rollout, f"{tempfile.mkdtemp()}/run")
+        >>> with RolloutLogger(f"{folder}.rrd") as rerun_logger:
+        ...     replay_rollout(folder, rerun_logger)
+    """
     rollout_logger.log_rollout(load_rollout(path))
 
 
@@ -93,7 +109,11 @@ def viewer_command(rrd: str | Path, memory_limit: str = DEFAULT_MEMORY_LIMIT) ->
 
 
 def open_in_viewer(rrd: str | Path, memory_limit: str = DEFAULT_MEMORY_LIMIT) -> subprocess.Popen:
-    """Open ``rrd`` in a native viewer process that outlives this one."""
+    """Open ``rrd`` in a native viewer process that outlives this one (needs a display).
+
+    Example:
+        >>> viewer = open_in_viewer("run.rrd", "2GB")  # doctest: +SKIP
+    """
     if source_kind(rrd) != RRD:
         raise ValueError(f"{rrd} is not an .rrd file")
     logger.info("opening %s in the rerun viewer", rrd)

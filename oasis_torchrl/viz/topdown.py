@@ -87,7 +87,13 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 @dataclass(frozen=True)
 class MapPatch:
-    """What to draw near the car: polylines with one colour each, obstacle outlines likewise."""
+    """What to draw near the car: polylines with one colour each, obstacle outlines likewise.
+
+    Example:
+        >>> patch = MapPatch([], [], obstacles=np.zeros((0, 5, 2)), obstacle_colors=[])
+        >>> len(patch.road), patch.obstacles.shape
+        (0, (0, 5, 2))
+    """
 
     road: list[np.ndarray]
     road_colors: list[Color]

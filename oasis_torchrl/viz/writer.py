@@ -3,14 +3,14 @@
 Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 * tick`` to
 ``4 * tick + 3``: action ``k`` and ground truth ``k`` sit on frame ``4 * tick + k`` (frame ``k``
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
-frame. Each row keeps a little state (episode number, step count, return, collided flag, its
-road map and a fixed-size path buffer), never frames.
+frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
+at most a second late). Each row keeps a little state (episode number, step count, return,
+collided flag, its road map and a fixed-size path buffer), never frames.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +22,7 @@ from oasis_torchrl.viz.images import depth_archetype, image_archetype
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.records import StepRecord
+from oasis_torchrl.viz.series import SeriesBuffer
 from oasis_torchrl.viz.topdown import (
     CAR_COLOR,
     CAR_SIZE,
@@ -65,6 +66,7 @@ class RecordWriter:
     def __init__(self, recording: rr.RecordingStream, options: LogOptions) -> None:
         self.recording = recording
         self.options = options
+        self._series = SeriesBuffer(recording, options.fps)
         self._rows: dict[int, _RowState] = {}
         self._cameras: list[str] = []
         self._depth_cameras: list[str] = []
@@ -82,13 +84,18 @@ class RecordWriter:
                 self._start_episode(paths, state, record, i, first)
             else:
                 state.step += 1
+            self._write_series(paths, record, i, first)
             self._write_frames(paths, state, record, i, first)
             self._at(first + _LAST)
             self._write_depth(paths, record, i)
             self._write_topdown(paths, state, record, i)
             if not record.start:  # a reset observation has no reward (its terms are zeros)
-                self._write_rewards(paths, state, record, i)
+                self._write_rewards(paths, state, record, i, first + _LAST)
                 self._write_episode_end(paths, state, record, i)
+
+    def flush(self) -> None:
+        """Send the buffered time series (never while a write runs on another thread)."""
+        self._series.flush()
 
     # -- helpers -----------------------------------------------------------------------------
 
@@ -98,11 +105,6 @@ class RecordWriter:
 
     def _event(self, paths: RowPaths, text: str, level: str) -> None:
         self.recording.log(paths.events, rr.TextLog(text, level=level))
-
-    def _scalar(self, path: str, value: float) -> None:
-        """One value of a time series at the current time (non-finite: NaN, "no value")."""
-        value = float(value)
-        self.recording.log(path, rr.Scalars(value if math.isfinite(value) else math.nan))
 
     # -- blueprint ---------------------------------------------------------------------------
 
@@ -175,39 +177,29 @@ class RecordWriter:
 
     # -- per-frame and per-step values -------------------------------------------------------
 
-    def _frame_series(
-        self, paths: RowPaths, record: StepRecord, i: int
-    ) -> list[tuple[str, np.ndarray]]:
-        """``(entity, 4 values)`` of the per-frame series: actions and chosen ground truth."""
-        series = []
+    def _write_series(self, paths: RowPaths, record: StepRecord, i: int, first: int) -> None:
+        """Per-frame series: the 4 actions of the chunk and the chosen ground-truth fields."""
+        frames = np.arange(first, first + CHUNK)
         if record.actions is not None:
             for column, name in enumerate(ACTION_NAMES):
-                series.append((paths.scalar("action", name), record.actions[i, :, column]))
+                self._series.add(paths.scalar("action", name), frames, record.actions[i, :, column])
         for name in self.options.truth_series:
             if name in record.truth:
-                series.append((paths.scalar("truth", name), record.truth[name][i]))
-        return series
+                self._series.add(paths.scalar("truth", name), frames, record.truth[name][i])
 
     def _write_frames(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
     ) -> None:
-        """Per frame of the chunk: actions, ground truth, the first collision and the images."""
-        # One rr.log per value beats send_columns here: 4 values per series, many series.
-        series = self._frame_series(paths, record, i)
+        """Per frame of the chunk: the first collision event and the camera images."""
         quality = self.options.jpeg_quality
         collided = record.truth.get("collided")
         off_road = record.truth.get("off_road")
         for k in range(CHUNK):
             self._at(first + k)
-            for path, values in series:
-                self._scalar(path, values[k])
             if collided is not None and collided[i, k] > 0.5 and not state.collided:
                 state.collided = True
-                what = (
-                    "left the road"
-                    if off_road is not None and off_road[i, k] > 0.5
-                    else ("hit an obstacle")
-                )
+                left_road = off_road is not None and off_road[i, k] > 0.5
+                what = "left the road" if left_road else "hit an obstacle"
                 self._event(paths, f"collision at step {state.step}: {what}", "ERROR")
             for camera, frames in record.images.items():
                 every = frames.shape[1] == CHUNK and self.options.all_frames
@@ -215,12 +207,15 @@ class RecordWriter:
                     image = frames[i, k if every else -1]
                     self.recording.log(paths.camera(camera), image_archetype(image, quality))
 
-    def _write_rewards(self, paths: RowPaths, state: _RowState, record: StepRecord, i: int) -> None:
+    def _write_rewards(
+        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, last: int
+    ) -> None:
+        frame = np.array([last])
         if record.reward is not None:
             state.episode_return += float(record.reward[i])
-            self._scalar(paths.scalar("reward", "total"), record.reward[i])
+            self._series.add(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
         for name, values in record.terms.items():
-            self._scalar(paths.scalar("reward", name), values[i])
+            self._series.add(paths.scalar("reward", name), frame, values[i : i + 1])
 
     def _write_depth(self, paths: RowPaths, record: StepRecord, i: int) -> None:
         for camera, depth in record.depth.items():

@@ -2,8 +2,10 @@
 
 Inputs: ``observation.images.<camera>`` (any number of cameras; the world model's three are
 ``left_forward``, ``front``, ``right_forward``) and ``observation.state`` (the previous
-``[throttle, steering]``). Output: ``action`` ``[throttle, steering]`` per row at the world
-model's 20 fps; the policy predicts ``chunk_size`` of them per call (4 = one world-model call).
+``[throttle, steering]``), over the last ``n_obs_steps`` frames (2 by default: two consecutive
+frames show the motion a single frame cannot). Output: ``action`` ``[throttle, steering]`` per
+row at the world model's 20 fps; the policy predicts ``chunk_size`` of them per call (4 = one
+world-model call).
 
 Normalisation runs in LeRobot's processor pipeline (:mod:`.processor_oasis`). The defaults are
 ``IDENTITY`` on purpose: images arrive in ``[0, 1]`` and the network centres them itself, and
@@ -44,6 +46,7 @@ class OasisConfig(PreTrainedConfig):
     (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
 
     Args:
+        n_obs_steps: consecutive frames per camera the network sees (its ``frames``).
         chunk_size: actions predicted per call.
         n_action_steps: actions of each chunk executed before predicting again.
         image_size: ``(height, width)`` images are resized to in the preprocessor.
@@ -54,11 +57,11 @@ class OasisConfig(PreTrainedConfig):
 
     Example:
         >>> config = OasisConfig(device="cpu")
-        >>> config.type, config.action_delta_indices
-        ('oasis', [0, 1, 2, 3])
+        >>> config.type, config.observation_delta_indices, config.action_delta_indices
+        ('oasis', [-1, 0], [0, 1, 2, 3])
     """
 
-    n_obs_steps: int = 1
+    n_obs_steps: int = 2
     chunk_size: int = 4
     n_action_steps: int = 4
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=_identity_mapping)
@@ -80,8 +83,8 @@ class OasisConfig(PreTrainedConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.n_obs_steps != 1:
-            raise ValueError(f"OasisConfig.n_obs_steps must be 1, got {self.n_obs_steps}")
+        if self.n_obs_steps < 1:
+            raise ValueError(f"OasisConfig.n_obs_steps must be >= 1, got {self.n_obs_steps}")
         if not 1 <= self.n_action_steps <= self.chunk_size:
             raise ValueError(
                 f"OasisConfig.n_action_steps must be in [1, chunk_size={self.chunk_size}], "
@@ -104,6 +107,7 @@ class OasisConfig(PreTrainedConfig):
         return DrivingNetConfig(
             cameras=self.cameras,
             image_size=tuple(self.image_size),
+            frames=self.n_obs_steps,
             shared_encoder=self.shared_encoder,
             encoder_channels=tuple(self.encoder_channels),
             pool_grid=tuple(self.pool_grid),
@@ -134,6 +138,7 @@ class OasisConfig(PreTrainedConfig):
             device=device,
             input_features=inputs,
             output_features={ACTION: PolicyFeature(FeatureType.ACTION, (ACTION_DIM,))},
+            n_obs_steps=net.frames,
             chunk_size=net.chunk,
             n_action_steps=net.chunk,
             image_size=net.image_size,
@@ -174,9 +179,9 @@ class OasisConfig(PreTrainedConfig):
         return None
 
     @property
-    def observation_delta_indices(self) -> None:
-        """Only the current observation."""
-        return None
+    def observation_delta_indices(self) -> list[int] | None:
+        """The last ``n_obs_steps`` rows (None: only the current one)."""
+        return list(range(1 - self.n_obs_steps, 1)) if self.n_obs_steps > 1 else None
 
     @property
     def action_delta_indices(self) -> list[int]:

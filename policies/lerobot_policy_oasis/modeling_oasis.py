@@ -5,6 +5,11 @@ only adapts LeRobot batches to it: ``forward`` returns the behaviour-cloning los
 deterministic chunk ``tanh(loc)`` against the next ``chunk_size`` actions (padded actions past
 an episode's end are masked out), ``predict_action_chunk`` returns that chunk and
 ``select_action`` serves it one action at a time from a queue.
+
+Batches carry ``n_obs_steps`` frames per camera (``[B, n_obs_steps, 3, H, W]``, LeRobot's
+observation delta indices) and states ``[B, n_obs_steps, 2]`` (the last one is used).
+``select_action`` gets one observation per call, as an env or robot gives it, and keeps the
+last ``n_obs_steps`` itself (the first observation after a reset fills the history).
 """
 
 from __future__ import annotations
@@ -41,9 +46,12 @@ class OasisPolicy(PreTrainedPolicy):
         >>> action = {"action": PolicyFeature(FeatureType.ACTION, (2,))}
         >>> config = OasisConfig(device="cpu", input_features=features, output_features=action)
         >>> policy = OasisPolicy(config)
-        >>> batch = {key: torch.rand(1, *ft.shape) for key, ft in features.items()}
-        >>> policy.predict_action_chunk(batch).shape, policy.select_action(batch).shape
-        (torch.Size([1, 4, 2]), torch.Size([1, 2]))
+        >>> observation = {key: torch.rand(1, *ft.shape) for key, ft in features.items()}
+        >>> policy.select_action(observation).shape
+        torch.Size([1, 2])
+        >>> frames = {key: torch.stack([v, v], dim=1) for key, v in observation.items()}
+        >>> policy.predict_action_chunk(frames).shape
+        torch.Size([1, 4, 2])
     """
 
     config_class = OasisConfig
@@ -55,6 +63,7 @@ class OasisPolicy(PreTrainedPolicy):
         self.model = DrivingNet(config.net_config())
         self._image_keys = [f"{OBS_IMAGES}.{camera}" for camera in self.model.config.cameras]
         self._queue: deque[Tensor] = deque(maxlen=config.n_action_steps)
+        self._history: dict[str, deque[Tensor]] = {}
 
     def get_optim_params(self) -> Iterator[nn.Parameter]:
         """The parameters behaviour cloning trains: the encoder and the actor."""
@@ -62,8 +71,9 @@ class OasisPolicy(PreTrainedPolicy):
         yield from self.model.actor.parameters()
 
     def reset(self) -> None:
-        """Drop queued actions (call at every episode start)."""
+        """Drop queued actions and past observations (call at every episode start)."""
         self._queue.clear()
+        self._history = {}
 
     def _get(self, batch: dict[str, Any], key: str) -> Tensor:
         if key not in batch:
@@ -72,7 +82,18 @@ class OasisPolicy(PreTrainedPolicy):
 
     def _chunk(self, batch: dict[str, Any]) -> Tensor:
         images = [self._get(batch, key) for key in self._image_keys]
-        return self.model(images, self._get(batch, OBS_STATE))
+        state = self._get(batch, OBS_STATE)
+        return self.model(images, state[:, -1] if state.dim() == 3 else state)
+
+    def _remember(self, observation: dict[str, Tensor]) -> dict[str, Tensor]:
+        """Add one observation to the history; the last ``n_obs_steps``, stacked on dim 1."""
+        stacked = {}
+        for key in [*self._image_keys, OBS_STATE]:
+            value = self._get(observation, key)
+            history = self._history.setdefault(key, deque(maxlen=self.config.n_obs_steps))
+            history.extend([value] * (history.maxlen - len(history) if not history else 1))
+            stacked[key] = torch.stack(list(history), dim=1)
+        return stacked
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
@@ -81,9 +102,11 @@ class OasisPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
-        """The next action ``[B, 2]``: a new chunk when the queue is empty, else the next queued."""
+        """The next action ``[B, 2]`` for one observation (``[B, 3, H, W]`` frames, ``[B, 2]``
+        state): a new chunk when the queue is empty, else the next queued action."""
+        frames = self._remember(batch)
         if not self._queue:
-            chunk = self.predict_action_chunk(batch)[:, : self.config.n_action_steps]
+            chunk = self.predict_action_chunk(frames)[:, : self.config.n_action_steps]
             self._queue.extend(chunk.transpose(0, 1))
         return self._queue.popleft()
 

@@ -125,7 +125,7 @@ def test_all_frames_raw_images_and_depth(tmp_path: Path) -> None:
     assert (first == color(0, 0, 1, reset=True)).all()
     frames, depths = readback.column("env/0/depth/front", "DepthImage:buffer")
     assert frames == [3, 7, 11]
-    depth = np.frombuffer(bytes(depths[0][0]), np.float32).reshape(SIZE)
+    depth = np.frombuffer(bytes(depths[0][0]), np.float16).reshape(SIZE)
     assert (depth[0] == 0).all() and (depth[1:] == 7.5).all()  # sky (inf) -> 0: "no depth"
 
 

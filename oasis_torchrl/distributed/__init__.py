@@ -1,0 +1,29 @@
+"""Scale-out: rollouts and recording on Ray through TorchRL's ``RayCollector``.
+
+- :class:`RayCollectionConfig`: the ``ray`` config section.
+- :class:`RayCollection`: the distributed collector over OasisEnvs, whose worker envs come
+  from :func:`oasis_env_factory` or :func:`training_env_factory`.
+- :class:`ShardRecorder`: one worker's LeRobot shard; :func:`merge_shards`: one dataset from all.
+"""
+
+from oasis_torchrl.distributed.config import RayCollectionConfig
+from oasis_torchrl.distributed.merge import complete_shards, merge_shards
+from oasis_torchrl.distributed.ray_collection import (
+    RayCollection,
+    WorkerLostError,
+    oasis_env_factory,
+    training_env_factory,
+)
+from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER, ShardRecorder
+
+__all__ = [
+    "COMPLETE_MARKER",
+    "RayCollection",
+    "RayCollectionConfig",
+    "ShardRecorder",
+    "WorkerLostError",
+    "complete_shards",
+    "merge_shards",
+    "oasis_env_factory",
+    "training_env_factory",
+]

@@ -1,0 +1,63 @@
+"""Merge the finalized shard parts of a sharded recording into one LeRobot dataset.
+
+The merge is lerobot's own ``aggregate_datasets``: episode indices are renumbered in shard
+order, tasks unified, videos and parquet files concatenated and the statistics aggregated.
+Parts without the completion marker (a worker killed mid-part) are skipped and named in the log.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER
+
+logger = logging.getLogger(__name__)
+
+
+def complete_shards(root: str | Path) -> list[Path]:
+    """The finalized shard parts under ``root``, in name (worker, then part) order.
+
+    Example:
+        >>> import tempfile
+        >>> complete_shards(tempfile.mkdtemp())
+        []
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"shard root {root} does not exist")
+    parts = sorted(path for path in root.iterdir() if path.is_dir())
+    incomplete = [path.name for path in parts if not (path / COMPLETE_MARKER).is_file()]
+    if incomplete:
+        logger.warning("skipping unfinished shard parts (worker lost mid-part): %s", incomplete)
+    return [path for path in parts if (path / COMPLETE_MARKER).is_file()]
+
+
+def merge_shards(root: str | Path, output: str | Path, *, repo_id: str | None = None) -> Path:
+    """Aggregate every finalized part under ``root`` into a new dataset at ``output``.
+
+    Args:
+        root: the sharded recording (``ray.shard_root``).
+        output: the merged dataset folder (must not exist).
+        repo_id: LeRobot repo id of the result (default ``local/<output folder name>``).
+
+    Example:
+        >>> merge_shards("recordings/shards", "recordings/drives")  # doctest: +SKIP
+        PosixPath('recordings/drives')
+    """
+    from lerobot.datasets.aggregate import aggregate_datasets
+
+    output = Path(output)
+    if output.exists():
+        raise FileExistsError(f"merge output {output} already exists")
+    shards = complete_shards(root)
+    if not shards:
+        raise ValueError(f"no finalized shard parts under {root}")
+    aggregate_datasets(
+        repo_ids=[f"local/{shard.name}" for shard in shards],
+        aggr_repo_id=repo_id or f"local/{output.name}",
+        roots=shards,
+        aggr_root=output,
+    )
+    logger.info("merged %d shard parts of %s into %s", len(shards), root, output)
+    return output

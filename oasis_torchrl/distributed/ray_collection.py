@@ -1,0 +1,255 @@
+"""Rollouts on Ray: TorchRL's :class:`~torchrl.collectors.distributed.RayCollector` over OasisEnvs.
+
+Every Ray actor runs a TorchRL collector over its own env(s); each ``OasisEnv`` opens its own
+channel in the actor (and, for ``endpoint="local"``, its own embedded server, or all share the
+``server_address`` of one ``oasis-torchrl serve``). Weights travel as TorchRL sends them
+(``RayWeightSyncScheme``). :class:`RayCollection` adds what a run needs around it: per-worker
+LeRobot shards, and a lost worker reported and then either dropped (``on_failure="continue"``)
+or the run stopped cleanly (``"stop"``), with every surviving shard finalized either way. In
+sync mode the round in which a worker dies is not yielded (the survivors' part of it is still
+recorded in their shards).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from collections.abc import Callable, Iterator
+from types import TracebackType
+from typing import Any
+
+import ray
+from omegaconf import DictConfig, OmegaConf
+from ray.exceptions import RayActorError
+from tensordict import TensorDictBase
+from torch import nn
+from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.collectors.distributed import RayCollector
+from torchrl.envs import EnvBase
+
+from oasis_torchrl.distributed.config import RayCollectionConfig
+from oasis_torchrl.distributed.sharded_recording import ShardRecorder
+
+logger = logging.getLogger(__name__)
+
+PING_TIMEOUT_S = 60.0
+"""How long a live worker may take to answer the liveness probe after a failure."""
+
+
+class WorkerLostError(RuntimeError):
+    """A Ray collector worker died and the run was stopped (``on_failure="stop"``)."""
+
+
+def oasis_env_factory(
+    make_env: Callable[..., EnvBase], config: RayCollectionConfig, **kwargs: Any
+) -> functools.partial[EnvBase]:
+    """A picklable constructor of one worker env with ``sessions_per_env`` rows.
+
+    With ``server_address`` set, the env talks to that shared server (with ground truth on);
+    otherwise it keeps its own endpoint (``"local"``: an embedded server per env).
+
+    Example:
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> make = oasis_env_factory(OasisEnv, RayCollectionConfig(sessions_per_env=2))
+        >>> make.keywords["num_envs"]
+        2
+    """
+    if config.server_address is not None:
+        kwargs = {**kwargs, "endpoint": config.server_address, "ground_truth": True}
+    return functools.partial(make_env, num_envs=config.sessions_per_env, **kwargs)
+
+
+def training_env_factory(
+    env_section: DictConfig, config: RayCollectionConfig
+) -> functools.partial[EnvBase]:
+    """A picklable constructor of one worker's training env (the ``env`` section of a training
+    config, see :func:`~oasis_torchrl.train.environment.build_env`) with ``sessions_per_env``
+    rows; ``server_address`` replaces ``env.endpoint``.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> make = training_env_factory(load_config("ppo").env, RayCollectionConfig())
+        >>> make().batch_size
+        torch.Size([4])
+    """
+    from oasis_torchrl.train.environment import build_env
+
+    kwargs: dict[str, Any] = {}
+    if config.server_address is not None:
+        env_section = OmegaConf.merge(env_section, {"endpoint": config.server_address})
+        kwargs["ground_truth"] = True
+    return functools.partial(build_env, env_section, num_envs=config.sessions_per_env, **kwargs)
+
+
+class RayCollection:
+    """A TorchRL Ray collector over OasisEnvs, with sharded recording and failure handling.
+
+    Iterate it like a collector: in ``sync`` mode each batch stacks one ``[N, T]`` batch per
+    live collector (``[C, N, T]``); otherwise batches come first-ready, ``[N, T]`` each.
+
+    Args:
+        config: where and how wide to run.
+        create_env: picklable env constructor (see :func:`oasis_env_factory`).
+        policy: the policy (an ``nn.Module``: its weights are what workers receive).
+        frames_per_batch: env steps per yielded batch (all rows, all collectors).
+        total_frames: env steps of the whole run.
+        recorder_kwargs: :class:`~oasis_torchrl.data.LeRobotRecorder` arguments of the shards
+            (used when ``config.shard_root`` is set).
+        **collector_kwargs: further arguments of each remote TorchRL collector.
+
+    Example:
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> config = RayCollectionConfig(num_collectors=2, sessions_per_env=2, num_cpus=2)
+        >>> with RayCollection(config, oasis_env_factory(OasisEnv, config), policy,
+        ...                    frames_per_batch=8, total_frames=16) as collection:
+        ...     [batch.shape for batch in collection]  # doctest: +SKIP
+        [torch.Size([2, 2, 2]), torch.Size([2, 2, 2])]
+    """
+
+    def __init__(
+        self,
+        config: RayCollectionConfig,
+        create_env: Callable[[], EnvBase],
+        policy: nn.Module,
+        *,
+        frames_per_batch: int,
+        total_frames: int,
+        recorder_kwargs: dict[str, Any] | None = None,
+        **collector_kwargs: Any,
+    ) -> None:
+        self.config = config
+        self.total_frames = total_frames
+        self.lost_workers: list[int] = []
+        self.shard_episodes: dict[int, int] = {}
+        self._recording = config.shard_root is not None
+        self._owns_ray = not ray.is_initialized() and config.is_local
+        if not ray.is_initialized():
+            ray.init(**config.init_kwargs())
+        self.collector = RayCollector(
+            create_env,
+            policy,
+            frames_per_batch=frames_per_batch,
+            total_frames=total_frames,
+            collector_class=Collector if config.envs_per_collector == 1 else MultiSyncCollector,
+            collector_kwargs=self._worker_kwargs(collector_kwargs, recorder_kwargs or {}),
+            num_workers_per_collector=config.envs_per_collector,
+            num_collectors=config.num_collectors,
+            remote_configs=config.remote_config(),
+            sync=config.sync,
+        )
+        self._workers = list(range(config.num_collectors))
+        self._closed = False
+        if isinstance(policy, nn.Module):
+            self.collector.update_policy_weights_(policy)
+
+    def _worker_kwargs(
+        self, collector_kwargs: dict[str, Any], recorder_kwargs: dict[str, Any]
+    ) -> list[dict[str, Any]]:
+        """One kwargs dict per remote collector (each with its own shard hook)."""
+        per_worker = [dict(collector_kwargs) for _ in range(self.config.num_collectors)]
+        if self._recording:
+            for worker, kwargs in enumerate(per_worker):
+                kwargs["post_collect_hook"] = ShardRecorder(
+                    self.config.shard_root,
+                    worker,
+                    part_batches=self.config.part_batches,
+                    **recorder_kwargs,
+                )
+        return per_worker
+
+    @property
+    def live_workers(self) -> list[int]:
+        """Indices (as configured) of the collectors still running."""
+        return list(self._workers)
+
+    def update_policy_weights_(self, policy: nn.Module | TensorDictBase) -> None:
+        """Send new weights to every live worker (TorchRL's Ray weight sync)."""
+        self.collector.update_policy_weights_(policy)
+
+    # -- iteration -----------------------------------------------------------------------
+
+    def __iter__(self) -> Iterator[TensorDictBase]:
+        """Yield batches until ``total_frames``; a lost worker is handled per ``on_failure``."""
+        while not self._closed and self.collector.collected_frames < self.total_frames:
+            try:
+                yield from self._batches()
+            except RayActorError as error:
+                self._on_worker_lost(error)
+
+    def _batches(self) -> Iterator[TensorDictBase]:
+        """TorchRL's iterator, left before it shuts the actors down so shards can finalize."""
+        iterator = self.collector.iterator()
+        try:
+            for batch in iterator:
+                yield batch
+                if self.collector.collected_frames >= self.total_frames:
+                    return
+        finally:
+            iterator.close()
+
+    def _on_worker_lost(self, error: RayActorError) -> None:
+        lost = self._dead_workers()
+        self.lost_workers.extend(lost)
+        logger.error("Ray collector worker(s) %s lost: %s", lost, error)
+        self._drop(lost)
+        if self.config.on_failure == "stop" or not self._workers:
+            self.close()
+            raise WorkerLostError(
+                f"Ray collector worker(s) {lost} lost (on_failure={self.config.on_failure!r}); "
+                f"the shards of the other workers are finalized"
+            ) from error
+        logger.warning("continuing with workers %s", self._workers)
+
+    def _dead_workers(self) -> list[int]:
+        """Configured indices of the actors that no longer answer."""
+        dead = []
+        for worker, actor in zip(self._workers, self.collector.remote_collectors, strict=True):
+            try:
+                ray.get(actor.get_distant_attr.remote("frames_per_batch"), timeout=PING_TIMEOUT_S)
+            except RayActorError:
+                dead.append(worker)
+        return dead
+
+    def _drop(self, lost: list[int]) -> None:
+        """Remove lost actors from the collector and its weight senders (TorchRL 0.13 layout:
+        RayCollector has no public way to shrink)."""
+        keep = [i for i, worker in enumerate(self._workers) if worker not in lost]
+        actors = [self.collector.remote_collectors[i] for i in keep]
+        self.collector._remote_collectors = actors
+        self.collector.num_collectors = len(actors)
+        self.collector._batches_since_weight_update = [0] * len(actors)
+        for scheme in (self.collector._weight_sync_schemes or {}).values():
+            scheme._remote_collectors = list(actors)
+            scheme._num_workers = len(actors)
+        self._workers = [self._workers[i] for i in keep]
+
+    # -- closing -------------------------------------------------------------------------
+
+    def close(self) -> dict[int, int]:
+        """Finalize the live workers' shards, stop the actors (and a Ray runtime started here).
+
+        Returns the episodes each live worker recorded (empty without recording).
+        """
+        if self._closed:
+            return self.shard_episodes
+        self._closed = True
+        try:
+            if self._recording and self._workers:
+                episodes = self.collector.map_fn("post_collect_hook.close")
+                self.shard_episodes = dict(zip(self._workers, episodes, strict=True))
+        finally:
+            self.collector.shutdown(shutdown_ray=False)
+            if self._owns_ray:
+                ray.shutdown()
+        return self.shard_episodes
+
+    def __enter__(self) -> RayCollection:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
