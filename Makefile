@@ -5,7 +5,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-EXTRAS := dev,lerobot,rerun,depth
+EXTRAS := dev,lerobot,rerun,depth,ray
 DEMO_OUT ?= outputs/demo
 
 .PHONY: demo test lint protos lock bench clean-venv

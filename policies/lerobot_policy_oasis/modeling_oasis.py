@@ -91,7 +91,9 @@ class OasisPolicy(PreTrainedPolicy):
         for key in [*self._image_keys, OBS_STATE]:
             value = self._get(observation, key)
             history = self._history.setdefault(key, deque(maxlen=self.config.n_obs_steps))
-            history.extend([value] * (history.maxlen - len(history) if not history else 1))
+            if not history:
+                history.extend([value] * (self.config.n_obs_steps - 1))
+            history.append(value)
             stacked[key] = torch.stack(list(history), dim=1)
         return stacked
 

@@ -11,71 +11,105 @@ from oasis_torchrl.models import (
     DrivingNet,
     DrivingNetConfig,
     MultiCameraEncoder,
+    as_float_frames,
     make_actor_critic,
 )
 
 SIZE = (32, 48)
 
 
-def _images(batch: tuple[int, ...], cameras: int = 3) -> list[torch.Tensor]:
-    return [torch.rand(*batch, 3, *SIZE) for _ in range(cameras)]
+def _frames(batch: tuple[int, ...], frames: int = 2, cameras: int = 3) -> list[torch.Tensor]:
+    return [torch.rand(*batch, frames, 3, *SIZE) for _ in range(cameras)]
 
 
-def _observation(net: DrivingNet, batch: int) -> TensorDict:
-    images = dict(zip(net.config.cameras, _images((batch,)), strict=True))
-    return TensorDict({"images": images, "state": torch.rand(batch, 2) * 2 - 1}, [batch])
+def _pixels(net: DrivingNet, batch: int) -> TensorDict:
+    """Env-style observation: uint8 [B, 4, H, W, 3] per camera and a state."""
+    pixels = {
+        camera: torch.randint(0, 256, (batch, 4, *SIZE, 3), dtype=torch.uint8)
+        for camera in net.config.cameras
+    }
+    return TensorDict({"pixels": pixels, "state": torch.rand(batch, 2) * 2 - 1}, [batch])
+
+
+def _trained_looking(net: DrivingNet) -> DrivingNet:
+    with torch.no_grad():
+        net.actor[-1].weight.normal_()  # leave the near-zero initialisation
+    return net
 
 
 @pytest.mark.parametrize("shared", [True, False])
 def test_encoder_keeps_leading_dims(shared: bool) -> None:
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE, shared_encoder=shared))
-    assert encoder(_images((2, 5))).shape == (2, 5, 3 * 128)
+    assert encoder(_frames((2, 5))).shape == (2, 5, 3 * 128)
 
 
 def test_separate_weights_keep_cameras_apart() -> None:
     torch.manual_seed(0)
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE, shared_encoder=False))
-    images = _images((4,))
-    base = encoder(images).view(4, 3, -1)
-    images[0] = torch.rand_like(images[0])
-    changed = encoder(images).view(4, 3, -1)
+    frames = _frames((4,))
+    base = encoder(frames).view(4, 3, -1)
+    frames[0] = torch.rand_like(frames[0])
+    changed = encoder(frames).view(4, 3, -1)
     assert not torch.allclose(base[:, 0], changed[:, 0])
     torch.testing.assert_close(base[:, 1:], changed[:, 1:])
 
 
 def test_shared_weights_treat_cameras_alike() -> None:
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE, shared_encoder=True))
-    image = torch.rand(2, 3, *SIZE)
-    features = encoder([image, image, image]).view(2, 3, -1)
+    frames = torch.rand(2, 2, 3, *SIZE)
+    features = encoder([frames, frames, frames]).view(2, 3, -1)
     torch.testing.assert_close(features[:, 0], features[:, 2])
     separate = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE, shared_encoder=False))
-    assert not torch.allclose(*separate([image, image, image]).view(2, 3, -1)[:, :2].unbind(1))
+    assert not torch.allclose(*separate([frames, frames, frames]).view(2, 3, -1)[:, :2].unbind(1))
 
 
-def test_encoder_rejects_wrong_camera_count() -> None:
+def test_encoder_rejects_wrong_inputs() -> None:
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE))
     with pytest.raises(ValueError, match="expected 3 camera images, got 2"):
-        encoder(_images((1,), cameras=2))
+        encoder(_frames((1,), cameras=2))
+    with pytest.raises(ValueError, match=r"camera frames must be \[\.\.\., 2, 3, H, W\]"):
+        encoder(_frames((1,), frames=1))
+
+
+def test_the_network_sees_motion_between_frames() -> None:
+    torch.manual_seed(0)
+    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE)))
+    still = torch.rand(1, 3, *SIZE).expand(2, 3, *SIZE)
+    moving = torch.stack([torch.rand(3, *SIZE), still[0]])
+    state = torch.zeros(1, 2)
+    chunk_still = net([still.unsqueeze(0)] * 3, state)
+    chunk_moving = net([moving.unsqueeze(0)] * 3, state)
+    assert not torch.allclose(chunk_still, chunk_moving)
+    longer = torch.cat([torch.rand(1, 2, 3, *SIZE), still.unsqueeze(0)], dim=1)  # 4 frames
+    torch.testing.assert_close(net([longer] * 3, state), chunk_still)  # the last 2 are used
+    with pytest.raises(ValueError, match=r"\[\*B, >=2, 3, H, W\]"):
+        net([still[:1]] * 3, state)
 
 
 def test_deterministic_actor_is_the_bc_chunk() -> None:
     torch.manual_seed(0)
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE))
-    with torch.no_grad():
-        net.actor[-1].weight.normal_()  # leave the near-zero initialisation
-    td = _observation(net, 3)
+    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE)))
+    td = _pixels(net, 3)
     policy = make_actor_critic(net).policy
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         action = policy(td.clone())["action"]
-        chunk = net([td["images", c] for c in net.config.cameras], td["state"])
+        frames = [as_float_frames(td["pixels", camera]) for camera in net.config.cameras]
+        chunk = net(frames, td["state"])
     torch.testing.assert_close(action, chunk)
     assert chunk.abs().max() < 1 and chunk.std() > 0.1
+
+
+def test_float_images_work_for_a_one_frame_network() -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, frames=1))
+    images = {camera: torch.rand(2, 3, *SIZE) for camera in net.config.cameras}
+    td = TensorDict({"images": images, "state": torch.zeros(2, 2)}, [2])
+    assert make_actor_critic(net, image_key="images").policy(td)["action"].shape == (2, 4, 2)
 
 
 def test_stochastic_actor_samples_in_bounds_with_finite_log_prob() -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_scale=2.0))
     modules = make_actor_critic(net)
-    td = modules.value(modules.policy(_observation(net, 64)))
+    td = modules.value(modules.policy(_pixels(net, 64)))
     assert td["action"].shape == (64, 4, 2)
     assert td["action"].abs().max() <= 1.0
     assert torch.isfinite(td["action_log_prob"]).all() and td["action_log_prob"].shape == (64,)
@@ -89,7 +123,7 @@ def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
     assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.2] * 8)
     with pytest.raises(ValueError, match="scale must be positive"):
         net.set_scale(0.0)
-    td = make_actor_critic(net).value(_observation(net, 2))
+    td = make_actor_critic(net).value(_pixels(net, 2))
     td["state_value"].sum().backward()
     assert net.encoder.convs[0].weight.grad.abs().sum() > 0
     assert net.actor[0].weight.grad is None

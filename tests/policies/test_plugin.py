@@ -33,7 +33,8 @@ def _config(action_dim: int = 2, **overrides: object) -> OasisConfig:
     )
 
 
-def _batch(size: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
+def _observation(size: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
+    """One step's observation, as an env gives it to ``select_action``."""
     generator = torch.Generator().manual_seed(seed)
     batch = {
         f"observation.images.{camera}": torch.rand(size, 3, *SIZE, generator=generator)
@@ -41,6 +42,11 @@ def _batch(size: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
     }
     batch["observation.state"] = torch.rand(size, 2, generator=generator) * 2 - 1
     return batch
+
+
+def _stacked(*observations: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Consecutive observations stacked on dim 1, as a dataset batch holds them."""
+    return {key: torch.stack([o[key] for o in observations], dim=1) for key in observations[0]}
 
 
 def _policy(**overrides: object) -> OasisPolicy:
@@ -59,27 +65,27 @@ def test_lerobot_discovers_the_plugin() -> None:
     assert type(post.steps[0]).__name__ == "UnnormalizerProcessorStep"
 
 
-def test_select_action_serves_the_queued_chunk() -> None:
+def test_select_action_serves_the_queued_chunk_and_remembers_frames() -> None:
     policy = _policy()
-    first = _batch(seed=1)
-    chunk = policy.predict_action_chunk(first)
-    served = [policy.select_action(first if k == 0 else _batch(seed=10 + k)) for k in range(4)]
-    torch.testing.assert_close(torch.stack(served, dim=1), chunk)  # later observations ignored
-    new = _batch(seed=2)
-    torch.testing.assert_close(policy.select_action(new), policy.predict_action_chunk(new)[:, 0])
+    steps = [_observation(seed=k) for k in range(6)]
+    chunk = policy.predict_action_chunk(_stacked(steps[0], steps[0]))  # reset: no motion yet
+    served = [policy.select_action(step) for step in steps[:4]]
+    torch.testing.assert_close(torch.stack(served, dim=1), chunk)  # later observations queued
+    # The next chunk sees the previous frame and the current one.
+    expected = policy.predict_action_chunk(_stacked(steps[3], steps[4]))[:, 0]
+    torch.testing.assert_close(policy.select_action(steps[4]), expected)
     policy.reset()
-    torch.testing.assert_close(policy.select_action(first), chunk[:, 0])
+    torch.testing.assert_close(policy.select_action(steps[0]), chunk[:, 0])
 
 
 def test_n_action_steps_limits_the_queue() -> None:
     policy = _policy(n_action_steps=2)
-    first, second = _batch(seed=1), _batch(seed=2)
-    chunk = policy.predict_action_chunk(first)
+    first, second, third = (_observation(seed=k) for k in range(3))
+    chunk = policy.predict_action_chunk(_stacked(first, first))
     served = [policy.select_action(first), policy.select_action(second)]
     torch.testing.assert_close(torch.stack(served, dim=1), chunk[:, :2])
-    torch.testing.assert_close(
-        policy.select_action(second), policy.predict_action_chunk(second)[:, 0]
-    )
+    expected = policy.predict_action_chunk(_stacked(second, third))[:, 0]
+    torch.testing.assert_close(policy.select_action(third), expected)
 
 
 def test_save_and_load_round_trip(tmp_path: Path) -> None:
@@ -87,7 +93,7 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
     policy.save_pretrained(tmp_path)
     loaded = OasisPolicy.from_pretrained(tmp_path)
     assert loaded.config.shared_encoder is False and loaded.config.camera_features == 32
-    batch = _batch()
+    batch = _stacked(_observation(seed=0), _observation(seed=1))
     torch.testing.assert_close(
         loaded.predict_action_chunk(batch), policy.predict_action_chunk(batch)
     )
@@ -95,7 +101,7 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
 
 def test_forward_masks_padded_actions() -> None:
     policy = _policy()
-    batch = _batch()
+    batch = _stacked(_observation(seed=0), _observation(seed=1))
     target = policy.predict_action_chunk(batch).clone()
     batch["action"] = target.clone()
     batch["action"][:, 2:] = 5.0  # wrong, but padding

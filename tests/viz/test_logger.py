@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import pickle
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -246,10 +248,12 @@ def test_live_viewer_over_grpc(tmp_path: Path) -> None:
     """A headless rerun server stands in for the viewer: it saves what it receives."""
     port, received = _free_port(), tmp_path / "received.rrd"
     command = [sys.executable, "-m", "rerun", "--bind", "127.0.0.1", "--port", str(port)]
+    # Its own process group: `python -m rerun` runs the server binary as a child process.
     server = subprocess.Popen(
         [*command, "--save", str(received), "--memory-limit", "100MB"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,
     )
     try:
         _wait_for_port(port)
@@ -257,7 +261,7 @@ def test_live_viewer_over_grpc(tmp_path: Path) -> None:
             rerun_logger.log_rollout(rollout(2, 2))
         readback = _wait_for_entities(received, "env/1/camera/front", count=3)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=10)
     expected = [reward(1, t) for t in range(2)]
     assert readback.scalars("env/1/reward/total")[1] == pytest.approx(expected)
