@@ -14,7 +14,6 @@ Every driver returns action chunks ``[N, 4, 2]`` (or ``[N, 2]`` for an env built
 
 from __future__ import annotations
 
-import functools
 import logging
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
@@ -30,7 +29,7 @@ from oasis_torchrl.client import TRUTH_FIELDS
 from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
 from oasis_torchrl.client.wire import ACTIONS_PER_CHUNK
 from oasis_torchrl.sim.autopilot import Autopilot as SimAutopilot
-from oasis_torchrl.sim.scene import Scene, build_scene
+from oasis_torchrl.sim.scene import Scene, cached_scene
 from oasis_torchrl.sim.vehicle import VehicleState
 from oasis_torchrl.sim.world import FrameTruth, World
 
@@ -69,17 +68,6 @@ class Driver(ABC):
 
 
 # -- autopilot ----------------------------------------------------------------------------
-
-
-@functools.lru_cache(maxsize=64)
-def cached_scene(prompt: str, seed: int) -> Scene:
-    """The world of ``(prompt, seed)``, built once per process (building is deterministic).
-
-    Example:
-        >>> cached_scene("rural road", 3) is cached_scene("rural road", 3)
-        True
-    """
-    return build_scene(prompt, seed)
 
 
 def _row_strings(td: TensorDictBase, key: str) -> list[str]:

@@ -35,6 +35,7 @@ rightmost lane; the car starts in it, at rest, at ``s = 0``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import logging
 import re
@@ -659,3 +660,14 @@ def build_scene(prompt: str, seed: int = 0) -> Scene:
         roadside=roadside,
         detail_seed=int(rng.integers(2**62)),
     )
+
+
+@functools.lru_cache(maxsize=64)
+def cached_scene(prompt: str, seed: int) -> Scene:
+    """:func:`build_scene`, reusing recent worlds (building is deterministic; scenes immutable).
+
+    Example:
+        >>> cached_scene("rural road", 3) is cached_scene("rural road", 3)
+        True
+    """
+    return build_scene(prompt, seed)

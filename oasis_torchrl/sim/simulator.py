@@ -11,7 +11,6 @@ fast tests and privileged data collection.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ import numpy as np
 
 from oasis_torchrl.proto import sim_pb2
 from oasis_torchrl.sim.render import CAMERAS, Renderer
-from oasis_torchrl.sim.scene import OBSTACLE_KINDS, Scene, build_scene
+from oasis_torchrl.sim.scene import OBSTACLE_KINDS, Scene, cached_scene
 from oasis_torchrl.sim.world import FrameTruth, World
 
 __all__ = ["CAMERA_NAMES", "FrameTruth", "Simulator", "StepResult"]
@@ -33,7 +32,6 @@ CHUNK = 4
 #: Spacing of the centreline samples in :meth:`Simulator.scene_proto`, metres.
 CENTERLINE_SPACING = 2.0
 #: Scenes kept for reuse across resets (building one takes a few tens of milliseconds).
-SCENE_CACHE_SIZE = 8
 _MAX_SEED = 2**64 - 1
 _MIN_SIZE = 8
 
@@ -57,10 +55,44 @@ class StepResult:
     truth: tuple[FrameTruth, ...]
 
 
-@functools.lru_cache(maxsize=SCENE_CACHE_SIZE)
-def _cached_scene(prompt: str, seed: int) -> Scene:
-    """:func:`build_scene` with reuse of recent scenes (scenes are immutable)."""
-    return build_scene(prompt, seed)
+def scene_proto(scene: Scene) -> sim_pb2.SceneResponse:
+    """The static world as ``SimService/GetScene`` reports it: centreline samples, road width,
+    lanes, obstacles, prompt and seed.
+
+    Example:
+        >>> proto = scene_proto(cached_scene("rural road", 3))
+        >>> proto.prompt, proto.seed, len(proto.centerline_x) > 100
+        ('rural road', 3, True)
+    """
+    x, y = scene.road.samples(CENTERLINE_SPACING)
+    obstacles = scene.obstacles
+    return sim_pb2.SceneResponse(
+        prompt=scene.prompt,
+        seed=scene.seed,
+        centerline_x=x.tolist(),
+        centerline_y=y.tolist(),
+        road_half_width=scene.style.road_half_width,
+        lanes=scene.style.lanes,
+        obstacles=[
+            sim_pb2.Obstacle(
+                kind=OBSTACLE_KINDS[kind],
+                x=float(x_),
+                y=float(y_),
+                heading=float(heading),
+                length=float(length),
+                width=float(width),
+            )
+            for kind, x_, y_, heading, length, width in zip(
+                obstacles.kind.tolist(),
+                obstacles.x,
+                obstacles.y,
+                obstacles.heading,
+                obstacles.length,
+                obstacles.width,
+                strict=True,
+            )
+        ],
+    )
 
 
 def _validate_size(name: str, value: int) -> int:
@@ -170,7 +202,7 @@ class Simulator:
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
         if not 0 <= seed <= _MAX_SEED:
             raise ValueError(f"seed must be within [0, 2**64 - 1], got {seed}")
-        self.load_scene(_cached_scene(prompt, int(seed)))
+        self.load_scene(cached_scene(prompt, int(seed)))
 
     def load_scene(self, scene: Scene) -> None:
         """Start over in ``scene`` (e.g. a generated scene with scripted obstacles, see
@@ -217,37 +249,8 @@ class Simulator:
         return self._depth
 
     def scene_proto(self) -> sim_pb2.SceneResponse:
-        """The static world: centreline samples, road width, lanes, obstacles, prompt, seed."""
-        scene = self.scene
-        x, y = scene.road.samples(CENTERLINE_SPACING)
-        obstacles = scene.obstacles
-        return sim_pb2.SceneResponse(
-            prompt=scene.prompt,
-            seed=scene.seed,
-            centerline_x=x.tolist(),
-            centerline_y=y.tolist(),
-            road_half_width=scene.style.road_half_width,
-            lanes=scene.style.lanes,
-            obstacles=[
-                sim_pb2.Obstacle(
-                    kind=OBSTACLE_KINDS[kind],
-                    x=float(x_),
-                    y=float(y_),
-                    heading=float(heading),
-                    length=float(length),
-                    width=float(width),
-                )
-                for kind, x_, y_, heading, length, width in zip(
-                    obstacles.kind.tolist(),
-                    obstacles.x,
-                    obstacles.y,
-                    obstacles.heading,
-                    obstacles.length,
-                    obstacles.width,
-                    strict=True,
-                )
-            ],
-        )
+        """The static world of the current scene (see :func:`scene_proto`)."""
+        return scene_proto(self.scene)
 
     def _require_world(self) -> World:
         if self._world is None:

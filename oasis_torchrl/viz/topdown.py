@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from oasis_torchrl.proto import sim_pb2
-from oasis_torchrl.sim.simulator import Simulator
+from oasis_torchrl.sim.scene import cached_scene
+from oasis_torchrl.sim.simulator import scene_proto
 from oasis_torchrl.sim.vehicle import VehicleParams
 
 Color = tuple[int, int, int]
@@ -46,9 +47,7 @@ def local_scene(prompt: str, seed: int) -> sim_pb2.SceneResponse:
         >>> scene.prompt, scene.seed, len(scene.centerline_x) > 100
         ('rural road', 3, True)
     """
-    simulator = Simulator(width=8, height=8)  # the smallest renderer: only the scene is needed
-    simulator.reset(prompt, int(seed))
-    return simulator.scene_proto()
+    return scene_proto(cached_scene(prompt, int(seed)))
 
 
 def to_view(points: np.ndarray) -> np.ndarray:
