@@ -3,8 +3,8 @@
 The peer (decart-robotics' RL extras): one shared CNN per camera at 128x192 (conv 16 k5 s2,
 conv 32 k3 s2, global average pool), the three concatenated and projected to 384, then
 Stable-Baselines3's default PPO heads (two 64-unit MLPs for the policy and the value). Ours:
-:class:`~oasis_torchrl.models.DrivingNet` (three convolutions, a pooled 4x6 grid per camera,
-256-unit actor and value MLPs; a 4-action chunk per call).
+:class:`~oasis_torchrl.models.DrivingNet` (three convolutions over the last two frames of each
+camera, a pooled 4x6 grid per camera, 256-unit actor and value MLPs; a 4-action chunk per call).
 
 Cases, each the action (chunk) and the value for a batch, best of several repeats:
 
@@ -75,12 +75,14 @@ def time_per_sample(
     model: Callable[[list[torch.Tensor]], tuple[torch.Tensor, torch.Tensor]],
     parameters: list[nn.Parameter],
     size: tuple[int, int],
+    frames: int,
     batch: int,
     train: bool,
     repeats: int,
 ) -> float:
-    """Best-of-``repeats`` microseconds per sample."""
-    images = [torch.rand(batch, 3, *size) for _ in CAMERAS]
+    """Best-of-``repeats`` microseconds per sample (``frames`` per camera; 0: no time axis)."""
+    shape = (batch, frames, 3, *size) if frames else (batch, 3, *size)
+    images = [torch.rand(shape) for _ in CAMERAS]
     iterations = max(3, 256 // batch)
 
     def once() -> None:
@@ -112,18 +114,18 @@ def main() -> None:
     torch.manual_seed(0)
 
     peer = PeerPolicy()
-    models = {"peer_128x192": (peer, list(peer.parameters()), PEER_SIZE)}
+    models = {"peer_128x192": (peer, list(peer.parameters()), PEER_SIZE, 0)}
     for shared in (True, False):
         for size in ((64, 96), PEER_SIZE):
             net = DrivingNet(DrivingNetConfig(shared_encoder=shared, image_size=size))
             name = f"ours_{'shared' if shared else 'separate'}_{size[0]}x{size[1]}"
-            models[name] = (ours(net), list(net.parameters()), size)
+            models[name] = (ours(net), list(net.parameters()), size, net.config.frames)
 
     results: dict[str, dict[str, float]] = {}
-    for name, (model, parameters, size) in models.items():
+    for name, (model, parameters, size, frames) in models.items():
         results[name] = {
             f"{case}_us_per_sample": round(
-                time_per_sample(model, parameters, size, batch, train, args.repeats), 1
+                time_per_sample(model, parameters, size, frames, batch, train, args.repeats), 1
             )
             for case, (batch, train) in CASES.items()
         }

@@ -47,6 +47,10 @@ class FrameDecoder(Protocol):
         """Decode ``packet`` into ``out`` (uint8 ``[H, W, 3]``), scaling to ``out``'s size."""
         ...
 
+    def skip(self, packet: bytes) -> None:
+        """Consume ``packet`` to keep the stream in sync, without producing RGB."""
+        ...
+
     def reset(self) -> None:
         """Forget the stream's state: the next packet starts a new clip."""
         ...
@@ -90,6 +94,10 @@ class Vp9Decoder:
         )
         np.copyto(out, rgb.to_ndarray())
 
+    def skip(self, packet: bytes) -> None:
+        """Decode ``packet`` (the stream state advances) but skip the RGB conversion."""
+        self._decode(packet)
+
     def _decode(self, packet: bytes) -> av.VideoFrame:
         try:
             frames = self._context.decode(av.Packet(packet))
@@ -127,6 +135,9 @@ class JpegDecoder:
     def reset(self) -> None:
         """JPEG frames are independent: nothing to reset."""
 
+    def skip(self, packet: bytes) -> None:
+        """JPEG frames are independent: a skipped frame needs no decoding."""
+
     def decode_into(self, packet: bytes, out: np.ndarray) -> None:
         """Decode one JPEG image into ``out``, scaled to ``out``'s size."""
         height, width = out.shape[:2]
@@ -160,18 +171,26 @@ def make_decoder(frame_format: int, stream: str, *, threads: int = 0) -> FrameDe
     )
 
 
-def decode_chunk(decoder: FrameDecoder, packets: Sequence[bytes], out: np.ndarray) -> None:
-    """Decode a chunk of packets in order into ``out`` (uint8 ``[frames, H, W, 3]``).
+def decode_chunk(
+    decoder: FrameDecoder, packets: Sequence[bytes], out: np.ndarray, chunk: int | None = None
+) -> None:
+    """Decode a chunk of ``chunk`` packets in order; ``out`` (uint8 ``[k, H, W, 3]``) receives
+    its last ``k`` frames. Earlier frames are still decoded, keeping a stateful stream in sync,
+    but never converted to RGB (the conversion is most of the cost).
 
     >>> import numpy as np
-    >>> decode_chunk(JpegDecoder("front"), [], np.empty((4, 8, 8, 3), np.uint8))
+    >>> decode_chunk(JpegDecoder("front"), [], np.empty((1, 8, 8, 3), np.uint8), chunk=4)
     Traceback (most recent call last):
     ...
     oasis_torchrl.client.errors.DecodeError: cannot decode stream 'front': expected 4 frames, got 0
     """
-    if len(packets) != len(out):
-        raise DecodeError(decoder.stream, f"expected {len(out)} frames, got {len(packets)}")
-    for packet, slot in zip(packets, out, strict=True):
+    expected = len(out) if chunk is None else chunk
+    if len(packets) != expected or len(out) > expected:
+        raise DecodeError(decoder.stream, f"expected {expected} frames, got {len(packets)}")
+    skipped = len(packets) - len(out)
+    for packet in packets[:skipped]:
+        decoder.skip(packet)
+    for packet, slot in zip(packets[skipped:], out, strict=True):
         decoder.decode_into(packet, slot)
 
 

@@ -74,6 +74,9 @@ FRAMES_PER_CHUNK = wire.ACTIONS_PER_CHUNK
 # Finish at close is best effort: a hung server must not hold close() for the full call timeout.
 FINISH_TIMEOUT_S = 5.0
 ZERO_CHUNK = np.zeros((FRAMES_PER_CHUNK, 2), np.float32)
+FRAME_SELECTIONS = {"all": FRAMES_PER_CHUNK, "last": 1}
+"""``frames=`` of :class:`SessionPool`: frames kept per chunk (``"last"`` skips the RGB
+conversion of the first three, which an env observing only the last frame never reads)."""
 RECOVERABLE_STEP_ERRORS = (TransportError, SessionLostError, SequenceError, DecodeError)
 
 RowSlots = dict[str, np.ndarray]
@@ -219,7 +222,12 @@ class _PoolSession:
         decoded = await _gather(
             [
                 loop.run_in_executor(
-                    self.executor, decode_chunk, self.decoders[name], packets.get(name, ()), out
+                    self.executor,
+                    decode_chunk,
+                    self.decoders[name],
+                    packets.get(name, ()),
+                    out,
+                    FRAMES_PER_CHUNK,
                 )
                 for name, out in slots.items()
             ]
@@ -301,7 +309,8 @@ class SessionPool:
 
     Constructing a pool opens nothing (it pickles, so a worker process can open it);
     :meth:`start` (or the first call that needs it, or ``with``) connects and Initializes all
-    sessions.
+    sessions. ``frames="last"`` returns only the last frame of each chunk (``[n, 1, H, W, 3]``):
+    the other three are still decoded, so the streams stay in sync, but never converted to RGB.
 
     >>> pool = SessionPool("http://127.0.0.1:1", num_sessions=4, api_key="secret")
     >>> import pickle
@@ -325,7 +334,10 @@ class SessionPool:
         required_streams: Sequence[str] = DEFAULT_REQUIRED_STREAMS,
         decode_threads: int | None = None,
         client_sdk_version: str = DEFAULT_SDK_VERSION,
+        frames: str = "all",
     ) -> None:
+        if frames not in FRAME_SELECTIONS:
+            raise ValueError(f"frames must be one of {sorted(FRAME_SELECTIONS)}, got {frames!r}")
         if isinstance(num_sessions, bool) or not isinstance(num_sessions, int) or num_sessions < 1:
             raise ValueError(f"num_sessions must be a positive int, got {num_sessions!r}")
         if decode_threads is not None and decode_threads < 1:
@@ -342,6 +354,7 @@ class SessionPool:
         self.required_streams = tuple(required_streams)
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
+        self.frames = frames
         self._num_sessions = num_sessions
         self._target = parse_endpoint(endpoint, tls).address
         self._streams: tuple[StreamInfo, ...] = ()
@@ -630,8 +643,9 @@ class SessionPool:
     ) -> PoolStep:
         """Run ``row_step`` for every selected row concurrently into fresh output arrays."""
         height, width = self.frame_size
+        kept = FRAME_SELECTIONS[self.frames]
         frames = {
-            name: np.empty((len(rows), FRAMES_PER_CHUNK, height, width, 3), np.uint8)
+            name: np.empty((len(rows), kept, height, width, 3), np.uint8)
             for name in self.stream_names
         }
         coroutines = [

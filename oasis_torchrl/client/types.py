@@ -112,7 +112,8 @@ class PoolStep:
     """
 
     frames: dict[str, np.ndarray]
-    """stream -> uint8 ``[n, 4, H, W, 3]``, one array per stream."""
+    """stream -> uint8 ``[n, F, H, W, 3]``, one array per stream; F is 4, or 1 for a pool built
+    with ``frames="last"`` (the chunk's last frame)."""
     truth: np.ndarray | None
     """float64 ``[n, 4, K]`` ground truth in ``TRUTH_FIELDS`` order (NaN where missing), or None."""
     status: np.ndarray

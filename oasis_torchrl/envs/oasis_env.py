@@ -198,6 +198,7 @@ class OasisEnv(EnvBase):
             timeout=self.timeout,
             retry=self.retry,
             resize=self._frame_size,
+            frames="all" if self.all_frames else "last",
         )
         try:
             pool.start()

@@ -19,10 +19,10 @@ __all__ = [
     "CHUNK",
     "POLICY_IMAGE_SIZE",
     "ActorCritic",
-    "as_float_frames",
     "DrivingNet",
     "DrivingNetConfig",
     "MultiCameraEncoder",
+    "as_float_frames",
     "make_actor_critic",
     "observation_keys",
 ]

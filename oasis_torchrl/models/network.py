@@ -29,9 +29,10 @@ class DrivingNet(nn.Module):
 
     Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` (the
     last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1; the state
-    is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state. The actor MLP gives ``loc`` ``[..., 4, 2]``
-    (before the tanh); the scale is a learned, observation-independent ``[4, 2]`` parameter (the
-    usual choice for PPO; behaviour cloning leaves it untouched). The critic MLP gives the value.
+    is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state. The actor MLP gives
+    ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned, observation-independent
+    ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning leaves it untouched). The
+    critic MLP gives the value.
 
     Example:
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), frames=2))

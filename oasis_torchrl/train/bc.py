@@ -48,21 +48,27 @@ class BCResult:
 
 
 def random_shift(images: torch.Tensor, pad: int) -> torch.Tensor:
-    """Shift each image ``[B, 3, H, W]`` by up to ``pad`` pixels (replicate padding, DrQ style).
+    """Shift each sample's frames ``[B, ..., H, W]`` by up to ``pad`` pixels, all frames of a
+    sample alike (replicate padding, DrQ style).
 
     Example:
-        >>> random_shift(torch.rand(2, 3, 8, 12), pad=2).shape
-        torch.Size([2, 3, 8, 12])
+        >>> random_shift(torch.rand(2, 2, 3, 8, 12), pad=2).shape
+        torch.Size([2, 2, 3, 8, 12])
     """
     if pad <= 0:
         return images
     height, width = images.shape[-2:]
-    padded = F.pad(images, (pad, pad, pad, pad), mode="replicate")
+    flat = images.reshape(images.shape[0], -1, height, width)
+    padded = F.pad(flat, (pad, pad, pad, pad), mode="replicate")
     offsets = torch.randint(0, 2 * pad + 1, (images.shape[0], 2)).tolist()
-    # One slice copy per image is several times faster than a gather over every pixel.
-    return torch.stack(
-        [image[:, r : r + height, c : c + width] for image, (r, c) in zip(padded, offsets)]
+    # One slice copy per sample is several times faster than a gather over every pixel.
+    shifted = torch.stack(
+        [
+            sample[:, r : r + height, c : c + width]
+            for sample, (r, c) in zip(padded, offsets, strict=True)
+        ]
     )
+    return shifted.reshape(images.shape)
 
 
 def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:

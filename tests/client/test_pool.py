@@ -51,6 +51,24 @@ def test_concurrent_steps_match_the_sync_client_frame_for_frame(
                 np.testing.assert_array_equal(step.frames[name][row], expected[k][name])
 
 
+def test_last_frame_pool_returns_exactly_the_last_frames(
+    local_server: LocalServer, pool: SessionPool
+) -> None:
+    chunks = action_chunks(3, 3)
+    with SessionPool(
+        local_server.endpoint, 3, api_key=local_server.api_key, frames="last"
+    ) as last_only:
+        for full in (pool, last_only):
+            full.prompt([PROMPT] * 3, seeds=SEEDS)
+        for chunk in chunks:
+            every, last = pool.infer(chunk), last_only.infer(chunk)
+            for name in STREAMS:
+                assert last.frames[name].shape == (3, 1, 64, 96, 3)
+                np.testing.assert_array_equal(last.frames[name][:, 0], every.frames[name][:, -1])
+    with pytest.raises(ValueError, match="frames must be one of"):
+        SessionPool(local_server.endpoint, 1, frames="first")
+
+
 def test_subsets_of_rows_step_independently(pool: SessionPool) -> None:
     pool.prompt([PROMPT] * 3, seeds=SEEDS)
     pool.infer(np.zeros((3, 4, 2), np.float32))

@@ -61,7 +61,7 @@ def test_lerobot_discovers_the_plugin() -> None:
     register_third_party_plugins()
     assert get_policy_class("oasis") is OasisPolicy
     pre, post = make_pre_post_processors(_config())
-    assert any(type(step).__name__ == "ImageCropResizeProcessorStep" for step in pre.steps)
+    assert any(type(step).__name__ == "ResizeFramesProcessorStep" for step in pre.steps)
     assert type(post.steps[0]).__name__ == "UnnormalizerProcessorStep"
 
 

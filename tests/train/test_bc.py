@@ -58,18 +58,27 @@ def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: P
     assert len(cached) == len(dataset) == 32
     for index in (0, 13, 15, 31):  # 15 and 31 end an episode: padded actions
         expected, actual = dataset[index], cached[index]
-        for key in ("observation.state", "action", "action_is_pad", "index", "episode_index"):
-            torch.testing.assert_close(actual[key], expected[key], msg=key)
-        for key in cached.camera_keys:
-            torch.testing.assert_close(actual[key], expected[key], atol=1 / 255, rtol=0)
+        assert set(actual) == set(expected) - {
+            "task",
+            "task_index",
+            "next.reward",
+            "next.done",
+            "episode_seed",
+        }
+        for key in actual:
+            tolerance = {"atol": 1 / 255, "rtol": 0} if key in cached.camera_keys else {}
+            torch.testing.assert_close(actual[key], expected[key], msg=key, **tolerance)
     assert cached[15]["action_is_pad"].tolist() == [False, True, True, True]
+    assert cached[16]["observation.state_is_pad"].tolist() == [True, False]  # episode start
+    assert cached[16]["observation.images.front"].shape == (2, 3, 32, 48)
 
 
 def test_random_shift_moves_content_within_the_pad() -> None:
-    image = torch.zeros(64, 1, 9, 9)
-    image[:, :, 4, 4] = 1.0
+    image = torch.zeros(64, 2, 1, 9, 9)
+    image[..., 4, 4] = 1.0
     shifted = random_shift(image, pad=2)
-    positions = shifted[:, 0].flatten(1).argmax(1)
+    torch.testing.assert_close(shifted[:, 0], shifted[:, 1])  # both frames alike
+    positions = shifted[:, 0, 0].flatten(1).argmax(1)
     rows, cols = positions // 9, positions % 9
     assert rows.min() >= 2 and rows.max() <= 6 and cols.min() >= 2 and cols.max() <= 6
     assert len(set(positions.tolist())) > 5
