@@ -10,10 +10,11 @@ DEMO_OUT ?= outputs/demo
 
 .PHONY: demo test lint protos lock bench clean-venv
 
-$(STAMP): pyproject.toml constraints.txt
+$(STAMP): pyproject.toml policies/pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade "pip>=24"
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[$(EXTRAS)]"
+	$(PY) -m pip install --quiet -c constraints.txt --no-deps -e policies/
 	touch $(STAMP)
 
 demo: $(STAMP)
