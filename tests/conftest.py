@@ -24,6 +24,10 @@ from grpc_health.v1 import health_pb2_grpc
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2, sim_pb2_grpc
 from oasis_torchrl.sim.launcher import LocalServer
 
+# Scripts run in subprocesses by interop tests; importing them here would load the official
+# SDK's protos into this process, where they clash with ours.
+collect_ignore_glob = ["interop/official_*.py"]
+
 TEST_KEYS = ("test-key-alpha", "test-key-beta")
 SMALL_SERVER = {"width": 96, "height": 64}
 Metadata = tuple[tuple[str, str], ...]
