@@ -36,7 +36,7 @@ from PIL import Image, ImageDraw
 from oasis_torchrl.train.bc import train_bc
 from oasis_torchrl.train.config import load_config
 from oasis_torchrl.train.evaluate import Evaluator
-from oasis_torchrl.train.pipeline import evaluate_all, record_demonstrations, stage_configs
+from oasis_torchrl.train.pipeline import demonstrations, evaluate_all, stage_configs
 from oasis_torchrl.train.policy_source import load_policy
 from oasis_torchrl.train.ppo import train_ppo
 
@@ -178,7 +178,7 @@ def main() -> None:
     seconds["references"] = time.perf_counter() - started
 
     started = time.perf_counter()
-    dataset = record_demonstrations(cfg, Path(cfg.output_dir) / "demos")
+    dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
     seconds["record"] = time.perf_counter() - started
     bc_cfg, finetune_base = stage_configs(cfg, dataset)
     bc_policy = Path(bc_cfg.output_dir) / "policy"

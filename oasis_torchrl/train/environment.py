@@ -10,8 +10,10 @@ A reward sum (``"episode_reward"``) and a step count are added.
 for every episode, several are drawn from per episode), ``num_envs``, ``max_steps`` (chunks per
 episode), ``image_size`` ``[height, width]`` of the policy images, ``server`` (``width``,
 ``height`` of the embedded server's frames) and ``reward`` (``kind: ground_truth`` with
-``progress_scale``, ``collision_penalty``, ``lane_penalty``; or ``kind: depth``, the peer's
-depth-collision reward, for remote endpoints).
+``progress_scale``, ``collision_penalty``, ``lane_penalty`` and the optional
+:class:`~oasis_torchrl.train.shaping.ClearanceShaping` ``clearance_weight`` (0: off) and
+``clearance_horizon``; or ``kind: depth``, the peer's depth-collision reward, for remote
+endpoints).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.envs.episodes import Prompts
 from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, RewardModule
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.train.shaping import ClearanceShaping
 
 REWARD_KINDS = ("ground_truth", "depth")
 
@@ -59,17 +62,20 @@ def make_reward(cfg: DictConfig) -> RewardModule:
     Example:
         >>> from omegaconf import OmegaConf
         >>> cfg = OmegaConf.create({"kind": "ground_truth", "progress_scale": 0.1,
-        ...                         "collision_penalty": 10.0, "lane_penalty": 0.01})
+        ...     "collision_penalty": 10.0, "lane_penalty": 0.01, "clearance_weight": 0.0})
         >>> type(make_reward(cfg)).__name__
         'GroundTruthReward'
     """
     kind = cfg.kind
     if kind == "ground_truth":
-        return GroundTruthReward(
+        reward = GroundTruthReward(
             progress_scale=cfg.progress_scale,
             collision_penalty=cfg.collision_penalty,
             lane_penalty=cfg.lane_penalty,
         )
+        if not cfg.get("clearance_weight"):
+            return reward
+        return ClearanceShaping(reward, cfg.clearance_weight, cfg.get("clearance_horizon", 25.0))
     if kind == "depth":
         return DepthCollisionReward()
     raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {kind!r}")

@@ -1,7 +1,7 @@
 """The main job in one call: record -> behaviour cloning -> PPO fine-tuning -> evaluation.
 
-1. ``record``: autopilot demonstrations as a LeRobot dataset (one row per frame), through
-   ``oasis-torchrl record``'s own code;
+1. ``record``: autopilot demonstrations as a LeRobot dataset (one row per frame), with noise
+   injected into the executed actions (:mod:`oasis_torchrl.train.demonstrations`);
 2. ``bc``: behaviour cloning on it (``configs/bc.yaml`` plus the config's ``bc`` overrides);
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (``configs/ppo.yaml`` plus the
    ``ppo`` overrides, the shared ``env`` and ``eval`` sections);
@@ -16,7 +16,6 @@ folder to redo it), so re-running after an interruption continues where it stopp
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import time
@@ -29,6 +28,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.train.config import load_config, save_config
+from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
 from oasis_torchrl.train.policy_source import load_policy
 
@@ -57,9 +57,9 @@ def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
     seconds[stage] = round(time.perf_counter() - started, 1)
 
 
-def record_demonstrations(cfg: DictConfig, root: Path) -> Path:
-    """Record ``cfg.record.episodes`` autopilot episodes into ``root`` (reused if complete)."""
-    from oasis_torchrl.commands import record as record_command
+def demonstrations(cfg: DictConfig, root: Path) -> Path:
+    """Record ``cfg.record.episodes`` noisy-execution autopilot episodes into ``root`` (a
+    complete earlier recording is reused)."""
     from oasis_torchrl.commands._dataset_args import quiet_dataset_libraries
 
     info = root / "meta" / "info.json"
@@ -71,26 +71,15 @@ def record_demonstrations(cfg: DictConfig, root: Path) -> Path:
         raise FileExistsError(
             f"{root} holds {episodes} of {cfg.record.episodes} episodes; delete it"
         )
-    env = cfg.env
-    argv = [
-        "--root", str(root),
-        "--episodes", str(cfg.record.episodes),
-        "--num-envs", str(env.num_envs),
-        "--driver", "autopilot",
-        "--max-steps", str(env.max_steps),
-        "--endpoint", str(env.endpoint),
-        "--width", str(env.server.width),
-        "--height", str(env.server.height),
-        "--seed", str(cfg.record.seed),
-        "--rows", "frame",
-    ]  # fmt: skip
-    for prompt in env.prompts:
-        argv += ["--prompt", str(prompt)]
-    parser = argparse.ArgumentParser()
-    record_command.add_arguments(parser)
     quiet_dataset_libraries()
-    record_command.record(parser.parse_args(argv))
-    return root
+    return record_demonstrations(
+        cfg.env,
+        root,
+        episodes=cfg.record.episodes,
+        seed=cfg.record.seed,
+        noise=ActionNoise(**cfg.record.noise),
+        progress=cfg.progress,
+    )
 
 
 def stage_configs(cfg: DictConfig, dataset: Path) -> tuple[DictConfig, DictConfig]:
@@ -158,7 +147,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
     with _timed(seconds, "record"):
-        dataset = record_demonstrations(cfg, out / "demos")
+        dataset = demonstrations(cfg, out / "demos")
     bc_cfg, ppo_cfg = stage_configs(cfg, dataset)
     bc_policy = Path(bc_cfg.output_dir) / "policy"
     with _timed(seconds, "bc"):
