@@ -56,7 +56,22 @@ def load_config(name_or_path: str | Path, overrides: Sequence[str] = ()) -> Dict
     cfg = OmegaConf.load(path)
     if not isinstance(cfg, DictConfig):
         raise ValueError(f"{path} must hold a mapping at the top level")
-    return apply_overrides(cfg, overrides, source=path.name)
+    return apply_overrides(_with_defaults(cfg, path), overrides, source=path.name)
+
+
+def _with_defaults(cfg: DictConfig, path: Path) -> DictConfig:
+    """Merge Hydra-style ``defaults: [{section: name}]``: ``configs/<name>.yaml`` becomes
+    ``cfg.section`` (values the config itself sets under ``section`` win)."""
+    if "defaults" not in cfg:
+        return cfg
+    defaults = cfg.pop("defaults")
+    base = OmegaConf.create()
+    for entry in defaults:
+        if not isinstance(entry, DictConfig) or len(entry) != 1:
+            raise ValueError(f"{path.name}: each defaults entry must be {{section: config}}")
+        ((section, name),) = entry.items()
+        base[section] = OmegaConf.load(config_path(name))
+    return OmegaConf.merge(base, cfg)
 
 
 def apply_overrides(

@@ -184,13 +184,7 @@ class PPOTrainer:
 
     def _train(self, remaining: int) -> None:
         cfg = self.cfg
-        collector = Collector(
-            self.env,
-            self.modules.policy,
-            frames_per_batch=cfg.collector.frames_per_batch,
-            total_frames=remaining,
-            auto_register_policy_transforms=False,
-        )
+        collector = self._collector(remaining)
         bar = tqdm(
             total=cfg.collector.total_frames,
             initial=self.frames,
@@ -201,6 +195,8 @@ class PPOTrainer:
         try:
             started = time.perf_counter()
             for batch in collector:
+                if cfg.ray.enabled:  # [collectors, rows, time] -> [rows, time]
+                    batch = batch.flatten(0, 1)
                 self.frames += batch.numel()
                 self.iteration += 1
                 metrics = {**_prefixed("train", episode_stats(batch)), **self._update(batch)}
@@ -212,9 +208,41 @@ class PPOTrainer:
                 self._log(metrics)
                 bar.update(batch.numel())
                 bar.set_postfix(_postfix(metrics))
+                if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
+                    collector.update_policy_weights_(self.modules.policy)
         finally:
             bar.close()
-            collector.shutdown(close_env=False)
+            if cfg.ray.enabled:
+                collector.close()
+            else:
+                collector.shutdown(close_env=False)
+
+    def _collector(self, remaining: int) -> Any:
+        """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
+        cfg = self.cfg
+        if cfg.ray.enabled:
+            from oasis_torchrl.distributed import (
+                RayCollection,
+                RayCollectionConfig,
+                training_env_factory,
+            )
+
+            ray_cfg = RayCollectionConfig.from_config(cfg.ray)
+            return RayCollection(
+                ray_cfg,
+                training_env_factory(cfg.env, ray_cfg),
+                self.modules.policy,
+                frames_per_batch=cfg.collector.frames_per_batch,
+                total_frames=remaining,
+                auto_register_policy_transforms=False,
+            )
+        return Collector(
+            self.env,
+            self.modules.policy,
+            frames_per_batch=cfg.collector.frames_per_batch,
+            total_frames=remaining,
+            auto_register_policy_transforms=False,
+        )
 
     def _update(self, batch: TensorDictBase) -> dict[str, float]:
         """Advantages, then ``optim.epochs`` passes of minibatch PPO updates."""

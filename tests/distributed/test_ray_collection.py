@@ -154,3 +154,34 @@ def test_a_killed_worker_stops_the_run_cleanly(tmp_path: Path, caplog) -> None:
     assert collection.lost_workers == [1]
     assert any("lost" in record.getMessage() for record in caplog.records)
     assert [path.name for path in complete_shards(tmp_path / "shards")] == ["worker-000-part-0000"]
+
+
+def test_ppo_trains_on_ray_workers(tmp_path: Path) -> None:
+    from oasis_torchrl.train.checkpoint import load_checkpoint
+    from oasis_torchrl.train.config import load_config
+    from oasis_torchrl.train.ppo import PPOTrainer
+
+    cfg = load_config(
+        "ppo",
+        [
+            "env.image_size=[32,48]",
+            "env.server.width=48",
+            "env.server.height=32",
+            "env.max_steps=6",
+            f"output_dir={tmp_path}",
+            "collector.frames_per_batch=16",
+            "collector.total_frames=32",
+            "optim.mini_batch_size=8",
+            "optim.epochs=1",
+            "eval.every=0",
+            "eval.episodes=0",
+            "progress=false",
+            "ray.enabled=true",
+            "ray.num_collectors=2",
+            "ray.sessions_per_env=2",
+        ],
+    )
+    result = PPOTrainer(cfg).run()
+    state = load_checkpoint(result.checkpoint)
+    # two batches of 16 env steps, each gathered from both Ray workers, each followed by an update
+    assert (state["iteration"], state["frames"]) == (2, 32)
