@@ -115,9 +115,10 @@ def record_demonstrations(
     process = NoiseProcess(noise, rows, seed)
     recorder = LeRobotRecorder(root, max_episodes=episodes, keep_unfinished=False)
     try:
-        with recorder, tqdm(
-            total=episodes, desc="recording", unit="episode", disable=not progress
-        ) as bar:
+        with (
+            recorder,
+            tqdm(total=episodes, desc="recording", unit="episode", disable=not progress) as bar,
+        ):
             td = env.reset()
             while not recorder.full:
                 clean = expert(td).get("action").clone()
