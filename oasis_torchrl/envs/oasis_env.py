@@ -271,6 +271,8 @@ class OasisEnv(EnvBase):
         self._restarts += restarted.long()
         for i in restarted.flatten().nonzero().flatten().tolist():
             logger.warning("env row %d lost its session and was re-opened: %s", i, step.errors[i])
+        if restarted.any():  # a re-opened session starts a new clip: per-row reward state too
+            self._reward.reset(restarted.flatten())
         obs = self._observation(step, rows, chunk[:, -1])
         scored = self._reward(obs.clone(False).set("action", chunk.to(self.device)))
         terminated = scored.get("terminated", torch.zeros(self.num_envs, 1, dtype=torch.bool))
