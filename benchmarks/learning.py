@@ -5,8 +5,9 @@ images), fixed evaluation seeds, one episode per env row of up to ``--max-steps`
 
 1. references: the autopilot (privileged expert) and constant actions (straight ahead, a sweep
    of throttles; the best one is "the best constant action");
-2. behaviour cloning on autopilot demonstrations; target: at least 70% of the autopilot's mean
-   distance before collision;
+2. behaviour cloning on autopilot demonstrations (recorded with noise injected into the
+   executed actions, then DAgger rounds); target: at least 70% of the autopilot's mean distance
+   before collision;
 3. PPO from scratch for ``--ppo-frames`` env steps; target: at least 1.5x the best constant
    action's mean distance;
 4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning alone.
@@ -23,22 +24,22 @@ Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 4
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import logging
 import time
 from pathlib import Path
-from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 from PIL import Image, ImageDraw
 
-from oasis_torchrl.train.bc import train_bc
 from oasis_torchrl.train.config import load_config
-from oasis_torchrl.train.evaluate import Evaluator
-from oasis_torchrl.train.pipeline import demonstrations, evaluate_all, stage_configs
-from oasis_torchrl.train.policy_source import load_policy
-from oasis_torchrl.train.ppo import train_ppo
+from oasis_torchrl.train.pipeline import (
+    clone,
+    demonstrations,
+    evaluate_all,
+    ppo_config,
+    run_ppo,
+)
 
 logger = logging.getLogger("benchmarks.learning")
 
@@ -53,7 +54,9 @@ COLORS = {
 
 
 def benchmark_config(args: argparse.Namespace) -> DictConfig:
-    """The pipeline config of the benchmark (``configs/demo.yaml`` with benchmark budgets)."""
+    """The pipeline config of the benchmark: ``configs/demo.yaml`` (its resolution, reward and
+    settings) with the benchmark's budgets, episode length and evaluation seeds."""
+    seeds = ",".join(str(seed) for seed in args.eval_seeds)
     return load_config(
         "demo",
         [
@@ -61,49 +64,24 @@ def benchmark_config(args: argparse.Namespace) -> DictConfig:
             f"env.max_steps={args.max_steps}",
             f"record.episodes={args.demo_episodes}",
             f"bc.train.steps={args.bc_steps}",
+            f"dagger.rounds={args.dagger_rounds}",
+            f"dagger.episodes={args.dagger_episodes}",
+            f"dagger.steps={args.dagger_steps}",
             f"eval.max_steps={args.max_steps}",
             f"eval.episodes={args.eval_episodes}",
-            f"eval.seeds=[{','.join(str(seed) for seed in args.eval_seeds)}]",
+            f"eval.seeds=[{seeds}]",
             "eval.reference=[]",
             "progress=false",
         ],
     )
 
 
-def ppo_config(
-    cfg: DictConfig, base: DictConfig, name: str, frames: int, **values: Any
-) -> DictConfig:
-    """A PPO stage config: ``base`` with its own output folder, budget and evaluation cadence."""
-    return OmegaConf.merge(
-        base,
-        {
-            "output_dir": str(Path(cfg.output_dir) / name),
-            "collector": {"total_frames": frames},
-            "eval": {"every": 10},
-            **values,
-        },
-    )
-
-
-def run_ppo(cfg: DictConfig) -> list[dict[str, float]]:
-    """Train (or reuse) a PPO stage; its evaluation history."""
-    checkpoint = Path(cfg.output_dir) / "checkpoints" / "latest.pt"
-    if (Path(cfg.output_dir) / "policy" / "model.safetensors").exists():
-        import torch
-
-        return torch.load(checkpoint, weights_only=False)["history"]
-    if checkpoint.exists():
-        cfg.resume = "latest"
-    return train_ppo(cfg).history
-
-
-def train_curve(output_dir: str | Path, name: str = "ppo") -> list[tuple[float, float]]:
-    """``(env steps, mean training-episode distance)`` rows of a PPO run's CSV log."""
-    path = Path(output_dir) / "logs" / name / "scalars" / "train" / "episode_distance.csv"
-    if not path.exists():
-        return []
-    with path.open() as handle:
-        return [(float(step), float(value)) for step, value in csv.reader(handle)]
+def ppo_stage(cfg: DictConfig, init_from: Path | None, name: str, frames: int) -> DictConfig:
+    """A PPO stage of the benchmark: its own folder, budget and evaluations every 10 batches;
+    fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from scratch the
+    ``configs/ppo.yaml`` defaults."""
+    stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
+    return OmegaConf.merge(stage, {"collector": {"total_frames": frames}, "eval": {"every": 10}})
 
 
 def plot(
@@ -157,19 +135,22 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("outputs/learning"))
     parser.add_argument("--results", type=Path, default=Path("benchmarks/results"))
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
-    parser.add_argument("--eval-episodes", type=int, default=16)
+    parser.add_argument("--eval-episodes", type=int, default=8)
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
-    parser.add_argument("--demo-episodes", type=int, default=32)
-    parser.add_argument("--bc-steps", type=int, default=2000)
-    parser.add_argument("--ppo-frames", type=int, default=40960, help="PPO from scratch, env steps")
-    parser.add_argument("--finetune-frames", type=int, default=8192, help="BC + PPO, env steps")
+    parser.add_argument("--demo-episodes", type=int, default=64)
+    parser.add_argument("--bc-steps", type=int, default=3000)
+    parser.add_argument("--dagger-rounds", type=int, default=0)
+    parser.add_argument("--dagger-episodes", type=int, default=32)
+    parser.add_argument("--dagger-steps", type=int, default=1000)
+    parser.add_argument("--ppo-frames", type=int, default=61440, help="PPO from scratch, env steps")
+    parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
     cfg = benchmark_config(args)
     seconds: dict[str, float] = {}
     started = time.perf_counter()
-    constants = {f"constant:throttle={t},steering=0.0": f"constant {t}" for t in CONSTANT_THROTTLES}
+    constants = {f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES}
     references = evaluate_all(cfg, {"autopilot": "autopilot", **constants})
     best_constant = max(
         (name for name in references if name != "autopilot"),
@@ -180,24 +161,17 @@ def main() -> None:
     started = time.perf_counter()
     dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
     seconds["record"] = time.perf_counter() - started
-    bc_cfg, finetune_base = stage_configs(cfg, dataset)
-    bc_policy = Path(bc_cfg.output_dir) / "policy"
     started = time.perf_counter()
-    if not (bc_policy / "model.safetensors").exists():
-        train_bc(bc_cfg)
+    bc_policy = clone(cfg, dataset)
     seconds["bc"] = time.perf_counter() - started
-    with Evaluator(cfg.env, cfg.eval, progress=False) as evaluator:
-        bc_eval = evaluator.evaluate(load_policy(bc_policy).policy).summary()
+    bc_eval = evaluate_all(cfg, {"bc": str(bc_policy)})["bc"]
 
-    scratch_base = OmegaConf.merge(load_config("ppo"), {"env": cfg.env, "eval": cfg.eval})
-    scratch_base.eval.pop("reference")
-    scratch = ppo_config(cfg, scratch_base, "ppo_scratch", args.ppo_frames)
     started = time.perf_counter()
-    scratch_history = run_ppo(scratch)
+    scratch_history = run_ppo(ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames)).history
     seconds["ppo_scratch"] = time.perf_counter() - started
-    finetune = ppo_config(cfg, finetune_base, "bc_ppo", args.finetune_frames)
     started = time.perf_counter()
-    finetune_history = run_ppo(finetune)
+    finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames)
+    finetune_history = run_ppo(finetune).history
     seconds["bc_ppo"] = time.perf_counter() - started
 
     autopilot = references["autopilot"]["mean_distance"]

@@ -23,7 +23,14 @@ HELP = "evaluate a policy (distance before collision, collision rate, return) as
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """An optional config file and ``key=value`` overrides."""
+    """An optional config file and ``key=value`` overrides.
+
+    Example:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_arguments(parser)
+        >>> parser.parse_args(["policy=autopilot"]).overrides
+        ['policy=autopilot']
+    """
     parser.add_argument("--config", type=Path, help="YAML config (default: configs/eval.yaml)")
     parser.add_argument(
         "overrides", nargs="*", metavar="KEY=VALUE", help="config overrides, e.g. policy=PATH"
@@ -31,7 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Evaluate and print the JSON report; exit code 2 on bad settings."""
+    """Evaluate and print the JSON report; exit code 2 on bad settings.
+
+    Example:
+        >>> run(argparse.Namespace(config=None, overrides=["policy=missing.pt"]))
+        2
+    """
     from oasis_torchrl.train.config import load_config
     from oasis_torchrl.train.evaluate import Evaluator
     from oasis_torchrl.train.policy_source import load_policy

@@ -21,7 +21,14 @@ ALGORITHMS = ("ppo", "bc")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The algorithm, an optional config file and ``key=value`` overrides."""
+    """The algorithm, an optional config file and ``key=value`` overrides.
+
+    Example:
+        >>> parser = argparse.ArgumentParser()
+        >>> add_arguments(parser)
+        >>> parser.parse_args(["ppo", "optim.lr=1e-4"]).overrides
+        ['optim.lr=1e-4']
+    """
     parser.add_argument("algorithm", choices=ALGORITHMS, help="ppo or bc")
     parser.add_argument(
         "--config", type=Path, help="YAML config (default: configs/<algorithm>.yaml)"
@@ -32,7 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Load the config, train, log where the results are; exit code 2 on bad settings."""
+    """Load the config, train, log where the results are; exit code 2 on bad settings.
+
+    Example:
+        >>> run(argparse.Namespace(algorithm="ppo", config=None, overrides=["optim.lrate=1"]))
+        2
+    """
     from oasis_torchrl.train.config import load_config
 
     try:

@@ -5,6 +5,7 @@ Keys in: each camera's frames and ``"state"`` ``[*B, 2]``. Frames are read from
 as :func:`oasis_torchrl.train.environment.build_env` makes it) or ``[*B, H, W, 3]``, converted
 to float in the module, so rollouts store compact uint8 frames; ``image_key="images"`` reads
 float ``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (:func:`oasis_torchrl.envs.make_training_env`).
+With ``critic_inputs`` configured, the critic also reads ``"critic_inputs"`` ``[*B, k]``.
 Keys out: ``"features"`` (shared), ``"loc"``, ``"scale"``, ``"action"`` ``[*B, 4, 2]``,
 ``"action_log_prob"`` and ``"state_value"``.
 """
@@ -25,6 +26,7 @@ PIXELS = "pixels"
 IMAGES = "images"
 STATE = "state"
 FEATURES = "features"
+CRITIC_INPUTS = "critic_inputs"
 
 
 def as_float_frames(frames: torch.Tensor) -> torch.Tensor:
@@ -63,14 +65,14 @@ class _ChunkParams(nn.Module):
 
 
 class _Value(nn.Module):
-    """``features -> value``."""
+    """``(features[, critic inputs]) -> value``."""
 
     def __init__(self, net: DrivingNet) -> None:
         super().__init__()
         self.net = net
 
-    def forward(self, features: torch.Tensor) -> torch.Tensor:
-        return self.net.value(features)
+    def forward(self, features: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
+        return self.net.value(features, extra)
 
 
 def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tuple[str, str]]:
@@ -92,6 +94,11 @@ class ActorCritic:
         policy: the stochastic actor (a TanhNormal over the chunk in ``[-1, 1]``); call it under
             ``set_exploration_type(ExplorationType.DETERMINISTIC)`` for ``tanh(loc)``.
         value: the critic, writing ``"state_value"``.
+
+    Example:
+        >>> modules = make_actor_critic(DrivingNet())
+        >>> modules.value.out_keys[-1]
+        'state_value'
     """
 
     operator: ActorValueOperator
@@ -134,6 +141,7 @@ def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:
         distribution_kwargs={"low": -1.0, "high": 1.0, "event_dims": 2},
         return_log_prob=True,
     )
-    value_head = ValueOperator(_Value(net), in_keys=[FEATURES])
+    value_keys = [FEATURES, CRITIC_INPUTS] if cfg.critic_inputs else [FEATURES]
+    value_head = ValueOperator(_Value(net), in_keys=value_keys)
     operator = ActorValueOperator(common, actor_head, value_head)
     return ActorCritic(operator, operator.get_policy_operator(), operator.get_value_operator())

@@ -38,6 +38,8 @@ class DrivingNetConfig:
         camera_features: features per camera after the projection.
         state_dim: length of ``"state"`` (the previous action).
         hidden_dim: width of the actor and value MLPs.
+        critic_inputs: extra inputs of the value head only, e.g. privileged simulator state
+            for an asymmetric actor-critic (0: the critic sees what the actor sees).
         chunk: actions per chunk.
         action_dim: numbers per action.
         init_scale: initial scale (before the tanh) of the PPO action distribution.
@@ -58,6 +60,7 @@ class DrivingNetConfig:
     camera_features: int = 128
     state_dim: int = 2
     hidden_dim: int = 256
+    critic_inputs: int = 0
     chunk: int = CHUNK
     action_dim: int = ACTION_DIM
     init_scale: float = 0.5
@@ -68,6 +71,10 @@ class DrivingNetConfig:
             raise ValueError("DrivingNetConfig.cameras must name at least one camera")
         if len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
+        if self.critic_inputs < 0:
+            raise ValueError(
+                f"DrivingNetConfig.critic_inputs must be >= 0, got {self.critic_inputs}"
+            )
         if len(self.encoder_channels) != 3:
             raise ValueError(
                 "DrivingNetConfig.encoder_channels needs 3 values, "

@@ -8,6 +8,7 @@ TanhNormal's deterministic sample, so a cloned policy acts the same under PPO's 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -32,7 +33,8 @@ class DrivingNet(nn.Module):
     is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state. The actor MLP gives
     ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned, observation-independent
     ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning leaves it untouched). The
-    critic MLP gives the value.
+    critic MLP gives the value (from the features, plus ``critic_inputs`` extra numbers when
+    configured: an asymmetric actor-critic whose critic may use privileged simulator state).
 
     Example:
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), frames=2))
@@ -50,7 +52,7 @@ class DrivingNet(nn.Module):
         cfg = self.config
         self.encoder = MultiCameraEncoder(cfg)
         self.actor = _mlp(cfg.features_dim, cfg.hidden_dim, cfg.chunk * cfg.action_dim)
-        self.critic = _mlp(cfg.features_dim, cfg.hidden_dim, 1)
+        self.critic = _mlp(cfg.features_dim + cfg.critic_inputs, cfg.hidden_dim, 1)
         self.log_scale = nn.Parameter(torch.empty(cfg.chunk, cfg.action_dim))
         self.set_scale(cfg.init_scale)
         # A small last actor layer starts PPO near a zero chunk instead of saturated tanh ends.
@@ -88,9 +90,32 @@ class DrivingNet(nn.Module):
         scale = self.log_scale.exp().clamp_min(self.config.min_scale)
         return scale.expand_as(loc)
 
-    def value(self, features: torch.Tensor) -> torch.Tensor:
-        """State value ``[..., 1]``."""
-        return self.critic(features)
+    def value(self, features: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
+        """State value ``[..., 1]`` (``extra``: the ``critic_inputs`` numbers, if configured)."""
+        wanted = self.config.critic_inputs
+        if (extra is None) != (wanted == 0) or (extra is not None and extra.shape[-1] != wanted):
+            got = None if extra is None else list(extra.shape)
+            raise ValueError(f"the critic takes {wanted} extra inputs, got {got}")
+        return self.critic(features if extra is None else torch.cat([features, extra], dim=-1))
+
+    def with_critic_inputs(self, critic_inputs: int) -> DrivingNet:
+        """A copy with a fresh critic taking ``critic_inputs`` extra inputs (encoder, actor and
+        scale kept), e.g. to fine-tune a cloned policy with a privileged critic."""
+        net = DrivingNet(dataclasses.replace(self.config, critic_inputs=critic_inputs))
+        net.load_policy_weights(self)
+        return net
+
+    def load_policy_weights(self, other: DrivingNet) -> None:
+        """Copy ``other``'s encoder, actor and scale (what acts) into this network; the critic
+        is kept. Both must share the architecture of those parts."""
+        acting = {k: v for k, v in other.state_dict().items() if not k.startswith("critic.")}
+        try:
+            missing, _ = self.load_state_dict(acting, strict=False)
+        except RuntimeError as error:
+            raise ValueError(f"the networks' acting parts differ: {error}") from error
+        unexpected = [key for key in missing if not key.startswith("critic.")]
+        if unexpected:
+            raise ValueError(f"the source network lacks {unexpected}")
 
     def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """The deterministic chunk ``tanh(loc)`` ``[..., chunk, action_dim]`` in ``[-1, 1]``."""

@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
-from oasis_torchrl.train.checkpoint import lerobot_plugin
+from oasis_torchrl.train.checkpoint import lerobot_plugin, load_net
 from oasis_torchrl.train.config import save_config
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 
@@ -39,7 +39,12 @@ IMAGE_PREFIX = "observation.images."
 
 @dataclass
 class BCResult:
-    """The trained LeRobot policy, its folder and its evaluation (if one was run)."""
+    """The trained LeRobot policy, its folder and its evaluation (if one was run).
+
+    Example:
+        >>> train_bc(load_config("bc", ["dataset.root=drives"])).policy_dir  # doctest: +SKIP
+        PosixPath('outputs/bc/policy')
+    """
 
     policy: Any
     policy_dir: Path
@@ -72,7 +77,14 @@ def random_shift(images: torch.Tensor, pad: int) -> torch.Tensor:
 
 
 def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:
-    """The LeRobot dataset of ``cfg.dataset`` with the policy's action delta timestamps."""
+    """The LeRobot dataset of ``cfg.dataset`` with the policy's delta timestamps (the frames
+    and next actions each sample needs).
+
+    Example:
+        >>> dataset = open_dataset(cfg.dataset, policy_config)  # doctest: +SKIP
+        >>> dataset[0]["action"].shape  # doctest: +SKIP
+        torch.Size([4, 2])
+    """
     from lerobot.datasets.factory import resolve_delta_timestamps
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
@@ -123,6 +135,8 @@ class BCTrainer:
         self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
         dataset = open_dataset(cfg.dataset, self.policy_config)
         self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)
+        if cfg.init_from:  # fine-tune (e.g. a DAgger round) instead of starting afresh
+            self.policy.model.load_policy_weights(load_net(cfg.init_from))
         self.preprocessor, self.postprocessor = make_pre_post_processors(
             self.policy_config, dataset_stats=dataset.meta.stats
         )

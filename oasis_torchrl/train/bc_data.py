@@ -74,7 +74,8 @@ class InMemoryBCDataset(Dataset):
             meta = dataset.meta.episodes[ep]
             if key in dataset.meta.video_keys:
                 start = meta[f"videos/{key}/from_timestamp"]
-                timestamps = (start + self.columns["timestamp"][rows]).tolist()
+                # float64: float32 sums lose the 0.1 ms tolerance after ~15 min of video.
+                timestamps = (start + self.columns["timestamp"][rows].double()).tolist()
                 path = dataset.root / dataset.meta.get_video_file_path(ep, key)
                 frames = decode_video_frames(
                     path, timestamps, dataset.tolerance_s, dataset.video_backend

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
 import os
 from pathlib import Path
@@ -51,7 +53,14 @@ def save_checkpoint(path: str | Path, net: DrivingNet, **state: Any) -> Path:
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """The dict a :func:`save_checkpoint` file holds (on the CPU)."""
+    """The dict a :func:`save_checkpoint` file holds (on the CPU).
+
+    Example:
+        >>> import tempfile
+        >>> path = save_checkpoint(Path(tempfile.mkdtemp()) / "c.pt", DrivingNet(), frames=8)
+        >>> sorted(load_checkpoint(path))
+        ['frames', 'net_config', 'net_state', 'version']
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint at {path}")
@@ -64,14 +73,26 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 
 
 def net_from_checkpoint(payload: dict[str, Any]) -> DrivingNet:
-    """Rebuild the network of a loaded checkpoint."""
+    """Rebuild the network of a loaded checkpoint.
+
+    Example:
+        >>> import tempfile
+        >>> path = save_checkpoint(Path(tempfile.mkdtemp()) / "c.pt", DrivingNet())
+        >>> net_from_checkpoint(load_checkpoint(path)).config.frames
+        2
+    """
     net = DrivingNet(DrivingNetConfig.from_dict(payload["net_config"]))
     net.load_state_dict(payload["net_state"])
     return net
 
 
 def lerobot_plugin() -> Any:
-    """The ``lerobot_policy_oasis`` plugin module, or an ImportError saying how to install it."""
+    """The ``lerobot_policy_oasis`` plugin module, or an ImportError saying how to install it.
+
+    Example:
+        >>> lerobot_plugin().POLICY_TYPE
+        'oasis'
+    """
     try:
         import lerobot_policy_oasis
     except ImportError as error:
@@ -88,9 +109,17 @@ def net_from_lerobot(path: str | Path) -> DrivingNet:
     Raises:
         ValueError: the policy normalises its inputs or actions (a TorchRL env feeds raw
             values, so only ``IDENTITY`` normalisation transfers as is).
+
+    Example:
+        >>> import tempfile
+        >>> folder = export_lerobot(DrivingNet(), Path(tempfile.mkdtemp()) / "policy")
+        >>> net_from_lerobot(folder).config.image_size
+        (64, 96)
     """
     plugin = lerobot_plugin()
-    policy = plugin.OasisPolicy.from_pretrained(str(path))
+    # LeRobot prints a progress line; stdout may carry a command's JSON result.
+    with contextlib.redirect_stdout(io.StringIO()):
+        policy = plugin.OasisPolicy.from_pretrained(str(path))
     modes = {
         str(key): getattr(mode, "value", mode)
         for key, mode in policy.config.normalization_mapping.items()
@@ -128,6 +157,8 @@ def export_lerobot(net: DrivingNet, path: str | Path) -> Path:
         ['config.json', 'model.safetensors']
     """
     plugin = lerobot_plugin()
+    if net.config.critic_inputs:  # LeRobot has no privileged inputs (and never uses the critic)
+        net = net.with_critic_inputs(0)
     config = plugin.OasisConfig.from_net_config(net.config)
     policy = plugin.OasisPolicy(config)
     policy.model.load_state_dict(net.state_dict())

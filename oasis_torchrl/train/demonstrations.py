@@ -8,17 +8,24 @@ action for every visited state: exactly the corrections the clone needs (Laskey 
 2017). The noise is an Ornstein-Uhlenbeck process per env row and channel, constant within a
 chunk, reset with the row's episode.
 
+With a ``learner``, the learner's own (noisy) actions are executed instead, still labelled by
+the autopilot: a DAgger round (Ross et al., 2011), which collects the states the clone itself
+reaches, e.g. an obstacle seen late at full speed, with what the expert would do there.
+
 Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one row per frame.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
+from tensordict import TensorDictBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 from tqdm import tqdm
 
 from oasis_torchrl.drivers import Autopilot
@@ -90,16 +97,19 @@ def record_demonstrations(
     episodes: int,
     seed: int,
     noise: ActionNoise,
+    learner: Callable[[TensorDictBase], TensorDictBase] | None = None,
     progress: bool = True,
 ) -> Path:
-    """Record ``episodes`` noisy-execution autopilot episodes into a new dataset at ``root``.
+    """Record ``episodes`` autopilot-labelled episodes at ``root`` (appended if it exists).
 
     Args:
         env_cfg: the ``env`` config section (prompts, rows, episode length, sizes).
-        root: dataset folder (must not exist).
+        root: dataset folder; an existing dataset gets the new episodes appended.
         episodes: complete episodes to write (episodes still running at the end are dropped).
         seed: seeds the env's episodes and the noise.
         noise: the executed-action noise (all zeros records clean demonstrations).
+        learner: a policy ``td -> td`` (run deterministically) whose actions are executed
+            instead of the autopilot's (DAgger); the labels stay the autopilot's.
         progress: show a progress bar.
 
     Example:
@@ -113,7 +123,8 @@ def record_demonstrations(
     rows = int(env.batch_size[0])
     expert = Autopilot()
     process = NoiseProcess(noise, rows, seed)
-    recorder = LeRobotRecorder(root, max_episodes=episodes, keep_unfinished=False)
+    append = (Path(root) / "meta" / "info.json").exists()
+    recorder = LeRobotRecorder(root, max_episodes=episodes, keep_unfinished=False, append=append)
     try:
         with (
             recorder,
@@ -122,7 +133,8 @@ def record_demonstrations(
             td = env.reset()
             while not recorder.full:
                 clean = expert(td).get("action").clone()
-                executed = (clean + process.step().unsqueeze(1)).clamp(-1.0, 1.0)
+                driven = clean if learner is None else _act(learner, td)
+                executed = (driven + process.step().unsqueeze(1)).clamp(-1.0, 1.0)
                 td, next_td = env.step_and_maybe_reset(td.set("action", executed))
                 bar.update(recorder.write(td.set("action", clean).unsqueeze(-1)))
                 process.reset(td.get(("next", "done")).reshape(rows))
@@ -131,3 +143,9 @@ def record_demonstrations(
         env.close()
     logger.info("recorded %d episodes into %s", recorder.episodes_written, root)
     return Path(root)
+
+
+def _act(policy: Callable[[TensorDictBase], TensorDictBase], td: TensorDictBase) -> torch.Tensor:
+    """The policy's deterministic action for ``td`` (``td`` itself is left unchanged)."""
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        return policy(td.clone(False)).get("action")

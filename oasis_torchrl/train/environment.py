@@ -4,7 +4,8 @@ The env returns all 4 frames of each chunk (``all_frames=True``), decoded straig
 size and kept as uint8 ``("pixels", <camera>)`` ``[N, 4, H, W, 3]``: the policy modules convert
 the frames they use (:mod:`oasis_torchrl.models.actor_critic`), so collector batches stay
 compact, and evaluation episodes recorded to LeRobot get one row per frame, as BC data does.
-A reward sum (``"episode_reward"``) and a step count are added.
+A reward sum (``"episode_reward"``) and a step count are added, and on request
+:class:`PrivilegedState` (``"critic_inputs"``: ground truth for an asymmetric critic).
 
 ``env`` keys: ``endpoint`` (``local`` or an A2V URL), ``prompts`` (a list; one prompt is used
 for every episode, several are drawn from per episode), ``num_envs``, ``max_steps`` (chunks per
@@ -22,16 +23,65 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import torch
 from omegaconf import DictConfig
-from torchrl.envs import Compose, RewardSum, StepCounter, TransformedEnv
+from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
+from torchrl.envs import Compose, RewardSum, StepCounter, Transform, TransformedEnv
 
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.envs.episodes import Prompts
+from oasis_torchrl.envs.oasis_env import LOCAL
+from oasis_torchrl.models.actor_critic import CRITIC_INPUTS
 from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, RewardModule
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.shaping import ClearanceShaping
 
 REWARD_KINDS = ("ground_truth", "depth")
+PRIVILEGED_FIELDS = ("speed", "lateral_offset", "heading_error", "obstacle_distance")
+_PRIVILEGED_SCALE = torch.tensor([10.0, 4.0, 1.0, 60.0])
+"""Rough magnitudes: m/s, m, rad, m (the obstacle distance is capped at 60 m, none = 60 m)."""
+
+
+class PrivilegedState(Transform):
+    """Writes ``"critic_inputs"`` ``[N, 4]``: the last frame's ground-truth speed, lateral
+    offset, heading error and obstacle distance, scaled to about unit size.
+
+    For an asymmetric actor-critic on the embedded server: the critic may use the simulator's
+    state, the actor (what is deployed) only sees the cameras and the previous action.
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> truth = {field: torch.full((2, 4), 2.0) for field in PRIVILEGED_FIELDS}
+        >>> truth["obstacle_distance"][0] = float("inf")
+        >>> out = PrivilegedState()(TensorDict({"truth": truth}, [2]))
+        >>> out["critic_inputs"][:, -1].tolist()
+        [1.0, 0.03333333507180214]
+    """
+
+    def __init__(self) -> None:
+        in_keys = [("truth", field) for field in PRIVILEGED_FIELDS]
+        super().__init__(in_keys=in_keys, out_keys=[CRITIC_INPUTS])
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        last = torch.stack([next_tensordict.get(key)[..., -1] for key in self.in_keys], dim=-1)
+        last[..., -1] = last[..., -1].nan_to_num(posinf=60.0).clamp(max=60.0)
+        scale = _PRIVILEGED_SCALE.to(last.device)
+        return next_tensordict.set(CRITIC_INPUTS, (last / scale).nan_to_num(0.0))
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Add ``"critic_inputs"`` to a TensorDict outside an env (e.g. a stored batch)."""
+        return self._call(tensordict)
+
+    def _reset(
+        self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
+    ) -> TensorDictBase:
+        return self._call(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        shape = (*observation_spec.shape, len(PRIVILEGED_FIELDS))
+        observation_spec[CRITIC_INPUTS] = Unbounded(shape, device=observation_spec.device)
+        return observation_spec
 
 
 def episode_prompts(prompts: Sequence[str]) -> Prompts:
@@ -88,6 +138,7 @@ def build_env(
     prompts: Prompts | None = None,
     max_steps: int | None = None,
     image_size: Sequence[int] | None = None,
+    privileged: bool = False,
     **env_kwargs: Any,
 ) -> TransformedEnv:
     """The :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` config section, transformed.
@@ -96,6 +147,7 @@ def build_env(
         cfg: the ``env`` section.
         num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
             uses one row per episode, fixed per-row prompts and the policy's image size).
+        privileged: add :class:`PrivilegedState` (embedded server only).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -105,6 +157,11 @@ def build_env(
         torch.Size([1])
         >>> env.close()
     """
+    if privileged and cfg.endpoint != LOCAL:
+        raise ValueError(
+            "privileged_critic needs ground truth, which only the embedded server "
+            f"(endpoint 'local') sends; got endpoint {cfg.endpoint!r}: set privileged_critic=false"
+        )
     height, width = image_size if image_size is not None else cfg.image_size
     env = OasisEnv(
         cfg.endpoint,
@@ -117,4 +174,7 @@ def build_env(
         reward=make_reward(cfg.reward),
         **env_kwargs,
     )
-    return TransformedEnv(env, Compose(RewardSum(), StepCounter()))
+    transforms = [RewardSum(), StepCounter()]
+    if privileged:
+        transforms.append(PrivilegedState())
+    return TransformedEnv(env, Compose(*transforms))

@@ -41,7 +41,13 @@ NEXT = "next"
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """One evaluation episode."""
+    """One evaluation episode.
+
+    Example:
+        >>> EpisodeResult("urban", 7, distance=120.5, collided=True, episode_return=2.0, steps=60)
+        EpisodeResult(prompt='urban', episode_seed=7, distance=120.5, collided=True, \
+episode_return=2.0, steps=60)
+    """
 
     prompt: str
     episode_seed: int
@@ -119,6 +125,15 @@ def rollout_episodes(
     recording needs them), so memory stays small. ``on_reset(td)`` and ``on_step(td)`` see every
     reset and step (recorders). The policy acts deterministically
     (``ExplorationType.DETERMINISTIC``).
+
+    Example:
+        >>> from oasis_torchrl.drivers import ScriptedDriver
+        >>> from oasis_torchrl.train.config import load_config
+        >>> env = build_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
+        >>> rollout = rollout_episodes(env, ScriptedDriver.from_spec("throttle=1"), 3)
+        >>> env.close()
+        >>> rollout.batch_size, ("next", "pixels") in rollout.keys(True)
+        (torch.Size([2, 3]), False)
     """
     dropped = () if keep_pixels else (PIXELS, (NEXT, PIXELS))
     rows = int(env.batch_size[0])
@@ -150,7 +165,13 @@ def _row_prompts(rollout: TensorDictBase) -> list[str]:
 
 
 def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
-    """Per-row results of a :func:`rollout_episodes` output ``[N, T]``."""
+    """Per-row results of a :func:`rollout_episodes` output ``[N, T]``: each row's episode ends
+    at its first ``done`` (or at ``T``).
+
+    Example:
+        >>> results = episode_results(rollout)  # doctest: +SKIP
+        >>> EvalReport(results).mean_distance  # doctest: +SKIP
+    """
     done = rollout.get((NEXT, "done")).reshape(rollout.batch_size).cpu()
     horizon = done.shape[1]
     end = torch.where(done.any(1), done.float().argmax(1), horizon - 1)

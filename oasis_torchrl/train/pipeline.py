@@ -2,7 +2,9 @@
 
 1. ``record``: autopilot demonstrations as a LeRobot dataset (one row per frame), with noise
    injected into the executed actions (:mod:`oasis_torchrl.train.demonstrations`);
-2. ``bc``: behaviour cloning on it (``configs/bc.yaml`` plus the config's ``bc`` overrides);
+2. ``bc``: behaviour cloning on it (``configs/bc.yaml`` plus the config's ``bc`` overrides),
+   then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
+   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (``configs/ppo.yaml`` plus the
    ``ppo`` overrides, the shared ``env`` and ``eval`` sections);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
@@ -10,8 +12,8 @@
 
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
-``output_dir``: ``demos/`` (dataset), ``bc/policy/``, ``ppo/policy/`` (LeRobot policy folders),
-``ppo/checkpoints/latest.pt``, ``summary.json``. Config: ``configs/demo.yaml``.
+``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
+folders), ``ppo/checkpoints/latest.pt``, ``summary.json``. Config: ``configs/demo.yaml``.
 """
 
 from __future__ import annotations
@@ -39,7 +41,12 @@ REFERENCE_KEY = "reference"
 
 @dataclass
 class PipelineResult:
-    """Where the pipeline's outputs are, and the evaluation of every policy."""
+    """Where the pipeline's outputs are, and the evaluation of every policy.
+
+    Example:
+        >>> result = run_pipeline(load_config("demo"))  # doctest: +SKIP
+        >>> json.loads(result.summary_path.read_text())["seconds"]  # doctest: +SKIP
+    """
 
     dataset: Path
     bc_policy: Path
@@ -59,7 +66,11 @@ def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
 
 def demonstrations(cfg: DictConfig, root: Path) -> Path:
     """Record ``cfg.record.episodes`` noisy-execution autopilot episodes into ``root`` (a
-    complete earlier recording is reused)."""
+    complete earlier recording is reused).
+
+    Example:
+        >>> demonstrations(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
+    """
     from oasis_torchrl.commands._dataset_args import quiet_dataset_libraries
 
     info = root / "meta" / "info.json"
@@ -82,42 +93,91 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
     )
 
 
-def stage_configs(cfg: DictConfig, dataset: Path) -> tuple[DictConfig, DictConfig]:
-    """The BC and PPO configs of a pipeline config (base configs, shared sections, overrides).
+def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
+    """The BC config of clone round ``round_`` (0: from scratch; k: DAgger round k).
 
     Example:
-        >>> bc, ppo = stage_configs(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/x"))
-        >>> ppo.init_from, bc.dataset.root
-        ('/tmp/d/bc/policy', '/tmp/d/x')
+        >>> bc = bc_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/x"), 1)
+        >>> bc.output_dir, bc.init_from, bc.dataset.root
+        ('/tmp/d/bc/round_1', '/tmp/d/bc/round_0/policy', '/tmp/d/x')
     """
-    out = Path(cfg.output_dir)
-    shared = {"seed": cfg.seed, "progress": cfg.progress}
+    out = Path(cfg.output_dir) / "bc"
+    values: dict[str, Any] = {
+        "seed": cfg.seed + round_,
+        "progress": cfg.progress,
+        "output_dir": str(out / f"round_{round_}"),
+        "dataset": {"root": str(dataset)},
+        "eval": {"episodes": 0},
+        "policy": {"image_size": list(cfg.env.image_size)},
+    }
+    if round_:
+        values["init_from"] = str(out / f"round_{round_ - 1}" / "policy")
+        values["train"] = {"steps": cfg.dagger.steps}
+    return OmegaConf.merge(load_config("bc"), cfg.bc, values)
+
+
+def ppo_config(
+    cfg: DictConfig, init_from: Path | None, name: str = "ppo", *, fine_tune: bool = True
+) -> DictConfig:
+    """The PPO config of a pipeline config: ``configs/ppo.yaml``, the shared ``env`` and
+    ``eval`` sections, a warm start from ``init_from`` and, for fine-tuning, the ``ppo``
+    overrides.
+
+    Example:
+        >>> ppo = ppo_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/p"))
+        >>> ppo.output_dir, ppo.init_from
+        ('/tmp/d/ppo', '/tmp/d/p')
+    """
     evaluation = {key: value for key, value in cfg.eval.items() if key != REFERENCE_KEY}
-    bc = OmegaConf.merge(
-        load_config("bc"),
-        shared,
-        {"output_dir": str(out / "bc"), "dataset": {"root": str(dataset)}, "eval": {"episodes": 0}},
-        cfg.bc,
-    )
-    bc.policy.image_size = list(cfg.env.image_size)
-    ppo = OmegaConf.merge(
-        load_config("ppo"),
-        shared,
-        {
-            "output_dir": str(out / "ppo"),
-            "init_from": str(out / "bc" / "policy"),
-            "env": cfg.env,
-            "eval": evaluation,
-        },
-        cfg.ppo,
-    )
-    return bc, ppo
+    values = {
+        "seed": cfg.seed,
+        "progress": cfg.progress,
+        "output_dir": str(Path(cfg.output_dir) / name),
+        "init_from": None if init_from is None else str(init_from),
+        "env": cfg.env,
+        "eval": evaluation,
+    }
+    return OmegaConf.merge(load_config("ppo"), values, cfg.ppo if fine_tune else {})
+
+
+def clone(cfg: DictConfig, dataset: Path) -> Path:
+    """Behaviour cloning, then the DAgger rounds; the final policy folder (stages reused).
+
+    Example:
+        >>> clone(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
+        PosixPath('outputs/demo/bc/round_0/policy')
+    """
+    from oasis_torchrl.train.bc import train_bc
+
+    policy = Path()
+    for round_ in range(cfg.dagger.rounds + 1):
+        bc_cfg = bc_config(cfg, dataset, round_)
+        policy = Path(bc_cfg.output_dir) / "policy"
+        if (policy / "model.safetensors").exists():
+            logger.info("reusing %s", policy)
+            continue
+        if round_:
+            record_demonstrations(
+                cfg.env,
+                dataset,
+                episodes=cfg.dagger.episodes,
+                seed=cfg.record.seed + 1000 * round_,
+                noise=ActionNoise(**cfg.dagger.noise),
+                learner=load_policy(bc_cfg.init_from).policy,
+                progress=cfg.progress,
+            )
+        train_bc(bc_cfg)
+    return policy
 
 
 def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, float]]:
     """Evaluate each named policy spec on the config's fixed prompts and seeds.
 
     The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``).
+
+    Example:
+        >>> evaluate_all(load_config("demo"), {"autopilot": "autopilot"})  # doctest: +SKIP
+        {'autopilot': {'mean_distance': ..., 'collision_rate': 0.0, ...}}
     """
     plain = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
     results = {}
@@ -133,6 +193,38 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     return results
 
 
+@dataclass
+class PPOStage:
+    """A finished (or reused) PPO stage: its policy folder and evaluation history.
+
+    Example:
+        >>> run_ppo(ppo_config(load_config("demo"), None)).history  # doctest: +SKIP
+    """
+
+    policy_dir: Path
+    history: list[dict[str, float]]
+
+
+def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
+    """Train a PPO stage, resume it, or reuse it when its policy folder exists.
+
+    Example:
+        >>> stage = run_ppo(ppo_config(load_config("demo"), None))  # doctest: +SKIP
+    """
+    from oasis_torchrl.train.checkpoint import LATEST, load_checkpoint
+    from oasis_torchrl.train.ppo import train_ppo
+
+    out = Path(ppo_cfg.output_dir)
+    policy, checkpoint = out / "policy", out / "checkpoints" / LATEST
+    if (policy / "model.safetensors").exists():
+        logger.info("reusing %s", policy)
+        return PPOStage(policy, load_checkpoint(checkpoint)["history"])
+    if checkpoint.exists():
+        ppo_cfg.resume = "latest"
+    result = train_ppo(ppo_cfg)
+    return PPOStage(result.policy_dir or policy, result.history)
+
+
 def run_pipeline(cfg: DictConfig) -> PipelineResult:
     """Run record -> BC -> PPO fine-tuning -> evaluation as ``cfg`` (``configs/demo.yaml``) says.
 
@@ -140,29 +232,15 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
         >>> result = run_pipeline(load_config("demo"))  # doctest: +SKIP
         >>> result.evaluations["bc+ppo"]["mean_distance"]  # doctest: +SKIP
     """
-    from oasis_torchrl.train.bc import train_bc
-    from oasis_torchrl.train.ppo import train_ppo
-
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
     with _timed(seconds, "record"):
         dataset = demonstrations(cfg, out / "demos")
-    bc_cfg, ppo_cfg = stage_configs(cfg, dataset)
-    bc_policy = Path(bc_cfg.output_dir) / "policy"
     with _timed(seconds, "bc"):
-        if (bc_policy / "model.safetensors").exists():
-            logger.info("reusing %s", bc_policy)
-        else:
-            train_bc(bc_cfg)
-    ppo_policy = Path(ppo_cfg.output_dir) / "policy"
+        bc_policy = clone(cfg, dataset)
     with _timed(seconds, "ppo"):
-        if (ppo_policy / "model.safetensors").exists():
-            logger.info("reusing %s", ppo_policy)
-        else:
-            if (Path(ppo_cfg.output_dir) / "checkpoints" / "latest.pt").exists():
-                ppo_cfg.resume = "latest"
-            train_ppo(ppo_cfg)
+        ppo_policy = run_ppo(ppo_config(cfg, bc_policy)).policy_dir
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
     policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo_policy)}
     with _timed(seconds, "eval"):

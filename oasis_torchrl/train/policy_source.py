@@ -23,7 +23,12 @@ CONSTANT = "constant:"
 
 @dataclass
 class PolicySource:
-    """A loaded policy, the image size it wants (networks only) and its network, if any."""
+    """A loaded policy, the image size it wants (networks only) and its network, if any.
+
+    Example:
+        >>> load_policy("autopilot").net is None
+        True
+    """
 
     policy: Policy
     image_size: tuple[int, int] | None = None

@@ -36,7 +36,7 @@ from oasis_torchrl.train.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.train.config import save_config
-from oasis_torchrl.train.environment import build_env
+from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 
 logger = logging.getLogger(__name__)
@@ -47,7 +47,12 @@ LOGGED_LOSS_KEYS = (*LOSS_TERMS, "entropy", "kl_approx", "clip_fraction", "expla
 
 @dataclass
 class PPOResult:
-    """What a PPO run leaves: the trained network, its files and its evaluation history."""
+    """What a PPO run leaves: the trained network, its files and its evaluation history.
+
+    Example:
+        >>> result = train_ppo(load_config("ppo"))  # doctest: +SKIP
+        >>> result.history[-1]["mean_distance"]  # doctest: +SKIP
+    """
 
     net: DrivingNet
     checkpoint: Path
@@ -57,7 +62,8 @@ class PPOResult:
 
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
-    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale.
+    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale;
+    with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``.
 
     Example:
         >>> from oasis_torchrl.train.config import load_config
@@ -73,6 +79,9 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     else:
         network = OmegaConf.to_container(cfg.network)
         net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
+    critic_inputs = len(PRIVILEGED_FIELDS) if cfg.privileged_critic else 0
+    if net.config.critic_inputs != critic_inputs:
+        net = net.with_critic_inputs(critic_inputs)
     if net.config.cameras != cameras or tuple(net.config.image_size) != image_size:
         raise ValueError(
             f"the network reads cameras {net.config.cameras} at {net.config.image_size}, the env "
@@ -128,7 +137,7 @@ class PPOTrainer:
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, float]] = resumed.get("history", [])
-        self.env = build_env(cfg.env)
+        self.env = build_env(cfg.env, privileged=cfg.privileged_critic)
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)

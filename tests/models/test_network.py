@@ -129,6 +129,19 @@ def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
     assert net.actor[0].weight.grad is None
 
 
+def test_privileged_critic_takes_extra_inputs() -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE))
+    privileged = net.with_critic_inputs(4)
+    torch.testing.assert_close(privileged.encoder.convs[0].weight, net.encoder.convs[0].weight)
+    features = torch.rand(3, net.config.features_dim)
+    assert privileged.value(features, torch.rand(3, 4)).shape == (3, 1)
+    with pytest.raises(ValueError, match="the critic takes 4 extra inputs, got None"):
+        privileged.value(features)
+    td = _pixels(privileged, 3).set("critic_inputs", torch.rand(3, 4))
+    modules = make_actor_critic(privileged)
+    assert modules.value(modules.policy(td))["state_value"].shape == (3, 1)
+
+
 def test_config_round_trip_and_validation() -> None:
     config = DrivingNetConfig(cameras=("front",), image_size=(48, 64), shared_encoder=False)
     assert DrivingNetConfig.from_dict(config.to_dict()) == config

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
@@ -35,6 +36,8 @@ def _ppo_config(output: Path, total: int, *extra: str):
             "eval.episodes=1",
             "eval.max_steps=2",
             "progress=false",
+            "privileged_critic=true",
+            "env.reward.clearance_weight=0.2",
             *extra,
         ],
     )
@@ -53,6 +56,7 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     after = result.net.state_dict()
     for key in ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "log_scale"):
         assert not torch.equal(before[key], after[key]), key
+    assert result.net.config.critic_inputs == 4  # the asymmetric critic
     scalars = tmp_path / "logs" / "ppo" / "scalars"
     for name in ("loss_objective", "loss_critic", "loss_entropy"):
         values = _csv_values(scalars / "loss" / f"{name}.csv")
@@ -64,7 +68,8 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     restored = load_net(result.checkpoint)
     for key, value in after.items():
         torch.testing.assert_close(restored.state_dict()[key], value)
-    exported = load_net(result.policy_dir)
+    exported = load_net(result.policy_dir)  # LeRobot folder: no privileged critic
+    assert exported.config.critic_inputs == 0
     torch.testing.assert_close(exported.state_dict()["actor.2.bias"], after["actor.2.bias"])
 
     resumed = PPOTrainer(_ppo_config(tmp_path, 32, "resume=latest")).run()
@@ -81,6 +86,9 @@ def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) 
     net = build_net(cfg, CAMERAS)
     torch.testing.assert_close(net.encoder.convs[0].weight, source.encoder.convs[0].weight)
     assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.25] * 8)
+    privileged = build_net(OmegaConf.merge(cfg, {"privileged_critic": True}), CAMERAS)
+    assert privileged.critic[0].in_features == source.critic[0].in_features + 4
+    torch.testing.assert_close(privileged.actor[0].weight, source.actor[0].weight)
 
     wrong_size = load_config("ppo", [f"init_from={folder}"])  # the env's default 64x96
     with pytest.raises(ValueError, match=r"set env\.image_size to the network's size"):
