@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml policies/pyproject.toml constraints.txt
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m oasis_torchrl demo --output $(DEMO_OUT)
+	$(PY) -m oasis_torchrl demo output_dir=$(DEMO_OUT)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

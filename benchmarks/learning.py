@@ -81,7 +81,8 @@ def ppo_stage(cfg: DictConfig, init_from: Path | None, name: str, frames: int) -
     fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from scratch the
     ``configs/ppo.yaml`` defaults."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
-    return OmegaConf.merge(stage, {"collector": {"total_frames": frames}, "eval": {"every": 10}})
+    evaluations = {"every": 10, "episodes": cfg.eval.episodes}
+    return OmegaConf.merge(stage, {"collector": {"total_frames": frames}, "eval": evaluations})
 
 
 def plot(

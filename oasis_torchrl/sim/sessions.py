@@ -237,7 +237,7 @@ class SessionRegistry:
             self._check_limits(key_digest)
             self._open[session.session_id] = session
             self._last_used[session.session_id] = time.monotonic()
-        logger.info(
+        logger.debug(
             "session %s opened for key %s", session.session_id[:6], key_fingerprint(key_digest)
         )
         return session
@@ -275,7 +275,7 @@ class SessionRegistry:
             while len(self._finished) > _MAX_FINISHED_REMEMBERED:
                 self._finished.popitem(last=False)
         session.release()
-        logger.info("session %s finished", session.session_id[:6])
+        logger.debug("session %s finished", session.session_id[:6])
 
     def expire_idle(self) -> int:
         """Drop sessions idle for longer than ``idle_timeout_s``; returns how many."""

@@ -8,12 +8,14 @@
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (``configs/ppo.yaml`` plus the
    ``ppo`` overrides, the shared ``env`` and ``eval`` sections);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
-   prompts and seeds; the final policy's episodes go to rerun / a LeRobot dataset if configured.
+   prompts and seeds; the fine-tuned policy's episodes go to rerun (``eval.rerun``, by default
+   ``<output_dir>/eval.rrd``) and to a LeRobot dataset if ``eval.lerobot`` is set.
 
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
 ``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
-folders), ``ppo/checkpoints/latest.pt``, ``summary.json``. Config: ``configs/demo.yaml``.
+folders), ``ppo/checkpoints/latest.pt``, ``eval.rrd``, ``summary.json`` (paths, evaluations,
+seconds per stage). Config: ``configs/demo.yaml``.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from oasis_torchrl.train.policy_source import load_policy
 logger = logging.getLogger(__name__)
 
 REFERENCE_KEY = "reference"
+PIPELINE_ONLY = (REFERENCE_KEY, "rerun", "lerobot")
+"""``eval`` keys for the pipeline's final evaluation only (not PPO's)."""
 
 
 @dataclass
@@ -45,15 +49,34 @@ class PipelineResult:
 
     Example:
         >>> result = run_pipeline(load_config("demo"))  # doctest: +SKIP
-        >>> json.loads(result.summary_path.read_text())["seconds"]  # doctest: +SKIP
+        >>> result.to_dict()["paths"]["recording"]  # doctest: +SKIP
+        'outputs/demo/eval.rrd'
     """
 
     dataset: Path
     bc_policy: Path
     ppo_policy: Path
+    ppo_checkpoint: Path
+    recording: Path | None
     summary_path: Path
     evaluations: dict[str, dict[str, float]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``paths`` (str or None), ``evaluations`` and ``seconds`` per stage."""
+        paths = {
+            "dataset": self.dataset,
+            "bc_policy": self.bc_policy,
+            "ppo_policy": self.ppo_policy,
+            "ppo_checkpoint": self.ppo_checkpoint,
+            "recording": self.recording,
+            "summary": self.summary_path,
+        }
+        return {
+            "paths": {name: None if path is None else str(path) for name, path in paths.items()},
+            "evaluations": self.evaluations,
+            "seconds": self.seconds,
+        }
 
 
 @contextmanager
@@ -128,7 +151,8 @@ def ppo_config(
         >>> ppo.output_dir, ppo.init_from
         ('/tmp/d/ppo', '/tmp/d/p')
     """
-    evaluation = {key: value for key, value in cfg.eval.items() if key != REFERENCE_KEY}
+    # The pipeline records the final evaluation itself; PPO's own evaluations are not recorded.
+    evaluation = {key: value for key, value in cfg.eval.items() if key not in PIPELINE_ONLY}
     values = {
         "seed": cfg.seed,
         "progress": cfg.progress,
@@ -202,6 +226,7 @@ class PPOStage:
     """
 
     policy_dir: Path
+    checkpoint: Path
     history: list[dict[str, float]]
 
 
@@ -218,11 +243,11 @@ def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
     policy, checkpoint = out / "policy", out / "checkpoints" / LATEST
     if (policy / "model.safetensors").exists():
         logger.info("reusing %s", policy)
-        return PPOStage(policy, load_checkpoint(checkpoint)["history"])
+        return PPOStage(policy, checkpoint, load_checkpoint(checkpoint)["history"])
     if checkpoint.exists():
         ppo_cfg.resume = "latest"
     result = train_ppo(ppo_cfg)
-    return PPOStage(result.policy_dir or policy, result.history)
+    return PPOStage(result.policy_dir or policy, result.checkpoint, result.history)
 
 
 def run_pipeline(cfg: DictConfig) -> PipelineResult:
@@ -240,12 +265,22 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     with _timed(seconds, "bc"):
         bc_policy = clone(cfg, dataset)
     with _timed(seconds, "ppo"):
-        ppo_policy = run_ppo(ppo_config(cfg, bc_policy)).policy_dir
+        ppo = run_ppo(ppo_config(cfg, bc_policy))
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
-    policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo_policy)}
+    policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo.policy_dir)}
     with _timed(seconds, "eval"):
         evaluations = evaluate_all(cfg, policies)
-    summary = out / "summary.json"
-    summary.write_text(json.dumps({"evaluations": evaluations, "seconds": seconds}, indent=2))
-    logger.info("pipeline done in %.0f s; summary in %s", sum(seconds.values()), summary)
-    return PipelineResult(dataset, bc_policy, ppo_policy, summary, evaluations, seconds)
+    recording = Path(cfg.eval.rerun) if str(cfg.eval.rerun or "").endswith(".rrd") else None
+    result = PipelineResult(
+        dataset,
+        bc_policy,
+        ppo.policy_dir,
+        ppo.checkpoint,
+        recording,
+        out / "summary.json",
+        evaluations,
+        seconds,
+    )
+    result.summary_path.write_text(json.dumps(result.to_dict(), indent=2))
+    logger.info("pipeline done in %.0f s; summary: %s", sum(seconds.values()), out / "summary.json")
+    return result

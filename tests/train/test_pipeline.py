@@ -1,44 +1,56 @@
-"""The record -> BC (+ DAgger) -> PPO -> eval pipeline end to end, tiny."""
+"""The main job (``oasis-torchrl demo``: record -> BC + DAgger -> PPO -> eval) end to end, tiny."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from oasis_torchrl.train.config import load_config
-from oasis_torchrl.train.pipeline import run_pipeline
+import pytest
+import rerun as rr
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from oasis_torchrl.cli import main
+from oasis_torchrl.train.checkpoint import load_checkpoint
 
 from .conftest import TINY_ENV
 
+TINY_PIPELINE = [
+    *TINY_ENV,
+    "env.num_envs=2",
+    "env.max_steps=3",
+    "record.episodes=2",
+    "bc.train.steps=3",
+    "bc.train.batch_size=8",
+    "dagger.rounds=1",
+    "dagger.episodes=2",
+    "dagger.steps=2",
+    "ppo.collector.frames_per_batch=12",
+    "ppo.collector.total_frames=12",
+    "ppo.optim.mini_batch_size=6",
+    "eval.episodes=1",
+    "eval.max_steps=2",
+    "eval.reference=[constant:throttle=1.0]",
+    "progress=false",
+]
 
-def test_pipeline_runs_every_stage(tmp_path: Path) -> None:
-    cfg = load_config(
-        "demo",
-        [
-            *TINY_ENV,
-            f"output_dir={tmp_path}",
-            "env.num_envs=2",
-            "env.max_steps=3",
-            "record.episodes=2",
-            "bc.train.steps=3",
-            "bc.train.batch_size=8",
-            "dagger.rounds=1",
-            "dagger.episodes=2",
-            "dagger.steps=2",
-            "ppo.collector.frames_per_batch=12",
-            "ppo.collector.total_frames=12",
-            "ppo.optim.mini_batch_size=6",
-            "eval.episodes=1",
-            "eval.max_steps=2",
-            "eval.reference=[constant:throttle=1.0]",
-            "progress=false",
-        ],
-    )
-    result = run_pipeline(cfg)
-    summary = json.loads(result.summary_path.read_text())
-    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
-    assert set(summary["seconds"]) == {"record", "bc", "ppo", "eval"}
-    assert result.bc_policy == tmp_path / "bc" / "round_1" / "policy"
-    info = json.loads((result.dataset / "meta" / "info.json").read_text())
-    assert info["total_episodes"] == 4  # 2 demonstrations + 2 DAgger episodes
-    assert (result.ppo_policy / "model.safetensors").exists()
+
+def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed == json.loads((tmp_path / "summary.json").read_text())
+    paths = {name: Path(path) for name, path in printed["paths"].items()}
+    assert list(printed["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    assert set(printed["seconds"]) == {"record", "bc", "ppo", "eval"}
+    assert paths["bc_policy"] == tmp_path / "bc" / "round_1" / "policy"
+    dataset = LeRobotDataset("local/demos", root=paths["dataset"], video_backend="pyav")
+    assert dataset.num_episodes == 4  # 2 demonstrations + 2 DAgger episodes
+    assert (paths["ppo_policy"] / "model.safetensors").exists()
+    assert load_checkpoint(paths["ppo_checkpoint"])["frames"] == 12
+    assert paths["recording"] == tmp_path / "eval.rrd"
+    columns = rr.dataframe.load_recording(str(paths["recording"])).schema().component_columns()
+    assert any("front" in column.entity_path for column in columns)
+
+
+def test_demo_command_rejects_a_bad_key_before_writing(tmp_path: Path) -> None:
+    assert main(["demo", f"output_dir={tmp_path / 'out'}", "record.episode=3"]) == 2
+    assert not (tmp_path / "out").exists()
