@@ -7,6 +7,8 @@
   places the car in it.
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a saved policy (TorchScript or ``torch.save``d module).
+- :class:`DriverSpec`: any of them as plain picklable values, built where it drives (e.g. in a
+  Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
 Every driver returns action chunks ``[N, 4, 2]`` (or ``[N, 2]`` for an env built with
 ``chunk_actions=False``).
@@ -17,6 +19,7 @@ from __future__ import annotations
 import logging
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -323,3 +326,48 @@ class PolicyDriver(Driver):
         if torch.isnan(chunk).any():
             raise ValueError("the policy returned NaN actions")
         return chunk
+
+
+# -- spec ---------------------------------------------------------------------------------
+
+DRIVER_KINDS = ("autopilot", "scripted", "policy")
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """A driver described by plain values: picklable and small, so it can be shipped (to a Ray
+    worker, say) and built there by calling it.
+
+    Args:
+        kind: ``autopilot``, ``scripted`` or ``policy``.
+        script: the scripted driver's spec (see :meth:`ScriptedDriver.from_spec`).
+        policy: the saved policy file (``kind="policy"``; read where the driver is built).
+        policy_in_keys: inputs of a plain policy module (see :class:`PolicyDriver`).
+        fps: world-model frame rate (the autopilot's time step is ``1 / fps``).
+
+    Example:
+        >>> import pickle
+        >>> spec = pickle.loads(pickle.dumps(DriverSpec("scripted", script="throttle=0.3")))
+        >>> type(spec()).__name__
+        'ScriptedDriver'
+    """
+
+    kind: str = "autopilot"
+    script: str = "throttle=0.5"
+    policy: Path | None = None
+    policy_in_keys: tuple[tuple[str, ...], ...] | None = None
+    fps: float = 20.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in DRIVER_KINDS:
+            raise ValueError(f"driver kind must be one of {DRIVER_KINDS}, got {self.kind!r}")
+        if self.kind == "policy" and self.policy is None:
+            raise ValueError("a policy driver needs a policy file")
+
+    def __call__(self) -> Driver:
+        """Build the driver."""
+        if self.kind == "autopilot":
+            return Autopilot(self.fps)
+        if self.kind == "scripted":
+            return ScriptedDriver.from_spec(self.script)
+        return PolicyDriver.load(self.policy, in_keys=self.policy_in_keys)

@@ -4,6 +4,7 @@
 - :class:`RayCollection`: the distributed collector over OasisEnvs, whose worker envs come
   from :func:`oasis_env_factory` or :func:`training_env_factory`.
 - :class:`ShardRecorder`: one worker's LeRobot shard; :func:`merge_shards`: one dataset from all.
+- :func:`record_on_ray`: record a dataset on Ray workers and merge it (``record --ray``).
 """
 
 from oasis_torchrl.distributed.config import RayCollectionConfig
@@ -14,16 +15,19 @@ from oasis_torchrl.distributed.ray_collection import (
     oasis_env_factory,
     training_env_factory,
 )
+from oasis_torchrl.distributed.ray_recording import RayRecording, record_on_ray
 from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER, ShardRecorder
 
 __all__ = [
     "COMPLETE_MARKER",
     "RayCollection",
     "RayCollectionConfig",
+    "RayRecording",
     "ShardRecorder",
     "WorkerLostError",
     "complete_shards",
     "merge_shards",
     "oasis_env_factory",
+    "record_on_ray",
     "training_env_factory",
 ]

@@ -58,6 +58,12 @@ class RayCollectionConfig:
             )
         if self.part_batches < 0:
             raise ValueError(f"ray.part_batches must be >= 0, got {self.part_batches}")
+        if self.shard_root is not None and self.envs_per_collector != 1:
+            # The hook would run in each env's subprocess, all writing the same shard.
+            raise ValueError(
+                f"ray.shard_root needs ray.envs_per_collector=1, got {self.envs_per_collector}; "
+                "widen with sessions_per_env or num_collectors instead"
+            )
 
     @classmethod
     def from_config(cls, section: DictConfig | dict[str, Any]) -> RayCollectionConfig:

@@ -2,26 +2,32 @@
 
 Every Ray actor runs a TorchRL collector over its own env(s); each ``OasisEnv`` opens its own
 channel in the actor (and, for ``endpoint="local"``, its own embedded server, or all share the
-``server_address`` of one ``oasis-torchrl serve``). Weights travel as TorchRL sends them
+``server_address`` of one ``oasis-torchrl serve``). Every actor's env is seeded differently (from
+one run seed), so workers never drive the same worlds. Weights travel as TorchRL sends them
 (``RayWeightSyncScheme``). :class:`RayCollection` adds what a run needs around it: per-worker
-LeRobot shards, and a lost worker reported and then either dropped (``on_failure="continue"``)
-or the run stopped cleanly (``"stop"``), with every surviving shard finalized either way. In
-sync mode the round in which a worker dies is not yielded (the survivors' part of it is still
-recorded in their shards).
+LeRobot shards (optionally up to an episode count split over the workers), and a lost worker
+reported and then either dropped (``on_failure="continue"``) or the run stopped cleanly
+(``"stop"``), with every surviving shard finalized either way. In sync mode the round in which a
+worker dies is not yielded (the survivors' part of it is still recorded in their shards).
 """
 
 from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Callable, Iterator
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
 import ray
 from omegaconf import DictConfig, OmegaConf
 from ray.exceptions import RayActorError
 from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
@@ -60,11 +66,12 @@ def oasis_env_factory(
 
 
 def training_env_factory(
-    env_section: DictConfig, config: RayCollectionConfig
+    env_section: DictConfig, config: RayCollectionConfig, **build_kwargs: Any
 ) -> functools.partial[EnvBase]:
     """A picklable constructor of one worker's training env (the ``env`` section of a training
-    config, see :func:`~oasis_torchrl.train.environment.build_env`) with ``sessions_per_env``
-    rows; ``server_address`` replaces ``env.endpoint``.
+    config and further ``build_kwargs`` such as ``privileged``, see
+    :func:`~oasis_torchrl.train.environment.build_env`) with ``sessions_per_env`` rows;
+    ``server_address`` replaces ``env.endpoint``.
 
     Example:
         >>> from oasis_torchrl.train.config import load_config
@@ -74,11 +81,55 @@ def training_env_factory(
     """
     from oasis_torchrl.train.environment import build_env
 
-    kwargs: dict[str, Any] = {}
+    kwargs = dict(build_kwargs)
     if config.server_address is not None:
         env_section = OmegaConf.merge(env_section, {"endpoint": config.server_address})
         kwargs["ground_truth"] = True
     return functools.partial(build_env, env_section, num_envs=config.sessions_per_env, **kwargs)
+
+
+def worker_seeds(seed: int, workers: int) -> list[int]:
+    """Independent env seeds of ``workers`` Ray workers, all derived from the run's ``seed``.
+
+    Example:
+        >>> first, second = worker_seeds(0, 2)
+        >>> first != second and worker_seeds(0, 2) == [first, second]
+        True
+    """
+    children = np.random.SeedSequence(seed).spawn(workers)
+    return [int(child.generate_state(1)[0]) for child in children]
+
+
+def split_evenly(total: int, parts: int) -> list[int]:
+    """``total`` split into ``parts`` shares differing by at most one, the larger ones first.
+
+    Example:
+        >>> split_evenly(7, 3)
+        [3, 2, 2]
+    """
+    share, rest = divmod(total, parts)
+    return [share + (part < rest) for part in range(parts)]
+
+
+@dataclass(frozen=True)
+class SeededEnvFactory:
+    """A picklable env constructor that seeds the env before the collector's first reset.
+
+    Example:
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> make = SeededEnvFactory(oasis_env_factory(OasisEnv, RayCollectionConfig()), seed=3)
+        >>> make.seed
+        3
+    """
+
+    make_env: Callable[[], EnvBase]
+    seed: int
+
+    def __call__(self) -> EnvBase:
+        """Build the env and seed it."""
+        env = self.make_env()
+        env.set_seed(self.seed)
+        return env
 
 
 class RayCollection:
@@ -90,11 +141,21 @@ class RayCollection:
     Args:
         config: where and how wide to run.
         create_env: picklable env constructor (see :func:`oasis_env_factory`).
-        policy: the policy (an ``nn.Module``: its weights are what workers receive).
+        policy: the policy (an ``nn.Module``: its weights are what workers receive); None
+            with ``policy_factory``.
         frames_per_batch: env steps per yielded batch (all rows, all collectors).
-        total_frames: env steps of the whole run.
+        total_frames: env steps of the whole run (at most).
+        policy_factory: picklable callable building the policy in each worker, for a policy
+            that does not pickle or carries no weights (e.g. a
+            :class:`~oasis_torchrl.drivers.DriverSpec`).
+        seed: run seed; worker ``i``'s env gets ``worker_seeds(seed, C)[i]``.
         recorder_kwargs: :class:`~oasis_torchrl.data.LeRobotRecorder` arguments of the shards
             (used when ``config.shard_root`` is set).
+        max_episodes: stop once the shards hold this many episodes (sync mode, recording
+            only). Each worker records at most its :attr:`episode_quotas` share; a lost
+            worker's missing share is not made up by the others.
+        batch_keys: keys of the batches the workers send back once recorded (recording only;
+            default everything; ``()`` keeps the frames on the workers for a record-only run).
         **collector_kwargs: further arguments of each remote TorchRL collector.
 
     Example:
@@ -110,11 +171,15 @@ class RayCollection:
         self,
         config: RayCollectionConfig,
         create_env: Callable[[], EnvBase],
-        policy: nn.Module,
+        policy: nn.Module | Callable[[TensorDictBase], TensorDictBase] | None,
         *,
         frames_per_batch: int,
         total_frames: int,
+        policy_factory: Callable[[], Callable[[TensorDictBase], TensorDictBase]] | None = None,
+        seed: int = 0,
         recorder_kwargs: dict[str, Any] | None = None,
+        max_episodes: int | None = None,
+        batch_keys: Sequence[NestedKey] | None = None,
         **collector_kwargs: Any,
     ) -> None:
         self.config = config
@@ -122,37 +187,88 @@ class RayCollection:
         self.lost_workers: list[int] = []
         self.shard_episodes: dict[int, int] = {}
         self._recording = config.shard_root is not None
+        self._check_recording_options(max_episodes, batch_keys)
+        self.max_episodes = max_episodes
+        self.episode_quotas = split_evenly(max_episodes or 0, config.num_collectors)
+        self._recorded = dict.fromkeys(range(config.num_collectors), 0)
         self._owns_ray = not ray.is_initialized() and config.is_local
         if not ray.is_initialized():
             ray.init(**config.init_kwargs())
-        self.collector = RayCollector(
-            create_env,
-            policy,
-            frames_per_batch=frames_per_batch,
-            total_frames=total_frames,
-            collector_class=Collector if config.envs_per_collector == 1 else MultiSyncCollector,
-            collector_kwargs=self._worker_kwargs(collector_kwargs, recorder_kwargs or {}),
-            num_workers_per_collector=config.envs_per_collector,
-            num_collectors=config.num_collectors,
-            remote_configs=config.remote_config(),
-            sync=config.sync,
-        )
+        create_envs = [
+            SeededEnvFactory(create_env, worker_seed)
+            for worker_seed in worker_seeds(seed, config.num_collectors)
+        ]
+        try:
+            self._check_local_cpus()
+            with warnings.catch_warnings():
+                # Built in the workers, a factory's policy has no central weights to sync.
+                warnings.filterwarnings("ignore", "The policy is not an nn.Module")
+                self.collector = RayCollector(
+                    create_envs,
+                    policy,
+                    policy_factory=policy_factory,
+                    frames_per_batch=frames_per_batch,
+                    total_frames=total_frames,
+                    collector_class=(
+                        Collector if config.envs_per_collector == 1 else MultiSyncCollector
+                    ),
+                    collector_kwargs=self._worker_kwargs(
+                        collector_kwargs, recorder_kwargs or {}, batch_keys
+                    ),
+                    num_workers_per_collector=config.envs_per_collector,
+                    num_collectors=config.num_collectors,
+                    remote_configs=config.remote_config(),
+                    sync=config.sync,
+                    **({"weight_sync_schemes": {}} if policy is None else {}),
+                )
+        except BaseException:
+            if self._owns_ray:
+                ray.shutdown()
+            raise
         self._workers = list(range(config.num_collectors))
         self._closed = False
         if isinstance(policy, nn.Module):
             self.collector.update_policy_weights_(policy)
 
+    def _check_recording_options(
+        self, max_episodes: int | None, batch_keys: Sequence[NestedKey] | None
+    ) -> None:
+        if (max_episodes is not None or batch_keys is not None) and not self._recording:
+            raise ValueError("max_episodes and batch_keys need recording (ray.shard_root)")
+        if max_episodes is not None and not self.config.sync:
+            raise ValueError("max_episodes needs ray.sync=true (workers are polled between rounds)")
+        if max_episodes is not None and max_episodes < 1:
+            raise ValueError(f"max_episodes must be >= 1, got {max_episodes}")
+
+    def _check_local_cpus(self) -> None:
+        """A local runtime cannot grow: actors it has no CPUs for would wait forever."""
+        if not self.config.is_local:
+            return
+        needed = self.config.num_collectors * self.config.cpus_per_collector
+        available = ray.cluster_resources().get("CPU", 0.0)
+        if needed > available:
+            raise ValueError(
+                f"{self.config.num_collectors} collectors x {self.config.cpus_per_collector} "
+                f"CPUs need {needed:g} CPUs, the local Ray runtime has {available:g}; use fewer "
+                "collectors, fewer cpus_per_collector or a cluster (address)"
+            )
+
     def _worker_kwargs(
-        self, collector_kwargs: dict[str, Any], recorder_kwargs: dict[str, Any]
+        self,
+        collector_kwargs: dict[str, Any],
+        recorder_kwargs: dict[str, Any],
+        batch_keys: Sequence[NestedKey] | None,
     ) -> list[dict[str, Any]]:
         """One kwargs dict per remote collector (each with its own shard hook)."""
         per_worker = [dict(collector_kwargs) for _ in range(self.config.num_collectors)]
         if self._recording:
             for worker, kwargs in enumerate(per_worker):
                 kwargs["post_collect_hook"] = ShardRecorder(
-                    self.config.shard_root,
+                    Path(self.config.shard_root).absolute(),  # workers on other nodes: other cwd
                     worker,
                     part_batches=self.config.part_batches,
+                    max_episodes=None if self.max_episodes is None else self.episode_quotas[worker],
+                    batch_keys=batch_keys,
                     **recorder_kwargs,
                 )
         return per_worker
@@ -162,6 +278,19 @@ class RayCollection:
         """Indices (as configured) of the collectors still running."""
         return list(self._workers)
 
+    @property
+    def recorded_episodes(self) -> int:
+        """Episodes the shards held at the last poll (``max_episodes`` runs; lost workers count
+        with their last poll, which includes their unfinished part)."""
+        return sum(self._recorded.values())
+
+    @property
+    def shards_full(self) -> bool:
+        """Whether every live worker has recorded its share of ``max_episodes``."""
+        return self.max_episodes is not None and all(
+            self._recorded[worker] >= self.episode_quotas[worker] for worker in self._workers
+        )
+
     def update_policy_weights_(self, policy: nn.Module | TensorDictBase) -> None:
         """Send new weights to every live worker (TorchRL's Ray weight sync)."""
         self.collector.update_policy_weights_(policy)
@@ -169,23 +298,35 @@ class RayCollection:
     # -- iteration -----------------------------------------------------------------------
 
     def __iter__(self) -> Iterator[TensorDictBase]:
-        """Yield batches until ``total_frames``; a lost worker is handled per ``on_failure``."""
-        while not self._closed and self.collector.collected_frames < self.total_frames:
+        """Yield batches until ``total_frames`` (or, with ``max_episodes``, full shards); a lost
+        worker is handled per ``on_failure``."""
+        while not self._closed and not self._finished():
             try:
                 yield from self._batches()
             except RayActorError as error:
                 self._on_worker_lost(error)
+
+    def _finished(self) -> bool:
+        return self.collector.collected_frames >= self.total_frames or self.shards_full
 
     def _batches(self) -> Iterator[TensorDictBase]:
         """TorchRL's iterator, left before it shuts the actors down so shards can finalize."""
         iterator = self.collector.iterator()
         try:
             for batch in iterator:
+                self._poll_shards()
                 yield batch
-                if self.collector.collected_frames >= self.total_frames:
+                if self._finished():
                     return
         finally:
             iterator.close()
+
+    def _poll_shards(self) -> None:
+        """Episodes recorded per live worker (asked between sync rounds: the actors are idle)."""
+        if self.max_episodes is None:
+            return
+        counts = self.collector.get_distant_attr("post_collect_hook.episodes_written")
+        self._recorded.update(zip(self._workers, counts, strict=True))
 
     def _on_worker_lost(self, error: RayActorError) -> None:
         lost = self._dead_workers()

@@ -5,15 +5,20 @@ worker, wraps a :class:`~oasis_torchrl.data.LeRobotRecorder` and writes ``<root>
 part-<j>``. A part is finalized when the run closes it or, with ``part_batches``, every that many
 batches (episodes still running are then saved as they are, and continue in the next part); a
 finalized part gets a :data:`COMPLETE_MARKER` file, so a merge takes exactly the readable parts.
+The episodes still running when the run closes the last part are kept or dropped as the
+recorder's ``keep_unfinished`` says.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import datasets
 from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
 
 from oasis_torchrl.data import LeRobotRecorder
 
@@ -42,8 +47,12 @@ class ShardRecorder:
         root: folder holding the shards of the run.
         worker: index of the collector (names the shard).
         part_batches: finalize and start a new part every that many batches (0: never).
+        max_episodes: record at most this many episodes over all parts (None: no limit; 0:
+            none, see :attr:`full`).
+        batch_keys: after recording, strip each batch in place to these keys, so only they
+            travel on from the worker (None: leave batches whole; ``()``: keep just the shape).
         **recorder_kwargs: :class:`~oasis_torchrl.data.LeRobotRecorder` arguments (``fps``,
-            ``image_size``, ``vcodec``, ...).
+            ``image_size``, ``vcodec``, ``keep_unfinished``, ...).
 
     Example:
         >>> import tempfile
@@ -59,37 +68,70 @@ class ShardRecorder:
     """
 
     def __init__(
-        self, root: str | Path, worker: int, *, part_batches: int = 0, **recorder_kwargs: Any
+        self,
+        root: str | Path,
+        worker: int,
+        *,
+        part_batches: int = 0,
+        max_episodes: int | None = None,
+        batch_keys: Sequence[NestedKey] | None = None,
+        **recorder_kwargs: Any,
     ) -> None:
         if part_batches < 0:
             raise ValueError(f"part_batches must be >= 0, got {part_batches}")
+        if max_episodes is not None and max_episodes < 0:
+            raise ValueError(f"max_episodes must be >= 0, got {max_episodes}")
         self.root = Path(root)
         self.worker = worker
         self.part_batches = part_batches
+        self.max_episodes = max_episodes
+        self.batch_keys = None if batch_keys is None else list(batch_keys)
         self.recorder_kwargs = recorder_kwargs
         self.episodes = 0
         self._part = 0
         self._batches_in_part = 0
         self._recorder: LeRobotRecorder | None = None
 
+    @property
+    def episodes_written(self) -> int:
+        """Episodes saved so far, in the finalized parts and the open one."""
+        open_part = 0 if self._recorder is None else self._recorder.episodes_written
+        return self.episodes + open_part
+
+    @property
+    def full(self) -> bool:
+        """Whether ``max_episodes`` episodes have been saved (further batches are not recorded)."""
+        return self.max_episodes is not None and self.episodes_written >= self.max_episodes
+
     def __call__(self, batch: TensorDictBase) -> TensorDictBase:
-        """Record ``batch`` (a collector's ``[N, T]`` output) and return it unchanged."""
+        """Record ``batch`` (a collector's ``[N, T]`` output); returns it, stripped in place to
+        ``batch_keys`` if set."""
+        if not self.full:
+            self._write(batch)
+        if self.batch_keys is not None:
+            batch.select(*self.batch_keys, inplace=True)
+        return batch
+
+    def _write(self, batch: TensorDictBase) -> None:
         if self._recorder is None:
+            datasets.disable_progress_bars()  # a worker's bars reach the driver as log lines
+            remaining = None if self.max_episodes is None else self.max_episodes - self.episodes
             self._recorder = LeRobotRecorder(
-                self.root / shard_name(self.worker, self._part), **self.recorder_kwargs
+                self.root / shard_name(self.worker, self._part),
+                max_episodes=remaining,
+                **self.recorder_kwargs,
             )
         self._recorder.write(batch)
         self._batches_in_part += 1
         if self.part_batches and self._batches_in_part >= self.part_batches:
-            self._close_part()
-        return batch
+            self._close_part(keep_unfinished=True)  # they go on in the next part
 
-    def _close_part(self) -> None:
+    def _close_part(self, *, keep_unfinished: bool | None) -> None:
         recorder, self._recorder = self._recorder, None
         self._batches_in_part = 0
         if recorder is None:
             return
-        recorder.close(keep_unfinished=True)
+        recorder.close(keep_unfinished=keep_unfinished)
         self.episodes += recorder.episodes_written
         if recorder.dataset is not None:
             (recorder.root / COMPLETE_MARKER).touch()
@@ -97,6 +139,7 @@ class ShardRecorder:
         self._part += 1
 
     def close(self) -> int:
-        """Finalize the open part; returns the episodes this worker recorded in all parts."""
-        self._close_part()
+        """Finalize the open part (its running episodes kept or dropped as the recorder's
+        ``keep_unfinished`` says); returns the episodes this worker recorded in all parts."""
+        self._close_part(keep_unfinished=None)
         return self.episodes

@@ -147,7 +147,7 @@ def build_env(
         cfg: the ``env`` section.
         num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
             uses one row per episode, fixed per-row prompts and the policy's image size).
-        privileged: add :class:`PrivilegedState` (embedded server only).
+        privileged: add :class:`PrivilegedState` (needs ground truth: the embedded server).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -157,10 +157,11 @@ def build_env(
         torch.Size([1])
         >>> env.close()
     """
-    if privileged and cfg.endpoint != LOCAL:
+    if privileged and not env_kwargs.get("ground_truth", cfg.endpoint == LOCAL):
         raise ValueError(
-            "privileged_critic needs ground truth, which only the embedded server "
-            f"(endpoint 'local') sends; got endpoint {cfg.endpoint!r}: set privileged_critic=false"
+            "privileged_critic needs ground truth, which only the embedded server sends "
+            f"(endpoint 'local', or its address with ground_truth=True); got endpoint "
+            f"{cfg.endpoint!r}: set privileged_critic=false"
         )
     height, width = image_size if image_size is not None else cfg.image_size
     env = OasisEnv(

@@ -239,7 +239,7 @@ class PPOTrainer:
             ray_cfg = RayCollectionConfig.from_config(cfg.ray)
             return RayCollection(
                 ray_cfg,
-                training_env_factory(cfg.env, ray_cfg),
+                training_env_factory(cfg.env, ray_cfg, privileged=cfg.privileged_critic),
                 self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,

@@ -30,20 +30,6 @@ FRAMES_PER_BATCH = WORKERS * SESSIONS * STEPS
 HEIGHT, WIDTH = 48, 64
 
 
-@pytest.fixture(scope="module", autouse=True)
-def ray_runtime():
-    """One local Ray runtime for the module (2 CPUs, small object store, no dashboard)."""
-    ray.init(
-        address="local",
-        num_cpus=2,
-        include_dashboard=False,
-        object_store_memory=200 * 1024**2,
-        logging_level=logging.WARNING,
-    )
-    yield
-    ray.shutdown()
-
-
 def constant_policy(value: float) -> TensorDictModule:
     """A policy whose every action is ``tanh(value)``: the weights decide the action."""
     net = nn.Sequential(nn.Linear(2, 8), nn.Tanh(), nn.Unflatten(-1, (4, 2)))

@@ -1,0 +1,24 @@
+"""One local Ray runtime for all tests of this package (Ray takes seconds to start)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+
+import pytest
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="package", autouse=True)
+def ray_runtime() -> Iterator[None]:
+    """A local Ray runtime (2 CPUs, small object store, no dashboard) for the package."""
+    ray.init(
+        address="local",
+        num_cpus=2,
+        include_dashboard=False,
+        object_store_memory=200 * 1024**2,
+        logging_level=logging.WARNING,
+    )
+    yield
+    ray.shutdown()

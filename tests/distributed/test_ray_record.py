@@ -1,0 +1,131 @@
+"""``oasis-torchrl record --ray``: two Ray workers record shards that merge into one dataset."""
+
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from tensordict import TensorDict
+
+from oasis_torchrl.cli import main
+from oasis_torchrl.distributed import RayCollectionConfig, oasis_env_factory, record_on_ray
+from oasis_torchrl.drivers import DriverSpec, PolicyDriver
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
+
+EPISODES, SESSIONS, STEPS = 5, 2, 2
+SMALL = ["--width", "96", "--height", "64", "--max-steps", str(STEPS)]
+
+
+def test_record_on_two_ray_workers_merges_one_dataset(tmp_path: Path) -> None:
+    root = tmp_path / "drives"
+    command = ["record", "--root", str(root), "--episodes", str(EPISODES), *SMALL]
+    command += ["--ray", "--collectors", "2", "--sessions-per-env", str(SESSIONS)]
+    assert main([*command, "--batch-steps", "2"]) == 0
+
+    dataset = LeRobotDataset("local/drives", root=root, video_backend="pyav")
+    # shares 3 + 2; every row ends an episode every STEPS chunks of 4 frame rows
+    assert dataset.meta.total_episodes == EPISODES
+    episode_index = torch.as_tensor(dataset.hf_dataset["episode_index"])
+    assert episode_index.unique().tolist() == list(range(EPISODES))
+    assert torch.equal(episode_index, episode_index.sort().values)  # contiguous episodes
+    assert len(dataset) == EPISODES * STEPS * 4
+    seeds = torch.as_tensor(dataset.hf_dataset["episode_seed"]).unique()
+    assert len(seeds) == EPISODES  # the workers are seeded apart: no world twice
+    assert dataset[len(dataset) - 1]["observation.images.front"].shape == (3, 64, 96)
+    assert not (tmp_path / "drives.shards").exists()  # merged, then removed
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--collectors", "2"], "--collectors"),
+        (["--ray", "--num-envs", "3"], "--num-envs"),
+        (["--ray", "--append"], "--append"),
+        (["--ray", "--server-address", "http://127.0.0.1:1", "--endpoint", "x:1"], "--endpoint"),
+        (["--ray", "--driver", "policy"], "--policy"),
+        (["--ray", "--shard-root", "{busy}"], "not empty"),
+    ],
+)
+def test_bad_ray_flags_are_refused_before_ray_runs(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, flags: list[str], named: str
+) -> None:
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "worker-000-part-0000").mkdir()
+    flags = [flag.format(busy=busy) for flag in flags]
+    with caplog.at_level(logging.ERROR):
+        assert main(["record", "--root", str(tmp_path / "drives"), *flags]) == 2
+    assert named in caplog.text
+    assert not (tmp_path / "drives").exists()
+
+
+def test_a_torchscript_policy_driver_travels_as_its_spec(tmp_path: Path) -> None:
+    path = tmp_path / "policy.pt"
+    torch.jit.save(torch.jit.script(torch.nn.Linear(2, 8)), path)
+    spec = pickle.loads(
+        pickle.dumps(DriverSpec("policy", policy=path, policy_in_keys=(("state",),)))
+    )
+    driver = spec()
+    assert isinstance(driver, PolicyDriver)
+    action = driver(TensorDict(state=torch.ones(3, 2), batch_size=[3]))["action"]
+    assert action.shape == (3, 4, 2)
+
+
+def _kill_a_collector_process() -> None:
+    """SIGKILL one Ray collector actor's process, as a crashed machine would."""
+    for proc in Path("/proc").iterdir():
+        try:
+            title = (proc / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if proc.name.isdigit() and title.startswith(b"ray::Collector"):
+            os.kill(int(proc.name), signal.SIGKILL)
+            return
+    raise AssertionError("no Ray collector process found")
+
+
+@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="finds workers in /proc")
+def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    shard_root = tmp_path / "shards"
+    config = RayCollectionConfig(
+        num_collectors=2, sessions_per_env=SESSIONS, shard_root=str(shard_root), part_batches=1
+    )
+    create_env = oasis_env_factory(
+        OasisEnv, config, server=ServerConfig(width=96, height=64), all_frames=True, max_steps=STEPS
+    )
+    killed: list[int] = []
+
+    def kill_once(episodes: int) -> None:
+        if not killed:
+            killed.append(episodes)
+            _kill_a_collector_process()
+
+    with caplog.at_level(logging.WARNING):
+        result = record_on_ray(
+            config,
+            create_env,
+            DriverSpec("scripted", script="throttle=0.5"),
+            tmp_path / "drives",
+            episodes=4 * SESSIONS,
+            batch_steps=STEPS,
+            progress=kill_once,
+        )
+    # One batch (an episode per row) from both workers, then the survivor's next batch, which
+    # it records while the lost one fails; each batch is a finalized shard part.
+    assert killed == [2 * SESSIONS]
+    assert result.stopped and len(result.lost_workers) == 1
+    dataset = LeRobotDataset("local/drives", root=result.output, video_backend="pyav")
+    assert result.episodes == dataset.meta.total_episodes == 3 * SESSIONS
+    episode_index = torch.as_tensor(dataset.hf_dataset["episode_index"]).unique()
+    assert episode_index.tolist() == list(range(3 * SESSIONS))
+    assert len(list(shard_root.iterdir())) == 3  # kept
+    assert str(shard_root) in caplog.text
