@@ -37,6 +37,10 @@ class DrivingNetConfig:
             (not a global pool) keeps where things are, which steering needs.
         camera_features: features per camera after the projection.
         state_dim: length of ``"state"`` (the previous action).
+        use_state: feed the state to the actor and critic. Off for behaviour cloning: actions
+            change slowly, so a clone that sees the previous action learns to repeat it and
+            ignores the cameras (the "copycat" shortcut, Wen et al., 2020); measured here, a
+            clone with the state drove straight into every obstacle.
         hidden_dim: width of the actor and value MLPs.
         critic_inputs: extra inputs of the value head only, e.g. privileged simulator state
             for an asymmetric actor-critic (0: the critic sees what the actor sees).
@@ -59,6 +63,7 @@ class DrivingNetConfig:
     pool_grid: tuple[int, int] = (4, 6)
     camera_features: int = 128
     state_dim: int = 2
+    use_state: bool = True
     hidden_dim: int = 256
     critic_inputs: int = 0
     chunk: int = CHUNK
@@ -99,7 +104,7 @@ class DrivingNetConfig:
     @property
     def features_dim(self) -> int:
         """Length of the shared feature vector: camera features plus the state."""
-        return len(self.cameras) * self.camera_features + self.state_dim
+        return len(self.cameras) * self.camera_features + (self.state_dim if self.use_state else 0)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types (lists for tuples), for JSON and checkpoints."""

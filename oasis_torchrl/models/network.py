@@ -30,11 +30,12 @@ class DrivingNet(nn.Module):
 
     Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` (the
     last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1; the state
-    is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state. The actor MLP gives
-    ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned, observation-independent
-    ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning leaves it untouched). The
-    critic MLP gives the value (from the features, plus ``critic_inputs`` extra numbers when
-    configured: an asymmetric actor-critic whose critic may use privileged simulator state).
+    is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state (if ``use_state``).
+    The actor MLP gives ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned,
+    observation-independent ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning
+    leaves it untouched). The critic MLP gives the value (from the features, plus
+    ``critic_inputs`` extra numbers when configured: an asymmetric actor-critic whose critic may
+    use privileged simulator state).
 
     Example:
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), frames=2))
@@ -67,7 +68,10 @@ class DrivingNet(nn.Module):
                 f"state must end in {self.config.state_dim} values, got {list(state.shape)}"
             )
         frames = [self.last_frames(image, state.dim() - 1) for image in images]
-        return torch.cat([self.encoder(frames), state.to(frames[0].dtype)], dim=-1)
+        encoded = self.encoder(frames)
+        if not self.config.use_state:
+            return encoded
+        return torch.cat([encoded, state.to(encoded.dtype)], dim=-1)
 
     def last_frames(self, image: torch.Tensor, batch_dims: int) -> torch.Tensor:
         """``[*B, frames, 3, H, W]``: the last ``frames`` of a camera's frames."""

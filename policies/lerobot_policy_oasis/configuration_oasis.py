@@ -52,6 +52,8 @@ class OasisConfig(PreTrainedConfig):
         image_size: ``(height, width)`` images are resized to in the preprocessor.
         shared_encoder: one CNN for all cameras, or one per camera.
         encoder_channels, pool_grid, camera_features, hidden_dim: network sizes.
+        use_state: feed ``observation.state`` (the previous action) to the network; see
+            ``DrivingNetConfig.use_state`` (off in ``configs/bc.yaml``: the copycat shortcut).
         loss: behaviour-cloning loss on the chunk, ``"l1"`` or ``"mse"``.
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
 
@@ -72,6 +74,7 @@ class OasisConfig(PreTrainedConfig):
     pool_grid: tuple[int, int] = (4, 6)
     camera_features: int = 128
     hidden_dim: int = 256
+    use_state: bool = True
 
     loss: str = "l1"
     optimizer_lr: float = 1e-3
@@ -113,6 +116,7 @@ class OasisConfig(PreTrainedConfig):
             pool_grid=tuple(self.pool_grid),
             camera_features=self.camera_features,
             state_dim=self.robot_state_feature.shape[0],
+            use_state=self.use_state,
             hidden_dim=self.hidden_dim,
             chunk=self.chunk_size,
             action_dim=ACTION_DIM,
@@ -147,6 +151,7 @@ class OasisConfig(PreTrainedConfig):
             pool_grid=net.pool_grid,
             camera_features=net.camera_features,
             hidden_dim=net.hidden_dim,
+            use_state=net.use_state,
         )
 
     def validate_features(self) -> None:

@@ -142,6 +142,16 @@ def test_privileged_critic_takes_extra_inputs() -> None:
     assert modules.value(modules.policy(td))["state_value"].shape == (3, 1)
 
 
+def test_without_state_the_actions_depend_on_the_cameras_only() -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, use_state=False)).eval()
+    assert net.config.features_dim == 3 * net.config.camera_features
+    images = _frames((2,))
+    with torch.no_grad():
+        chunk = net(images, torch.zeros(2, 2))
+        torch.testing.assert_close(net(images, torch.ones(2, 2)), chunk)
+        assert not torch.allclose(net(_frames((2,)), torch.zeros(2, 2)), chunk)
+
+
 def test_config_round_trip_and_validation() -> None:
     config = DrivingNetConfig(cameras=("front",), image_size=(48, 64), shared_encoder=False)
     assert DrivingNetConfig.from_dict(config.to_dict()) == config

@@ -89,10 +89,12 @@ def test_n_action_steps_limits_the_queue() -> None:
 
 
 def test_save_and_load_round_trip(tmp_path: Path) -> None:
-    policy = _policy(shared_encoder=False, camera_features=32)
+    policy = _policy(shared_encoder=False, camera_features=32, use_state=False)
     policy.save_pretrained(tmp_path)
     loaded = OasisPolicy.from_pretrained(tmp_path)
     assert loaded.config.shared_encoder is False and loaded.config.camera_features == 32
+    assert loaded.model.config.use_state is False
+    assert OasisConfig.from_net_config(loaded.model.config).use_state is False
     batch = _stacked(_observation(seed=0), _observation(seed=1))
     torch.testing.assert_close(
         loaded.predict_action_chunk(batch), policy.predict_action_chunk(batch)
