@@ -266,14 +266,19 @@ class PPOTrainer:
             batch = self.advantage(batch)
         flat = batch.reshape(-1)
         sums: dict[str, float] = {}
-        updates = 0
+        updates = skipped = 0
         for _ in range(cfg.optim.epochs):
             for index in torch.randperm(flat.numel()).split(cfg.optim.mini_batch_size):
                 losses = self.loss(flat[index])
                 terms = ("loss_critic",) if critic_only else LOSS_TERMS
                 total = sum(losses[key] for key in terms)
+                if not torch.isfinite(total):
+                    skipped += 1
+                    continue
                 self.optimizer.zero_grad(set_to_none=True)
                 total.backward()
+                if critic_only:  # the encoder is the actor's too: warm up the critic head only
+                    self.net.encoder.zero_grad(set_to_none=True)
                 grad_norm = torch.nn.utils.clip_grad_norm_(
                     self.loss.parameters(), cfg.optim.max_grad_norm
                 )
@@ -284,7 +289,16 @@ class PPOTrainer:
                     if key in losses.keys():
                         name = f"loss/{key}"
                         sums[name] = sums.get(name, 0.0) + losses[key].mean().item()
+        if skipped:
+            # A near-saturated tanh action can give an infinite probability ratio; one such
+            # minibatch would turn every weight into NaN, so it is left out (as AMP skips steps).
+            logger.warning(
+                "iteration %d: %d minibatches with a non-finite loss skipped",
+                self.iteration,
+                skipped,
+            )
         metrics = {key: value / max(updates, 1) for key, value in sums.items()}
+        metrics["optim/skipped_minibatches"] = float(skipped)
         metrics["optim/lr"] = lr
         metrics["policy/scale"] = self.net.log_scale.exp().mean().item()
         return metrics
