@@ -55,25 +55,32 @@ def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 @contextlib.contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
+def sigterm_as_interrupt() -> Iterator[threading.Event]:
     """Let SIGTERM stop a writing command the way Ctrl-C does, so the dataset is finalized.
 
+    Both signals raise ``KeyboardInterrupt`` and set the yielded event: a loop that checks it
+    stops even when the exception landed in library code that swallowed it.
+
     Example:
-        >>> with sigterm_as_interrupt():
-        ...     pass
+        >>> with sigterm_as_interrupt() as stop:
+        ...     stop.is_set()
+        False
     """
+    requested = threading.Event()
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield requested
         return
 
     def interrupt(signum: int, frame: object) -> None:
+        requested.set()
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield
+        yield requested
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _not_lerobot_chatter(record: logging.LogRecord) -> bool:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -173,8 +174,9 @@ def _make_env(args: argparse.Namespace) -> OasisEnv:
     return env
 
 
-def record(args: argparse.Namespace) -> int:
-    """Drive until ``--episodes`` episodes are written; returns the number written."""
+def record(args: argparse.Namespace, stop: threading.Event) -> int:
+    """Drive until ``--episodes`` episodes are written or ``stop`` is set; returns the number
+    written."""
     from tqdm import tqdm
 
     from oasis_torchrl.data import LeRobotRecorder
@@ -193,6 +195,8 @@ def record(args: argparse.Namespace) -> int:
         with recorder, tqdm(total=args.episodes, unit="episode", desc="recording") as bar:
             td = env.reset()
             while not recorder.full:
+                if stop.is_set():
+                    raise KeyboardInterrupt
                 td, next_td = env.step_and_maybe_reset(driver(td))
                 completed = recorder.write(td.unsqueeze(-1))
                 bar.set_postfix(rows=recorder.rows_written, refresh=False)
@@ -247,12 +251,12 @@ def run(args: argparse.Namespace) -> int:
     quiet_dataset_libraries()
     try:
         check_flags(args)
-        with sigterm_as_interrupt():
+        with sigterm_as_interrupt() as stop:
             if args.ray:
                 result = record_on_ray(args)
                 written, stopped = result.episodes, result.stopped
             else:
-                written, stopped = record(args), False
+                written, stopped = record(args, stop), False
     except (ValueError, TypeError, KeyError, FileExistsError, FileNotFoundError) as error:
         logger.error("cannot record: %s", error)
         return 2
