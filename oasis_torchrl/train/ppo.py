@@ -282,6 +282,9 @@ class PPOTrainer:
                 grad_norm = torch.nn.utils.clip_grad_norm_(
                     self.loss.parameters(), cfg.optim.max_grad_norm
                 )
+                if not torch.isfinite(grad_norm):
+                    skipped += 1
+                    continue
                 self.optimizer.step()
                 updates += 1
                 sums["optim/grad_norm"] = sums.get("optim/grad_norm", 0.0) + float(grad_norm)
@@ -290,10 +293,11 @@ class PPOTrainer:
                         name = f"loss/{key}"
                         sums[name] = sums.get(name, 0.0) + losses[key].mean().item()
         if skipped:
-            # A near-saturated tanh action can give an infinite probability ratio; one such
-            # minibatch would turn every weight into NaN, so it is left out (as AMP skips steps).
+            # Near-saturated tanh actions (a fine-tuned clone's) can give an infinite ratio or
+            # gradient; one such step turns every weight into NaN, so it is left out, as AMP
+            # skips steps with non-finite gradients.
             logger.warning(
-                "iteration %d: %d minibatches with a non-finite loss skipped",
+                "iteration %d: %d minibatches with a non-finite loss or gradient skipped",
                 self.iteration,
                 skipped,
             )
