@@ -14,6 +14,7 @@ from oasis_torchrl.models import (
     as_float_frames,
     make_actor_critic,
 )
+from oasis_torchrl.models.network import LOC_BOUND
 
 SIZE = (32, 48)
 
@@ -140,6 +141,21 @@ def test_privileged_critic_takes_extra_inputs() -> None:
     td = _pixels(privileged, 3).set("critic_inputs", torch.rand(3, 4))
     modules = make_actor_critic(privileged)
     assert modules.value(modules.policy(td))["state_value"].shape == (3, 1)
+
+
+def test_a_saturated_clone_keeps_ppo_ratios_finite() -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE))
+    net.set_scale(0.2)
+    modules = make_actor_critic(net)
+    with torch.no_grad():
+        net.actor[-1].bias.fill_(10.0)  # where L1 on +-1 labels pushes a clone
+    with set_exploration_type(ExplorationType.RANDOM):  # as a collector samples
+        td = modules.policy(_pixels(net, 256))
+    assert td["loc"].max() <= LOC_BOUND
+    with torch.no_grad():
+        net.actor[-1].bias.add_(0.05)  # one small update
+    log_ratio = modules.policy.get_dist(td).log_prob(td["action"]) - td["action_log_prob"]
+    assert log_ratio.abs().max() < 0.1  # unbounded: about 28 nats
 
 
 def test_without_state_the_actions_depend_on_the_cameras_only() -> None:
