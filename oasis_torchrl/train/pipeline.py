@@ -257,6 +257,8 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
         >>> result = run_pipeline(load_config("demo"))  # doctest: +SKIP
         >>> result.evaluations["bc+ppo"]["mean_distance"]  # doctest: +SKIP
     """
+    from oasis_torchrl.viz.recording import describe_target
+
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
@@ -270,7 +272,8 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo.policy_dir)}
     with _timed(seconds, "eval"):
         evaluations = evaluate_all(cfg, policies)
-    recording = Path(cfg.eval.rerun) if str(cfg.eval.rerun or "").endswith(".rrd") else None
+    rerun = cfg.eval.rerun
+    recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
     result = PipelineResult(
         dataset,
         bc_policy,
