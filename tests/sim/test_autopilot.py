@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from oasis_torchrl.sim.autopilot import Autopilot
@@ -41,3 +42,19 @@ def test_changes_lane_around_a_blocked_lane_and_stops_when_all_are_blocked() -> 
     truth = simulator.truth
     assert not truth.collided and truth.speed == pytest.approx(0.0, abs=0.05)
     assert 0.5 < truth.obstacle_distance < 10.0
+
+
+def test_recovers_from_perturbed_steering_without_stalling() -> None:
+    """Demonstrations inject noise into the executed actions (DART): the autopilot must steer
+    back and keep going, not brake to a stop beside an obstacle it was pushed towards (a
+    stopped car cannot steer back into its lane) nor drift into one."""
+    rng = np.random.default_rng(0)
+    simulator = Simulator(64, 48)
+    for seed in range(1000, 1006):
+        simulator.reset("urban", seed)
+        pilot, noise = Autopilot(simulator), np.zeros(2)
+        for _ in range(150):
+            noise = 0.8 * noise + rng.normal(size=2) * [0.1, 0.02]
+            simulator.step(np.clip(pilot.act() + noise, -1.0, 1.0), render=False)
+        assert not simulator.truth.collided, f"seed {seed}"
+        assert simulator.truth.progress > 250.0, f"seed {seed}"
