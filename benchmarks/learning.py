@@ -27,6 +27,8 @@ import argparse
 import json
 import logging
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -44,6 +46,10 @@ from oasis_torchrl.train.pipeline import (
 logger = logging.getLogger("benchmarks.learning")
 
 CONSTANT_THROTTLES = (0.25, 0.5, 0.75, 1.0)
+# PPO iterations between evaluations: 20 x 512 env steps (an evaluation of 32 episodes of up to
+# 150 chunks costs about as many env steps as 10 iterations).
+EVAL_EVERY = 20
+STAGES = ("references", "bc", "bc_ppo", "ppo_scratch")
 COLORS = {
     "autopilot": (40, 40, 40),
     "best constant": (150, 150, 150),
@@ -51,6 +57,50 @@ COLORS = {
     "ppo (scratch)": (214, 39, 40),
     "bc + ppo": (44, 160, 44),
 }
+
+
+class StageCache:
+    """Evaluations and stage wall times kept in a JSON file under the work folder, so a rerun
+    (or a run split over processes with ``--stages``) reuses them: an evaluation is keyed by
+    policy name, spec and evaluation settings; a stage's time is the first run's."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        saved = json.loads(path.read_text()) if path.exists() else {}
+        self.evaluations: dict[str, dict[str, float]] = saved.get("evaluations", {})
+        self.seconds: dict[str, float] = saved.get("seconds", {})
+
+    def evaluate(self, cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, float]]:
+        """``evaluate_all`` of the policies not evaluated yet with these settings."""
+        settings = (
+            f"episodes={cfg.eval.episodes} seeds={list(cfg.eval.seeds)} steps={cfg.eval.max_steps}"
+        )
+        keys = {name: f"{name} {spec} {settings}" for name, spec in policies.items()}
+        missing = {
+            name: spec for name, spec in policies.items() if keys[name] not in self.evaluations
+        }
+        if missing:
+            for name, summary in evaluate_all(cfg, missing).items():
+                self.evaluations[keys[name]] = summary
+            self._save()
+        return {name: self.evaluations[keys[name]] for name in policies}
+
+    @contextmanager
+    def timed(self, stage: str) -> Iterator[None]:
+        """Time a stage; only its first (not reused) run is kept."""
+        started = time.perf_counter()
+        yield
+        if stage not in self.seconds:
+            self.seconds[stage] = round(time.perf_counter() - started, 1)
+            self._save()
+
+    def _save(self) -> None:
+        # Re-read first: another process may have run other stages into the same file.
+        saved = json.loads(self.path.read_text()) if self.path.exists() else {}
+        saved.setdefault("evaluations", {}).update(self.evaluations)
+        saved.setdefault("seconds", {}).update(self.seconds)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path.write_text(json.dumps(saved, indent=2))
 
 
 def benchmark_config(args: argparse.Namespace) -> DictConfig:
@@ -81,7 +131,7 @@ def ppo_stage(cfg: DictConfig, init_from: Path | None, name: str, frames: int) -
     fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from scratch the
     ``configs/ppo.yaml`` defaults."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
-    evaluations = {"every": 10, "episodes": cfg.eval.episodes}
+    evaluations = {"every": EVAL_EVERY, "episodes": cfg.eval.episodes}
     return OmegaConf.merge(stage, {"collector": {"total_frames": frames}, "eval": evaluations})
 
 
@@ -136,45 +186,51 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("outputs/learning"))
     parser.add_argument("--results", type=Path, default=Path("benchmarks/results"))
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
-    parser.add_argument("--eval-episodes", type=int, default=8)
+    parser.add_argument("--eval-episodes", type=int, default=32)
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
     parser.add_argument("--demo-episodes", type=int, default=64)
     parser.add_argument("--bc-steps", type=int, default=3000)
     parser.add_argument("--dagger-rounds", type=int, default=0)
     parser.add_argument("--dagger-episodes", type=int, default=32)
     parser.add_argument("--dagger-steps", type=int, default=1000)
-    parser.add_argument("--ppo-frames", type=int, default=61440, help="PPO from scratch, env steps")
+    parser.add_argument("--ppo-frames", type=int, default=40960, help="PPO from scratch, env steps")
+    parser.add_argument(
+        "--stages",
+        nargs="+",
+        choices=STAGES,
+        default=list(STAGES),
+        help="run only these stages (each caches under --work; the report needs all of them)",
+    )
     parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
     cfg = benchmark_config(args)
-    seconds: dict[str, float] = {}
-    started = time.perf_counter()
+    cache = StageCache(args.work / "stages.json")
+    stages = set(args.stages)
     constants = {f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES}
-    references = evaluate_all(cfg, {"autopilot": "autopilot", **constants})
-    best_constant = max(
-        (name for name in references if name != "autopilot"),
-        key=lambda name: references[name]["mean_distance"],
-    )
-    seconds["references"] = time.perf_counter() - started
+    if "references" in stages:
+        with cache.timed("references"):
+            references = cache.evaluate(cfg, {"autopilot": "autopilot", **constants})
+    if stages & {"bc", "bc_ppo"}:
+        with cache.timed("record"):
+            dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
+        with cache.timed("bc"):
+            bc_policy = clone(cfg, dataset)
+        bc_eval = cache.evaluate(cfg, {"bc": str(bc_policy)})["bc"]
+    if "bc_ppo" in stages:
+        with cache.timed("bc_ppo"):
+            finetune_history = run_ppo(
+                ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames)
+            ).history
+    if "ppo_scratch" in stages:
+        with cache.timed("ppo_scratch"):
+            scratch_history = run_ppo(ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames)).history
+    if stages != set(STAGES):
+        logger.info("ran %s; the report needs every stage", sorted(stages))
+        return
 
-    started = time.perf_counter()
-    dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
-    seconds["record"] = time.perf_counter() - started
-    started = time.perf_counter()
-    bc_policy = clone(cfg, dataset)
-    seconds["bc"] = time.perf_counter() - started
-    bc_eval = evaluate_all(cfg, {"bc": str(bc_policy)})["bc"]
-
-    started = time.perf_counter()
-    scratch_history = run_ppo(ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames)).history
-    seconds["ppo_scratch"] = time.perf_counter() - started
-    started = time.perf_counter()
-    finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames)
-    finetune_history = run_ppo(finetune).history
-    seconds["bc_ppo"] = time.perf_counter() - started
-
+    best_constant = max(constants, key=lambda name: references[name]["mean_distance"])
     autopilot = references["autopilot"]["mean_distance"]
     constant = references[best_constant]["mean_distance"]
     scratch_final = scratch_history[-1]["mean_distance"]
@@ -195,7 +251,7 @@ def main() -> None:
             "bc_ppo_over_bc": finetune_final / bc_eval["mean_distance"],
             "bc_ppo_target_met": finetune_final > bc_eval["mean_distance"],
         },
-        "seconds": {name: round(value, 1) for name, value in seconds.items()},
+        "seconds": cache.seconds,
     }
     curves = {
         "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in scratch_history],
