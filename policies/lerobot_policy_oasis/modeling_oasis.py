@@ -132,6 +132,8 @@ class OasisPolicy(PreTrainedPolicy):
         error = error.abs() if self.config.loss == "l1" else error.square()
         pad = batch.get(ACTION_IS_PAD)
         valid = torch.ones_like(error[..., 0]) if pad is None else (~pad).to(error.dtype)
-        per_sample = (error.mean(-1) * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+        weights = error.new_tensor(self.config.action_loss_weights)
+        weighted = (error * weights).sum(-1) / weights.sum()
+        per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
         loss = per_sample if reduction == "none" else per_sample.mean()
         return loss, {f"{self.config.loss}_loss": per_sample.mean().item()}

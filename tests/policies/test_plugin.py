@@ -119,11 +119,25 @@ def test_forward_masks_padded_actions() -> None:
     assert policy.model.encoder.convs[0].weight.grad is not None
 
 
+def test_action_loss_weights_pick_the_dimensions() -> None:
+    batch = _stacked(_observation(seed=0), _observation(seed=1))
+    target = _policy().predict_action_chunk(batch)
+    batch["action"] = target.clone()
+    batch["action"][..., 0] += 0.5  # throttle wrong by 0.5, steering right
+    assert _policy().forward(batch)[0].item() == pytest.approx(0.25, abs=1e-5)
+    steering_only = _policy(action_loss_weights=(0.0, 1.0))
+    assert steering_only.forward(batch)[0].item() == pytest.approx(0.0, abs=1e-6)
+    throttle_heavy = _policy(action_loss_weights=(3.0, 1.0))
+    assert throttle_heavy.forward(batch)[0].item() == pytest.approx(0.375, abs=1e-5)
+
+
 def test_bad_features_are_named() -> None:
     with pytest.raises(ValueError, match="needs 'action' of shape \\(2,\\)"):
         _config(action_dim=8).net_config()
     with pytest.raises(ValueError, match="n_action_steps must be in"):
         OasisConfig(device="cpu", n_action_steps=5)
+    with pytest.raises(ValueError, match="action_loss_weights must be two non-negative"):
+        OasisConfig(device="cpu", action_loss_weights=(0.0, 0.0))
 
 
 def _record(root: Path) -> None:
