@@ -129,9 +129,8 @@ class BCTrainer:
         self.output_dir = Path(cfg.output_dir)
         torch.manual_seed(cfg.seed)
         policy_values = OmegaConf.to_container(cfg.policy)
-        policy_values["image_size"] = tuple(policy_values["image_size"])
-        policy_values["encoder_channels"] = tuple(policy_values["encoder_channels"])
-        policy_values["pool_grid"] = tuple(policy_values["pool_grid"])
+        for key in ("image_size", "encoder_channels", "pool_grid", "action_loss_weights"):
+            policy_values[key] = tuple(policy_values[key])
         self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
         dataset = open_dataset(cfg.dataset, self.policy_config)
         self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)
