@@ -18,7 +18,9 @@ their outputs under ``--work`` (a rerun reuses finished stages). Budgets are sta
 steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps).
 
 Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 40960]``
-(tens of minutes on 2 CPU cores).
+(about two hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO from scratch in
+one process (``--stages ppo_scratch``) and the rest in another; a last run with every stage
+then assembles the report from the cache.
 """
 
 from __future__ import annotations
