@@ -192,7 +192,7 @@ def main() -> None:
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
     parser.add_argument("--demo-episodes", type=int, default=64)
     parser.add_argument("--bc-steps", type=int, default=3000)
-    parser.add_argument("--dagger-rounds", type=int, default=0)
+    parser.add_argument("--dagger-rounds", type=int, default=6)
     parser.add_argument("--dagger-episodes", type=int, default=32)
     parser.add_argument("--dagger-steps", type=int, default=1000)
     parser.add_argument("--ppo-frames", type=int, default=40960, help="PPO from scratch, env steps")
@@ -203,7 +203,7 @@ def main() -> None:
         default=list(STAGES),
         help="run only these stages (each caches under --work; the report needs all of them)",
     )
-    parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
+    parser.add_argument("--finetune-frames", type=int, default=10240, help="BC + PPO, env steps")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
