@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -43,6 +42,7 @@ from oasis_torchrl.train.pipeline import (
     evaluate_all,
     ppo_config,
     run_ppo,
+    timed_stage,
 )
 
 logger = logging.getLogger("benchmarks.learning")
@@ -90,10 +90,11 @@ class StageCache:
     @contextmanager
     def timed(self, stage: str) -> Iterator[None]:
         """Time a stage; only its first (not reused) run is kept."""
-        started = time.perf_counter()
-        yield
+        run: dict[str, float] = {}
+        with timed_stage(run, stage):
+            yield
         if stage not in self.seconds:
-            self.seconds[stage] = round(time.perf_counter() - started, 1)
+            self.seconds[stage] = run[stage]
             self._save()
 
     def _save(self) -> None:

@@ -80,7 +80,16 @@ class PipelineResult:
 
 
 @contextmanager
-def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
+def timed_stage(seconds: dict[str, float], stage: str) -> Iterator[None]:
+    """Log the start of ``stage`` and put its wall time (seconds, 0.1 s) in ``seconds``.
+
+    Example:
+        >>> seconds = {}
+        >>> with timed_stage(seconds, "record"):
+        ...     pass
+        >>> list(seconds)
+        ['record']
+    """
     logger.info("pipeline stage %s", stage)
     started = time.perf_counter()
     yield
@@ -262,15 +271,15 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
-    with _timed(seconds, "record"):
+    with timed_stage(seconds, "record"):
         dataset = demonstrations(cfg, out / "demos")
-    with _timed(seconds, "bc"):
+    with timed_stage(seconds, "bc"):
         bc_policy = clone(cfg, dataset)
-    with _timed(seconds, "ppo"):
+    with timed_stage(seconds, "ppo"):
         ppo = run_ppo(ppo_config(cfg, bc_policy))
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
     policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo.policy_dir)}
-    with _timed(seconds, "eval"):
+    with timed_stage(seconds, "eval"):
         evaluations = evaluate_all(cfg, policies)
     rerun = cfg.eval.rerun
     recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
