@@ -154,7 +154,7 @@ class PPOTrainer:
         self.advantage = GAE(
             gamma=cfg.loss.gamma, lmbda=cfg.loss.lmbda, value_network=self.modules.value
         )
-        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=cfg.optim.lr)
+        self.optimizer = torch.optim.Adam(self._param_groups(), lr=cfg.optim.lr)
         if resumed:
             self.optimizer.load_state_dict(resumed["optimizer"])
         self.logger: Logger = get_logger(
@@ -164,6 +164,26 @@ class PPOTrainer:
         )
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, EvalReport] | None = None
+
+    def _param_groups(self) -> list[dict[str, Any]]:
+        """The critic head in its own group, at ``optim.critic_lr`` (``null``: ``optim.lr``).
+
+        Why: a fresh critic on a warm-started encoder (whose features are small, ~0.08) moves
+        too slowly at the actor's fine-tuning rate: measured on 1536 steps of the cloned
+        policy, a critic fitted for 320 minibatches explains 31% of the returns' variance at
+        1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+        """
+        critic = {id(parameter) for parameter in self.net.critic.parameters()}
+        parameters = list(self.loss.parameters())
+        return [
+            {"params": [p for p in parameters if id(p) not in critic]},
+            {"params": [p for p in parameters if id(p) in critic]},
+        ]
+
+    def _base_lrs(self) -> tuple[float, float]:
+        """The un-annealed learning rates of the two parameter groups (actor+encoder, critic)."""
+        critic_lr = self.cfg.optim.get("critic_lr")
+        return self.cfg.optim.lr, self.cfg.optim.lr if critic_lr is None else critic_lr
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -257,11 +277,11 @@ class PPOTrainer:
         """Advantages, then ``optim.epochs`` passes of minibatch PPO updates."""
         cfg = self.cfg
         critic_only = self.iteration <= cfg.loss.critic_warmup_iters
-        lr = cfg.optim.lr
+        factor = 1.0
         if cfg.optim.anneal_lr:
-            lr *= max(1.0 - self.frames / cfg.collector.total_frames, 0.05)
-        for group in self.optimizer.param_groups:
-            group["lr"] = lr
+            factor = max(1.0 - self.frames / cfg.collector.total_frames, 0.05)
+        for group, base_lr in zip(self.optimizer.param_groups, self._base_lrs(), strict=True):
+            group["lr"] = base_lr * factor
         with torch.no_grad():
             batch = self.advantage(batch)
         flat = batch.reshape(-1)
@@ -303,7 +323,7 @@ class PPOTrainer:
             )
         metrics = {key: value / max(updates, 1) for key, value in sums.items()}
         metrics["optim/skipped_minibatches"] = float(skipped)
-        metrics["optim/lr"] = lr
+        metrics["optim/lr"] = cfg.optim.lr * factor
         metrics["policy/scale"] = self.net.log_scale.exp().mean().item()
         return metrics
 

@@ -49,7 +49,7 @@ def _csv_values(path: Path) -> list[float]:
 
 
 def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
-    trainer = PPOTrainer(_ppo_config(tmp_path, 16))
+    trainer = PPOTrainer(_ppo_config(tmp_path, 16, "optim.lr=2e-4", "optim.critic_lr=1e-3"))
     before = {key: value.clone() for key, value in trainer.net.state_dict().items()}
     result = trainer.run()
 
@@ -57,6 +57,10 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     for key in ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "log_scale"):
         assert not torch.equal(before[key], after[key]), key
     assert result.net.config.critic_inputs == 4  # the asymmetric critic
+    actor_group, critic_group = trainer.optimizer.param_groups  # annealed alike, 5x apart
+    assert critic_group["lr"] == pytest.approx(5 * actor_group["lr"])
+    critic = {id(parameter) for parameter in result.net.critic.parameters()}
+    assert {id(parameter) for parameter in critic_group["params"]} == critic
     scalars = tmp_path / "logs" / "ppo" / "scalars"
     for name in ("loss_objective", "loss_critic", "loss_entropy"):
         values = _csv_values(scalars / "loss" / f"{name}.csv")
