@@ -44,6 +44,8 @@ class DrivingNetConfig:
         hidden_dim: width of the actor and value MLPs.
         critic_inputs: extra inputs of the value head only, e.g. privileged simulator state
             for an asymmetric actor-critic (0: the critic sees what the actor sees).
+        aux_outputs: numbers an auxiliary head predicts from the camera features, e.g. the
+            same privileged state, as a training-only loss that shapes the encoder (0: none).
         chunk: actions per chunk.
         action_dim: numbers per action.
         init_scale: initial scale (before the tanh) of the PPO action distribution.
@@ -66,6 +68,7 @@ class DrivingNetConfig:
     use_state: bool = True
     hidden_dim: int = 256
     critic_inputs: int = 0
+    aux_outputs: int = 0
     chunk: int = CHUNK
     action_dim: int = ACTION_DIM
     init_scale: float = 0.5
@@ -76,10 +79,9 @@ class DrivingNetConfig:
             raise ValueError("DrivingNetConfig.cameras must name at least one camera")
         if len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
-        if self.critic_inputs < 0:
-            raise ValueError(
-                f"DrivingNetConfig.critic_inputs must be >= 0, got {self.critic_inputs}"
-            )
+        for name in ("critic_inputs", "aux_outputs"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"DrivingNetConfig.{name} must be >= 0, got {getattr(self, name)}")
         if len(self.encoder_channels) != 3:
             raise ValueError(
                 "DrivingNetConfig.encoder_channels needs 3 values, "

@@ -40,7 +40,8 @@ class DrivingNet(nn.Module):
     observation-independent ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning
     leaves it untouched). The critic MLP gives the value (from the features, plus
     ``critic_inputs`` extra numbers when configured: an asymmetric actor-critic whose critic may
-    use privileged simulator state).
+    use privileged simulator state). With ``aux_outputs``, an auxiliary head predicts that many
+    numbers from the camera features (a training-only loss; see :meth:`predict_aux`).
 
     Example:
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), frames=2))
@@ -59,6 +60,10 @@ class DrivingNet(nn.Module):
         self.encoder = MultiCameraEncoder(cfg)
         self.actor = _mlp(cfg.features_dim, cfg.hidden_dim, cfg.chunk * cfg.action_dim)
         self.critic = _mlp(cfg.features_dim + cfg.critic_inputs, cfg.hidden_dim, 1)
+        camera_features = self.encoder.out_features
+        self.aux = (
+            _mlp(camera_features, cfg.hidden_dim, cfg.aux_outputs) if cfg.aux_outputs else None
+        )
         self.log_scale = nn.Parameter(torch.empty(cfg.chunk, cfg.action_dim))
         self.set_scale(cfg.init_scale)
         # A small last actor layer starts PPO near a zero chunk instead of saturated tanh ends.
@@ -115,22 +120,34 @@ class DrivingNet(nn.Module):
             raise ValueError(f"the critic takes {wanted} extra inputs, got {got}")
         return self.critic(features if extra is None else torch.cat([features, extra], dim=-1))
 
-    def with_critic_inputs(self, critic_inputs: int) -> DrivingNet:
-        """A copy with a fresh critic taking ``critic_inputs`` extra inputs (encoder, actor and
-        scale kept), e.g. to fine-tune a cloned policy with a privileged critic."""
-        net = DrivingNet(dataclasses.replace(self.config, critic_inputs=critic_inputs))
+    def predict_aux(self, camera_features: torch.Tensor) -> torch.Tensor:
+        """The auxiliary head's ``[..., aux_outputs]`` from the encoder's output."""
+        if self.aux is None:
+            raise ValueError("this network has no auxiliary head (DrivingNetConfig.aux_outputs=0)")
+        return self.aux(camera_features)
+
+    def with_training_heads(self, critic_inputs: int, aux_outputs: int) -> DrivingNet:
+        """A copy with fresh training-only heads, a critic taking ``critic_inputs`` extra
+        inputs and an auxiliary head of ``aux_outputs`` (encoder, actor and scale kept), e.g.
+        to fine-tune a cloned policy with privileged state, or ``(0, 0)`` to deploy it."""
+        config = dataclasses.replace(
+            self.config, critic_inputs=critic_inputs, aux_outputs=aux_outputs
+        )
+        net = DrivingNet(config)
         net.load_policy_weights(self)
         return net
 
     def load_policy_weights(self, other: DrivingNet) -> None:
-        """Copy ``other``'s encoder, actor and scale (what acts) into this network; the critic
-        is kept. Both must share the architecture of those parts."""
-        acting = {k: v for k, v in other.state_dict().items() if not k.startswith("critic.")}
+        """Copy ``other``'s encoder, actor and scale (what acts) into this network; the
+        training-only heads (critic, auxiliary) are kept. Both must share the architecture of
+        the acting parts."""
+        training_only = ("critic.", "aux.")
+        acting = {k: v for k, v in other.state_dict().items() if not k.startswith(training_only)}
         try:
             missing, _ = self.load_state_dict(acting, strict=False)
         except RuntimeError as error:
             raise ValueError(f"the networks' acting parts differ: {error}") from error
-        unexpected = [key for key in missing if not key.startswith("critic.")]
+        unexpected = [key for key in missing if not key.startswith(training_only)]
         if unexpected:
             raise ValueError(f"the source network lacks {unexpected}")
 

@@ -157,8 +157,8 @@ def export_lerobot(net: DrivingNet, path: str | Path) -> Path:
         ['config.json', 'model.safetensors']
     """
     plugin = lerobot_plugin()
-    if net.config.critic_inputs:  # LeRobot has no privileged inputs (and never uses the critic)
-        net = net.with_critic_inputs(0)
+    if net.config.critic_inputs or net.config.aux_outputs:
+        net = net.with_training_heads(0, 0)  # LeRobot only acts: no critic, no privileged state
     config = plugin.OasisConfig.from_net_config(net.config)
     policy = plugin.OasisPolicy(config)
     policy.model.load_state_dict(net.state_dict())

@@ -159,9 +159,10 @@ def build_env(
     """
     if privileged and not env_kwargs.get("ground_truth", cfg.endpoint == LOCAL):
         raise ValueError(
-            "privileged_critic needs ground truth, which only the embedded server sends "
-            f"(endpoint 'local', or its address with ground_truth=True); got endpoint "
-            f"{cfg.endpoint!r}: set privileged_critic=false"
+            "privileged state (privileged_critic, loss.aux_coeff) needs ground truth, which "
+            "only the embedded server sends (endpoint 'local', or its address with "
+            f"ground_truth=True); got endpoint {cfg.endpoint!r}: set privileged_critic=false "
+            "loss.aux_coeff=0"
         )
     height, width = image_size if image_size is not None else cfg.image_size
     env = OasisEnv(

@@ -27,6 +27,7 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.models.actor_critic import CRITIC_INPUTS
 from oasis_torchrl.train.checkpoint import (
     LATEST,
     export_lerobot,
@@ -42,7 +43,14 @@ from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 logger = logging.getLogger(__name__)
 
 LOSS_TERMS = ("loss_objective", "loss_critic", "loss_entropy")
-LOGGED_LOSS_KEYS = (*LOSS_TERMS, "entropy", "kl_approx", "clip_fraction", "explained_variance")
+LOGGED_LOSS_KEYS = (
+    *LOSS_TERMS,
+    "loss_aux",
+    "entropy",
+    "kl_approx",
+    "clip_fraction",
+    "explained_variance",
+)
 
 
 @dataclass
@@ -63,7 +71,8 @@ class PPOResult:
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale;
-    with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``.
+    with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
+    ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
     Example:
         >>> from oasis_torchrl.train.config import load_config
@@ -80,14 +89,27 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         network = OmegaConf.to_container(cfg.network)
         net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
     critic_inputs = len(PRIVILEGED_FIELDS) if cfg.privileged_critic else 0
-    if net.config.critic_inputs != critic_inputs:
-        net = net.with_critic_inputs(critic_inputs)
+    aux_outputs = len(PRIVILEGED_FIELDS) if cfg.loss.aux_coeff else 0
+    if (net.config.critic_inputs, net.config.aux_outputs) != (critic_inputs, aux_outputs):
+        net = net.with_training_heads(critic_inputs, aux_outputs)
     if net.config.cameras != cameras or tuple(net.config.image_size) != image_size:
         raise ValueError(
             f"the network reads cameras {net.config.cameras} at {net.config.image_size}, the env "
             f"gives {cameras} at {image_size}: set env.image_size to the network's size"
         )
     return net
+
+
+def uses_ground_truth(cfg: DictConfig) -> bool:
+    """Whether the run reads the simulator's privileged state (critic inputs or auxiliary
+    targets), which only the embedded server sends.
+
+    Example:
+        >>> from oasis_torchrl.train.config import load_config
+        >>> uses_ground_truth(load_config("ppo", ["privileged_critic=false", "loss.aux_coeff=0"]))
+        False
+    """
+    return bool(cfg.privileged_critic or cfg.loss.aux_coeff)
 
 
 def episode_stats(batch: TensorDictBase) -> dict[str, float]:
@@ -137,7 +159,7 @@ class PPOTrainer:
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, float]] = resumed.get("history", [])
-        self.env = build_env(cfg.env, privileged=cfg.privileged_critic)
+        self.env = build_env(cfg.env, privileged=uses_ground_truth(cfg))
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
@@ -155,6 +177,11 @@ class PPOTrainer:
             gamma=cfg.loss.gamma, lmbda=cfg.loss.lmbda, value_network=self.modules.value
         )
         self.optimizer = torch.optim.Adam(self._param_groups(), lr=cfg.optim.lr)
+        self._encoded: torch.Tensor | None = None
+        if self.net.aux is not None:
+            # ClipPPOLoss runs the encoder inside; the auxiliary loss reads that pass's output
+            # instead of paying for a third encoder pass per minibatch.
+            self.net.encoder.register_forward_hook(self._keep_encoded)
         if resumed:
             self.optimizer.load_state_dict(resumed["optimizer"])
         self.logger: Logger = get_logger(
@@ -165,23 +192,35 @@ class PPOTrainer:
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, EvalReport] | None = None
 
+    def _keep_encoded(self, module: torch.nn.Module, inputs: Any, output: torch.Tensor) -> None:
+        self._encoded = output
+
+    def _aux_loss(self, minibatch: TensorDictBase) -> torch.Tensor:
+        """Mean squared error of the auxiliary head on the minibatch's privileged state."""
+        if self._encoded is None or not self._encoded.requires_grad:
+            raise RuntimeError("the auxiliary loss found no encoder pass of the PPO loss")
+        prediction = self.net.predict_aux(self._encoded)
+        return torch.nn.functional.mse_loss(prediction, minibatch.get(CRITIC_INPUTS))
+
     def _param_groups(self) -> list[dict[str, Any]]:
-        """The critic head in its own group, at ``optim.critic_lr`` (``null``: ``optim.lr``).
+        """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
+        (``null``: ``optim.lr``).
 
         Why: a fresh critic on a warm-started encoder (whose features are small, ~0.08) moves
         too slowly at the actor's fine-tuning rate: measured on 1536 steps of the cloned
         policy, a critic fitted for 320 minibatches explains 31% of the returns' variance at
         1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
         """
-        critic = {id(parameter) for parameter in self.net.critic.parameters()}
+        heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
+        head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
         parameters = list(self.loss.parameters())
         return [
-            {"params": [p for p in parameters if id(p) not in critic]},
-            {"params": [p for p in parameters if id(p) in critic]},
+            {"params": [p for p in parameters if id(p) not in head_ids]},
+            {"params": [p for p in parameters if id(p) in head_ids]},
         ]
 
     def _base_lrs(self) -> tuple[float, float]:
-        """The un-annealed learning rates of the two parameter groups (actor+encoder, critic)."""
+        """The un-annealed learning rates of the two parameter groups (acting parts, heads)."""
         critic_lr = self.cfg.optim.get("critic_lr")
         return self.cfg.optim.lr, self.cfg.optim.lr if critic_lr is None else critic_lr
 
@@ -259,7 +298,7 @@ class PPOTrainer:
             ray_cfg = RayCollectionConfig.from_config(cfg.ray)
             return RayCollection(
                 ray_cfg,
-                training_env_factory(cfg.env, ray_cfg, privileged=cfg.privileged_critic),
+                training_env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
                 self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
@@ -289,8 +328,13 @@ class PPOTrainer:
         updates = skipped = 0
         for _ in range(cfg.optim.epochs):
             for index in torch.randperm(flat.numel()).split(cfg.optim.mini_batch_size):
-                losses = self.loss(flat[index])
+                minibatch = flat[index]
+                losses = self.loss(minibatch)
+                if self.net.aux is not None:
+                    losses["loss_aux"] = self._aux_loss(minibatch) * cfg.loss.aux_coeff
                 terms = ("loss_critic",) if critic_only else LOSS_TERMS
+                if self.net.aux is not None:
+                    terms = (*terms, "loss_aux")
                 total = sum(losses[key] for key in terms)
                 if not torch.isfinite(total):
                     skipped += 1

@@ -130,10 +130,15 @@ def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
     assert net.actor[0].weight.grad is None
 
 
-def test_privileged_critic_takes_extra_inputs() -> None:
+def test_privileged_critic_takes_extra_inputs_and_the_aux_head_predicts_them() -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE))
-    privileged = net.with_critic_inputs(4)
+    with pytest.raises(ValueError, match="no auxiliary head"):
+        net.predict_aux(torch.rand(3, net.encoder.out_features))
+    privileged = net.with_training_heads(4, 4)
     torch.testing.assert_close(privileged.encoder.convs[0].weight, net.encoder.convs[0].weight)
+    assert privileged.predict_aux(torch.rand(3, net.encoder.out_features)).shape == (3, 4)
+    deployed = privileged.with_training_heads(0, 0)
+    assert deployed.aux is None and set(deployed.state_dict()) == set(net.state_dict())
     features = torch.rand(3, net.config.features_dim)
     assert privileged.value(features, torch.rand(3, 4)).shape == (3, 1)
     with pytest.raises(ValueError, match="the critic takes 4 extra inputs, got None"):

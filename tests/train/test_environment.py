@@ -27,5 +27,5 @@ def test_privileged_state_follows_the_ground_truth() -> None:
 
 def test_privileged_state_needs_ground_truth() -> None:
     cfg = load_config("ppo", [*TINY_ENV, "env.endpoint=http://127.0.0.1:9"]).env
-    with pytest.raises(ValueError, match="privileged_critic needs ground truth"):
+    with pytest.raises(ValueError, match=r"loss.aux_coeff\) needs ground truth"):
         build_env(cfg, privileged=True)

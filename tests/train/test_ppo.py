@@ -54,15 +54,16 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     result = trainer.run()
 
     after = result.net.state_dict()
-    for key in ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "log_scale"):
+    trained = ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "aux.2.weight")
+    for key in (*trained, "log_scale"):
         assert not torch.equal(before[key], after[key]), key
     assert result.net.config.critic_inputs == 4  # the asymmetric critic
     actor_group, critic_group = trainer.optimizer.param_groups  # annealed alike, 5x apart
     assert critic_group["lr"] == pytest.approx(5 * actor_group["lr"])
-    critic = {id(parameter) for parameter in result.net.critic.parameters()}
-    assert {id(parameter) for parameter in critic_group["params"]} == critic
+    heads = [*result.net.critic.parameters(), *result.net.aux.parameters()]
+    assert {id(parameter) for parameter in critic_group["params"]} == {id(p) for p in heads}
     scalars = tmp_path / "logs" / "ppo" / "scalars"
-    for name in ("loss_objective", "loss_critic", "loss_entropy"):
+    for name in ("loss_objective", "loss_critic", "loss_entropy", "loss_aux"):
         values = _csv_values(scalars / "loss" / f"{name}.csv")
         assert values and all(math.isfinite(v) for v in values), name
     assert _csv_values(scalars / "eval" / "mean_distance.csv")
