@@ -62,6 +62,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def parse_arguments(
+    parser: argparse.ArgumentParser, argv: Sequence[str] | None = None
+) -> argparse.Namespace:
+    """``parser.parse_args``, but ``KEY=VALUE`` overrides may also follow the options.
+
+    Why: argparse fills a ``nargs="*"`` positional once, at its first position, so in
+    ``train ppo --config c.yaml optim.lr=1e-4`` the override after the option is rejected;
+    subcommands rule out ``parse_intermixed_args``.
+
+    Example:
+        >>> args = parse_arguments(build_parser(), ["train", "ppo", "--config", "c.yaml", "a=1"])
+        >>> str(args.config), args.overrides
+        ('c.yaml', ['a=1'])
+    """
+    args, extra = parser.parse_known_args(argv)
+    overrides = [item for item in extra if "=" in item and not item.startswith("-")]
+    if overrides and hasattr(args, "overrides"):
+        args.overrides = [*args.overrides, *overrides]
+        extra = [item for item in extra if item not in overrides]
+    if extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default: the process arguments), set up logging, run the command.
 
@@ -69,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         >>> main(["serve", "--width", "7"])  # invalid settings give exit code 2
         2
     """
-    args = build_parser().parse_args(argv)
+    args = parse_arguments(build_parser(), argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-import pytest
+from pathlib import Path
 
-from oasis_torchrl.cli import main
+import pytest
+from omegaconf import OmegaConf
+
+from oasis_torchrl.cli import build_parser, main, parse_arguments
 from oasis_torchrl.train.config import load_config
 
 
@@ -35,3 +38,14 @@ def test_bad_overrides_name_the_problem() -> None:
 def test_train_command_reports_bad_settings() -> None:
     assert main(["train", "ppo", "optim.lrate=1"]) == 2
     assert main(["train", "bc", "dataset.root=null"]) == 2
+
+
+def test_overrides_may_follow_the_options(tmp_path: Path) -> None:
+    config = tmp_path / "ppo.yaml"
+    config.write_text(OmegaConf.to_yaml(load_config("ppo")))
+    parser = build_parser()
+    args = parse_arguments(parser, ["train", "ppo", "seed=1", "--config", str(config), "seed=2"])
+    assert (args.config, args.overrides) == (config, ["seed=1", "seed=2"])
+    with pytest.raises(SystemExit):
+        parse_arguments(parser, ["train", "ppo", "--config", str(config), "--nope"])
+    assert main(["train", "ppo", "--config", str(config), "optim.lrate=1"]) == 2
