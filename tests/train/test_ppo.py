@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 from omegaconf import OmegaConf
+from tensordict import TensorDict
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
@@ -58,6 +59,10 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     for key in (*trained, "log_scale"):
         assert not torch.equal(before[key], after[key]), key
     assert result.net.config.critic_inputs == 4  # the asymmetric critic
+    assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(1.0)}))  # null: off
+    trainer.cfg.optim.target_kl = 0.05
+    assert trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.06)}))
+    assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.04)}))
     actor_group, critic_group = trainer.optimizer.param_groups  # annealed alike, 5x apart
     assert critic_group["lr"] == pytest.approx(5 * actor_group["lr"])
     heads = [*result.net.critic.parameters(), *result.net.aux.parameters()]
@@ -94,6 +99,9 @@ def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) 
     privileged = build_net(OmegaConf.merge(cfg, {"privileged_critic": True}), CAMERAS)
     assert privileged.critic[0].in_features == source.critic[0].in_features + 4
     torch.testing.assert_close(privileged.actor[0].weight, source.actor[0].weight)
+
+    with pytest.raises(ValueError, match=r"optim\.target_kl must be positive or null, got 0"):
+        PPOTrainer(load_config("ppo", [*TINY_ENV, "optim.target_kl=0"]))
 
     wrong_size = load_config("ppo", [f"init_from={folder}"])  # the env's default 64x96
     with pytest.raises(ValueError, match=r"set env\.image_size to the network's size"):
