@@ -46,6 +46,8 @@ logger = logging.getLogger(__name__)
 NAME = "record"
 HELP = "drive the world model (autopilot, script or saved policy) and record a LeRobot dataset"
 
+#: ``oasis_torchrl.drivers.DRIVER_KINDS``, spelled out: importing that module (torch) would cost
+#: every CLI call 8 s; tests/data/test_drivers.py checks the two agree.
 DRIVERS = ("autopilot", "scripted", "policy")
 DEFAULT_NUM_ENVS = 2
 

@@ -100,3 +100,10 @@ def test_saved_policies_drive(tmp_path: Path) -> None:
         wrong(_observation_with_pixels(2))
     with pytest.raises(FileNotFoundError):
         PolicyDriver.load(tmp_path / "missing.pt")
+
+
+def test_record_command_offers_every_driver_kind() -> None:
+    from oasis_torchrl.commands.record import DRIVERS
+    from oasis_torchrl.drivers import DRIVER_KINDS
+
+    assert DRIVERS == DRIVER_KINDS
