@@ -17,10 +17,10 @@ wall times) and writes it with a PNG of the learning curves to ``--results``. St
 their outputs under ``--work`` (a rerun reuses finished stages). Budgets are stated in env
 steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps).
 
-Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 40960]``
-(about two hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO from scratch in
-one process (``--stages ppo_scratch``) and the rest in another; a last run with every stage
-then assembles the report from the cache.
+Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 61440]``
+(about two and a half hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO
+from scratch in one process (``--stages ppo_scratch``) and the rest in another; a last run
+with every stage then assembles the report from the cache.
 """
 
 from __future__ import annotations
@@ -196,7 +196,7 @@ def main() -> None:
     parser.add_argument("--dagger-rounds", type=int, default=6)
     parser.add_argument("--dagger-episodes", type=int, default=32)
     parser.add_argument("--dagger-steps", type=int, default=1000)
-    parser.add_argument("--ppo-frames", type=int, default=40960, help="PPO from scratch, env steps")
+    parser.add_argument("--ppo-frames", type=int, default=61440, help="PPO from scratch, env steps")
     parser.add_argument(
         "--stages",
         nargs="+",
@@ -204,7 +204,7 @@ def main() -> None:
         default=list(STAGES),
         help="run only these stages (each caches under --work; the report needs all of them)",
     )
-    parser.add_argument("--finetune-frames", type=int, default=10240, help="BC + PPO, env steps")
+    parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
