@@ -187,7 +187,14 @@ class PPOTrainer:
             # instead of paying for a third encoder pass per minibatch.
             self.net.encoder.register_forward_hook(self._keep_encoded)
         if resumed:
-            self.optimizer.load_state_dict(resumed["optimizer"])
+            try:
+                self.optimizer.load_state_dict(resumed["optimizer"])
+            except ValueError as error:  # e.g. one parameter group, before optim.critic_lr
+                self.env.close()
+                raise ValueError(
+                    f"cannot resume the optimizer of {cfg.resume}: {error}; start a new run "
+                    "(init_from=<the checkpoint> keeps its weights)"
+                ) from error
         self.logger: Logger = get_logger(
             cfg.logger.backend,
             logger_name=str(self.output_dir / "logs"),

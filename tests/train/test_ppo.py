@@ -88,6 +88,12 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     assert [entry["frames"] for entry in resumed.history] == [16, 32]
     assert not torch.equal(resumed.net.state_dict()["actor.0.weight"], after["actor.0.weight"])
 
+    old = torch.load(resumed.checkpoint, weights_only=False)  # one parameter group: an old run's
+    old["optimizer"]["param_groups"] = old["optimizer"]["param_groups"][:1]
+    torch.save(old, tmp_path / "old.pt")
+    with pytest.raises(ValueError, match=r"cannot resume the optimizer of .*old\.pt"):
+        PPOTrainer(_ppo_config(tmp_path, 48, f"resume={tmp_path / 'old.pt'}"))
+
 
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=1.5))
