@@ -129,13 +129,16 @@ def benchmark_config(args: argparse.Namespace) -> DictConfig:
     )
 
 
-def ppo_stage(cfg: DictConfig, init_from: Path | None, name: str, frames: int) -> DictConfig:
-    """A PPO stage of the benchmark: its own folder, budget and evaluations every 10 batches;
-    fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from scratch the
-    ``configs/ppo.yaml`` defaults."""
+def ppo_stage(
+    cfg: DictConfig, init_from: Path | None, name: str, frames: int, overrides: list[str]
+) -> DictConfig:
+    """A PPO stage of the benchmark: its own folder, budget and evaluations every
+    ``EVAL_EVERY`` batches; fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides,
+    PPO from scratch the ``configs/ppo.yaml`` defaults; ``overrides`` (``KEY=VALUE``) last."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
     evaluations = {"every": EVAL_EVERY, "episodes": cfg.eval.episodes}
-    return OmegaConf.merge(stage, {"collector": {"total_frames": frames}, "eval": evaluations})
+    budget = {"collector": {"total_frames": frames}, "eval": evaluations}
+    return OmegaConf.merge(stage, budget, OmegaConf.from_dotlist(overrides))
 
 
 def plot(
@@ -205,6 +208,14 @@ def main() -> None:
         help="run only these stages (each caches under --work; the report needs all of them)",
     )
     parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
+    parser.add_argument(
+        "--ppo-overrides",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="PPO settings of both PPO stages, e.g. ray.enabled=true (collection on two Ray "
+        "workers, each with its own embedded server: 1.3x the env steps per second here)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
 
@@ -224,11 +235,12 @@ def main() -> None:
     if "bc_ppo" in stages:
         with cache.timed("bc_ppo"):
             finetune_history = run_ppo(
-                ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames)
+                ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args.ppo_overrides)
             ).history
     if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
-            scratch_history = run_ppo(ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames)).history
+            scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args.ppo_overrides)
+            scratch_history = run_ppo(scratch).history
     if stages != set(STAGES):
         logger.info("ran %s; the report needs every stage", sorted(stages))
         return

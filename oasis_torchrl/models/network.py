@@ -66,10 +66,17 @@ class DrivingNet(nn.Module):
         )
         self.log_scale = nn.Parameter(torch.empty(cfg.chunk, cfg.action_dim))
         self.set_scale(cfg.init_scale)
-        # A small last actor layer starts PPO near a zero chunk instead of saturated tanh ends.
+        # A small last actor layer starts PPO near one chunk (init_action) for every input,
+        # instead of saturated tanh ends.
         with torch.no_grad():
             self.actor[-1].weight.mul_(0.01)
-            self.actor[-1].bias.zero_()
+            self.actor[-1].bias.copy_(self._raw_location(cfg.init_action).repeat(cfg.chunk))
+
+    @staticmethod
+    def _raw_location(action: Sequence[float]) -> torch.Tensor:
+        """The actor output whose chunk location is ``atanh(action)`` (inverse of the bound)."""
+        loc = torch.atanh(torch.tensor(action, dtype=torch.float32))
+        return LOC_BOUND * torch.atanh(loc / LOC_BOUND)
 
     def features(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """Shared features ``[..., features_dim]`` from each camera's frames and the state."""

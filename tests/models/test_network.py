@@ -118,6 +118,20 @@ def test_stochastic_actor_samples_in_bounds_with_finite_log_prob() -> None:
     assert td["scale"].flatten().unique().tolist() == pytest.approx([2.0])
 
 
+@pytest.mark.parametrize("init_action", [(0.5, 0.0), (-0.3, 0.99)])
+def test_a_fresh_actor_starts_at_its_init_action(init_action: tuple[float, float]) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_action=init_action))
+    chunk = net(_frames((16,)), torch.rand(16, 2))
+    expected = torch.tensor(init_action).expand(16, 4, 2)
+    torch.testing.assert_close(chunk, expected, atol=0.02, rtol=0)
+
+
+@pytest.mark.parametrize("init_action", [(0.5,), (0.0, 1.0), (-0.995, 0.0)])
+def test_init_action_must_fit_the_actions(init_action: tuple[float, ...]) -> None:
+    with pytest.raises(ValueError, match=r"init_action needs 2 values in \[-0.99, 0.99\]"):
+        DrivingNetConfig(init_action=init_action)
+
+
 def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE))
     net.set_scale(0.2)
