@@ -78,17 +78,35 @@ def test_a_torchscript_policy_driver_travels_as_its_spec(tmp_path: Path) -> None
     assert action.shape == (3, 4, 2)
 
 
+def _parent(pid: int) -> int:
+    # /proc/<pid>/stat: "pid (comm) state ppid ...", and comm may hold spaces or parentheses.
+    stat = Path(f"/proc/{pid}/stat").read_text()
+    return int(stat.rsplit(")", 1)[1].split()[1])
+
+
+def _descends_from_this_process(pid: int) -> bool:
+    """Whether ``pid`` runs under this test process (its own Ray runtime: raylet, then workers),
+    not under another Ray runtime on the same machine."""
+    me = os.getpid()
+    while pid > 1:
+        pid = _parent(pid)
+        if pid == me:
+            return True
+    return False
+
+
 def _kill_a_collector_process() -> None:
-    """SIGKILL one Ray collector actor's process, as a crashed machine would."""
+    """SIGKILL one of this test's Ray collector actor processes, as a crashed machine would."""
     for proc in Path("/proc").iterdir():
         try:
             title = (proc / "cmdline").read_bytes()
+            ours = proc.name.isdigit() and _descends_from_this_process(int(proc.name))
         except OSError:
             continue
-        if proc.name.isdigit() and title.startswith(b"ray::Collector"):
+        if ours and title.startswith(b"ray::Collector"):
             os.kill(int(proc.name), signal.SIGKILL)
             return
-    raise AssertionError("no Ray collector process found")
+    raise AssertionError("no Ray collector process of this test found")
 
 
 @pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="finds workers in /proc")
