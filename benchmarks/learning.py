@@ -20,7 +20,8 @@ steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps)
 Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 61440]``
 (about two and a half hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO
 from scratch in one process (``--stages ppo_scratch``) and the rest in another; a last run
-with every stage then assembles the report from the cache.
+with every stage then assembles the report from the cache. A partial run writes what it ran to
+``learning_<stages>.json`` beside the full report.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import logging
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 from PIL import Image, ImageDraw
@@ -48,6 +50,11 @@ from oasis_torchrl.train.pipeline import (
 logger = logging.getLogger("benchmarks.learning")
 
 CONSTANT_THROTTLES = (0.25, 0.5, 0.75, 1.0)
+REFERENCES = {
+    "autopilot": "autopilot",
+    **{f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES},
+}
+"""The reference policies: the privileged expert and straight drives at constant throttles."""
 # PPO iterations between evaluations: 20 x 512 env steps (an evaluation of 32 episodes of up to
 # 150 chunks costs about as many env steps as 10 iterations).
 EVAL_EVERY = 20
@@ -221,62 +228,92 @@ def main() -> None:
 
     cfg = benchmark_config(args)
     cache = StageCache(args.work / "stages.json")
+    results = run_stages(args, cfg, cache)
+    settings = {
+        "settings": {**vars(args), "work": str(args.work), "results": str(args.results)},
+        "config": OmegaConf.to_container(cfg),
+    }
+    if set(results) != set(STAGES):
+        # A partial run (e.g. one stage on its own) still leaves its numbers in the results.
+        path = args.results / f"learning_{'_'.join(results)}.json"
+        write_json(path, {**settings, **results, "seconds": cache.seconds})
+        logger.info(
+            "ran %s (results in %s); the full report needs every stage", list(results), path
+        )
+        return
+    report = {**settings, **full_report(results), "seconds": cache.seconds}
+    write_json(args.results / "learning.json", report)
+    plot_report(report, args.results / "learning.png")
+
+
+def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> dict[str, Any]:
+    """Run (or reuse) the stages of ``args.stages``; their results, by stage, in stage order."""
     stages = set(args.stages)
-    constants = {f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES}
+    results: dict[str, Any] = {}
     if "references" in stages:
         with cache.timed("references"):
-            references = cache.evaluate(cfg, {"autopilot": "autopilot", **constants})
+            results["references"] = cache.evaluate(cfg, REFERENCES)
     if stages & {"bc", "bc_ppo"}:
         with cache.timed("record"):
             dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
         with cache.timed("bc"):
             bc_policy = clone(cfg, dataset)
-        bc_eval = cache.evaluate(cfg, {"bc": str(bc_policy)})["bc"]
+        if "bc" in stages:
+            results["bc"] = cache.evaluate(cfg, {"bc": str(bc_policy)})["bc"]
     if "bc_ppo" in stages:
         with cache.timed("bc_ppo"):
-            finetune_history = run_ppo(
-                ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args.ppo_overrides)
-            ).history
+            finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args.ppo_overrides)
+            results["bc_ppo"] = run_ppo(finetune).history
     if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
             scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args.ppo_overrides)
-            scratch_history = run_ppo(scratch).history
-    if stages != set(STAGES):
-        logger.info("ran %s; the report needs every stage", sorted(stages))
-        return
+            results["ppo_scratch"] = run_ppo(scratch).history
+    return results
 
+
+def full_report(results: dict[str, Any]) -> dict[str, Any]:
+    """Every stage's results, the best constant action and the targets, met or not."""
+    references, bc = results["references"], results["bc"]
+    constants = [name for name in REFERENCES if name.startswith("constant")]
     best_constant = max(constants, key=lambda name: references[name]["mean_distance"])
     autopilot = references["autopilot"]["mean_distance"]
     constant = references[best_constant]["mean_distance"]
-    scratch_final = scratch_history[-1]["mean_distance"]
-    finetune_final = finetune_history[-1]["mean_distance"]
-    report = {
-        "settings": {**vars(args), "work": str(args.work), "results": str(args.results)},
-        "config": OmegaConf.to_container(cfg),
-        "references": references,
+    scratch_final = results["ppo_scratch"][-1]["mean_distance"]
+    finetune_final = results["bc_ppo"][-1]["mean_distance"]
+    return {
+        **results,
         "best_constant": best_constant,
-        "bc": bc_eval,
-        "ppo_scratch": scratch_history,
-        "bc_ppo": finetune_history,
         "targets": {
-            "bc_over_autopilot": bc_eval["mean_distance"] / autopilot,
-            "bc_target_met": bc_eval["mean_distance"] >= 0.7 * autopilot,
+            "bc_over_autopilot": bc["mean_distance"] / autopilot,
+            "bc_target_met": bc["mean_distance"] >= 0.7 * autopilot,
             "ppo_scratch_over_best_constant": scratch_final / constant,
             "ppo_scratch_target_met": scratch_final >= 1.5 * constant,
-            "bc_ppo_over_bc": finetune_final / bc_eval["mean_distance"],
-            "bc_ppo_target_met": finetune_final > bc_eval["mean_distance"],
+            "bc_ppo_over_bc": finetune_final / bc["mean_distance"],
+            "bc_ppo_target_met": finetune_final > bc["mean_distance"],
         },
-        "seconds": cache.seconds,
     }
+
+
+def plot_report(report: dict[str, Any], path: Path) -> None:
+    """The learning curves of a full report against the reference levels, as a PNG."""
+    bc = report["bc"]["mean_distance"]
     curves = {
-        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in scratch_history],
-        "bc + ppo": [(0.0, bc_eval["mean_distance"])]
-        + [(h["frames"], h["mean_distance"]) for h in finetune_history],
+        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in report["ppo_scratch"]],
+        "bc + ppo": [(0.0, bc)] + [(h["frames"], h["mean_distance"]) for h in report["bc_ppo"]],
     }
-    levels = {"autopilot": autopilot, "best constant": constant, "bc": bc_eval["mean_distance"]}
-    args.results.mkdir(parents=True, exist_ok=True)
-    plot(curves, levels, args.results / "learning.png")
-    (args.results / "learning.json").write_text(json.dumps(report, indent=2))
+    references = report["references"]
+    levels = {
+        "autopilot": references["autopilot"]["mean_distance"],
+        "best constant": references[report["best_constant"]]["mean_distance"],
+        "bc": bc,
+    }
+    plot(curves, levels, path)
+
+
+def write_json(path: Path, report: dict[str, Any]) -> None:
+    """Print the report as JSON and write it to ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=2))
     print(json.dumps(report, indent=2))
 
 
