@@ -49,7 +49,10 @@ class _Features(nn.Module):
         self.net = net
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        return self.net.features([as_float_frames(x) for x in inputs[:-1]], inputs[-1])
+        state = inputs[-1]
+        # Only the frames the network reads are converted (2 of the env's 4 by default).
+        frames = [self.net.last_frames(x, state.dim() - 1) for x in inputs[:-1]]
+        return self.net.features([as_float_frames(x) for x in frames], state)
 
 
 class _ChunkParams(nn.Module):
@@ -99,11 +102,19 @@ class ActorCritic:
         >>> modules = make_actor_critic(DrivingNet())
         >>> modules.value.out_keys[-1]
         'state_value'
+        >>> modules.features.out_keys
+        ['features']
     """
 
     operator: ActorValueOperator
     policy: ProbabilisticActor
     value: ValueOperator
+
+    @property
+    def features(self) -> TensorDictModule:
+        """The shared part, observations -> ``"features"``, which the operator's heads
+        (``operator.get_policy_head()``, ``operator.get_value_head()``) read."""
+        return self.operator.module[0]
 
 
 def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:

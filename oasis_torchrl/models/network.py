@@ -91,14 +91,17 @@ class DrivingNet(nn.Module):
         return torch.cat([encoded, state.to(encoded.dtype)], dim=-1)
 
     def last_frames(self, image: torch.Tensor, batch_dims: int) -> torch.Tensor:
-        """``[*B, frames, 3, H, W]``: the last ``frames`` of a camera's frames."""
+        """The last ``frames`` of a camera's frames, ``[*B, K, ...]`` with three image
+        dimensions (``3, H, W`` or the env's ``H, W, 3``) -> ``[*B, frames, ...]``; a single
+        frame ``[*B, ...]`` gets its time axis."""
         wanted = self.config.frames
         if image.dim() == batch_dims + 3:  # a single frame, no time axis
             image = image.unsqueeze(-4)
         if image.dim() != batch_dims + 4 or image.shape[-4] < wanted:
             raise ValueError(
-                f"camera frames must be [*B, >={wanted}, 3, H, W] with {batch_dims} batch dims "
-                f"(or [*B, 3, H, W] when frames is 1), got {list(image.shape)}"
+                f"camera frames must be [*B, >={wanted}, 3, H, W] (or H, W, 3) with "
+                f"{batch_dims} batch dims (or one frame [*B, 3, H, W] when frames is 1), "
+                f"got {list(image.shape)}"
             )
         return image[..., -wanted:, :, :, :]
 
@@ -127,11 +130,12 @@ class DrivingNet(nn.Module):
             raise ValueError(f"the critic takes {wanted} extra inputs, got {got}")
         return self.critic(features if extra is None else torch.cat([features, extra], dim=-1))
 
-    def predict_aux(self, camera_features: torch.Tensor) -> torch.Tensor:
-        """The auxiliary head's ``[..., aux_outputs]`` from the encoder's output."""
+    def predict_aux(self, features: torch.Tensor) -> torch.Tensor:
+        """The auxiliary head's ``[..., aux_outputs]`` from the shared features (it reads their
+        camera part only, so its loss shapes the encoder)."""
         if self.aux is None:
             raise ValueError("this network has no auxiliary head (DrivingNetConfig.aux_outputs=0)")
-        return self.aux(camera_features)
+        return self.aux(features[..., : self.encoder.out_features])
 
     def with_training_heads(self, critic_inputs: int, aux_outputs: int) -> DrivingNet:
         """A copy with fresh training-only heads, a critic taking ``critic_inputs`` extra

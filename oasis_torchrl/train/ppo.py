@@ -2,11 +2,14 @@
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
 TanhNormal over the 4-action chunk); :class:`~torchrl.objectives.value.GAE` computes advantages
-with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared encoder) for a few
-epochs of minibatches per batch. Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar,
-checkpoints with resume, periodic deterministic evaluation episodes (recorded to rerun and/or a
-LeRobot dataset when configured), a warm start from a behaviour-cloning policy, and the final
-policy exported as a LeRobot policy folder. Config: ``configs/ppo.yaml``.
+with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both for a few epochs of
+minibatches per batch. The encoder is shared: it runs once per minibatch and the loss's actor
+and critic are the heads reading its ``"features"`` (with the full actor and critic operators
+the loss would run it twice, most of an update's cost). Around that: TorchRL loggers (CSV or
+TensorBoard), a tqdm bar, checkpoints with resume, periodic deterministic evaluation episodes
+(recorded to rerun and/or a LeRobot dataset when configured), a warm start from a
+behaviour-cloning policy, and the final policy exported as a LeRobot policy folder. Config:
+``configs/ppo.yaml``.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
-from oasis_torchrl.models.actor_critic import CRITIC_INPUTS
+from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FEATURES
 from oasis_torchrl.train.checkpoint import (
     LATEST,
     export_lerobot,
@@ -169,8 +172,8 @@ class PPOTrainer:
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.modules = make_actor_critic(self.net)
         self.loss = ClipPPOLoss(
-            self.modules.policy,
-            self.modules.value,
+            self.modules.operator.get_policy_head(),
+            self.modules.operator.get_value_head(),
             clip_epsilon=cfg.loss.clip_epsilon,
             entropy_coeff=cfg.loss.entropy_coeff,
             critic_coeff=cfg.loss.critic_coeff,
@@ -181,11 +184,6 @@ class PPOTrainer:
             gamma=cfg.loss.gamma, lmbda=cfg.loss.lmbda, value_network=self.modules.value
         )
         self.optimizer = torch.optim.Adam(self._param_groups(), lr=cfg.optim.lr)
-        self._encoded: torch.Tensor | None = None
-        if self.net.aux is not None:
-            # ClipPPOLoss runs the encoder inside; the auxiliary loss reads that pass's output
-            # instead of paying for a third encoder pass per minibatch.
-            self.net.encoder.register_forward_hook(self._keep_encoded)
         if resumed:
             try:
                 self.optimizer.load_state_dict(resumed["optimizer"])
@@ -202,16 +200,6 @@ class PPOTrainer:
         )
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, EvalReport] | None = None
-
-    def _keep_encoded(self, module: torch.nn.Module, inputs: Any, output: torch.Tensor) -> None:
-        self._encoded = output
-
-    def _aux_loss(self, minibatch: TensorDictBase) -> torch.Tensor:
-        """Mean squared error of the auxiliary head on the minibatch's privileged state."""
-        if self._encoded is None or not self._encoded.requires_grad:
-            raise RuntimeError("the auxiliary loss found no encoder pass of the PPO loss")
-        prediction = self.net.predict_aux(self._encoded)
-        return torch.nn.functional.mse_loss(prediction, minibatch.get(CRITIC_INPUTS))
 
     def _param_groups(self) -> list[dict[str, Any]]:
         """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
@@ -381,10 +369,15 @@ class PPOTrainer:
                 yield flat[index]
 
     def _losses(self, minibatch: TensorDictBase) -> TensorDictBase:
-        """ClipPPOLoss's terms, plus the weighted auxiliary loss when the net has that head."""
+        """ClipPPOLoss's terms on the minibatch's freshly encoded features, plus the weighted
+        auxiliary loss (the head's mean squared error on the privileged state) when the net
+        has that head."""
+        minibatch = self.modules.features(minibatch)  # replaces the collector's detached ones
         losses = self.loss(minibatch)
         if self.net.aux is not None:
-            losses["loss_aux"] = self._aux_loss(minibatch) * self.cfg.loss.aux_coeff
+            prediction = self.net.predict_aux(minibatch.get(FEATURES))
+            aux = torch.nn.functional.mse_loss(prediction, minibatch.get(CRITIC_INPUTS))
+            losses["loss_aux"] = aux * self.cfg.loss.aux_coeff
         return losses
 
     def _kl_exceeded(self, losses: TensorDictBase) -> bool:

@@ -147,13 +147,16 @@ def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
 def test_privileged_critic_takes_extra_inputs_and_the_aux_head_predicts_them() -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE))
     with pytest.raises(ValueError, match="no auxiliary head"):
-        net.predict_aux(torch.rand(3, net.encoder.out_features))
+        net.predict_aux(torch.rand(3, net.config.features_dim))
     privileged = net.with_training_heads(4, 4)
     torch.testing.assert_close(privileged.encoder.convs[0].weight, net.encoder.convs[0].weight)
-    assert privileged.predict_aux(torch.rand(3, net.encoder.out_features)).shape == (3, 4)
+    features = torch.rand(3, net.config.features_dim)
+    prediction = privileged.predict_aux(features)
+    assert prediction.shape == (3, 4)
+    features[:, net.encoder.out_features :] = 7.0  # the state part: not the head's input
+    torch.testing.assert_close(privileged.predict_aux(features), prediction)
     deployed = privileged.with_training_heads(0, 0)
     assert deployed.aux is None and set(deployed.state_dict()) == set(net.state_dict())
-    features = torch.rand(3, net.config.features_dim)
     assert privileged.value(features, torch.rand(3, 4)).shape == (3, 1)
     with pytest.raises(ValueError, match="the critic takes 4 extra inputs, got None"):
         privileged.value(features)
