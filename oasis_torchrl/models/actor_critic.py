@@ -97,6 +97,7 @@ class ActorCritic:
         policy: the stochastic actor (a TanhNormal over the chunk in ``[-1, 1]``); call it under
             ``set_exploration_type(ExplorationType.DETERMINISTIC)`` for ``tanh(loc)``.
         value: the critic, writing ``"state_value"``.
+        net: the network they wrap.
 
     Example:
         >>> modules = make_actor_critic(DrivingNet())
@@ -109,6 +110,7 @@ class ActorCritic:
     operator: ActorValueOperator
     policy: ProbabilisticActor
     value: ValueOperator
+    net: DrivingNet
 
     @property
     def features(self) -> TensorDictModule:
@@ -155,4 +157,4 @@ def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:
     value_keys = [FEATURES, CRITIC_INPUTS] if cfg.critic_inputs else [FEATURES]
     value_head = ValueOperator(_Value(net), in_keys=value_keys)
     operator = ActorValueOperator(common, actor_head, value_head)
-    return ActorCritic(operator, operator.get_policy_operator(), operator.get_value_operator())
+    return ActorCritic(operator, operator.get_policy_operator(), operator.get_value_operator(), net)

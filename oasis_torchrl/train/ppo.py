@@ -2,14 +2,12 @@
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
 TanhNormal over the 4-action chunk); :class:`~torchrl.objectives.value.GAE` computes advantages
-with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both for a few epochs of
-minibatches per batch. The encoder is shared: it runs once per minibatch and the loss's actor
-and critic are the heads reading its ``"features"`` (with the full actor and critic operators
-the loss would run it twice, most of an update's cost). Around that: TorchRL loggers (CSV or
-TensorBoard), a tqdm bar, checkpoints with resume, periodic deterministic evaluation episodes
-(recorded to rerun and/or a LeRobot dataset when configured), a warm start from a
-behaviour-cloning policy, and the final policy exported as a LeRobot policy folder. Config:
-``configs/ppo.yaml``.
+with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared encoder, run once
+per minibatch: :mod:`oasis_torchrl.train.ppo_loss`) for a few epochs of minibatches per batch.
+Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar, checkpoints with resume,
+periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot dataset when
+configured), a warm start from a behaviour-cloning policy, and the final policy exported as a
+LeRobot policy folder. Config: ``configs/ppo.yaml``.
 """
 
 from __future__ import annotations
@@ -25,13 +23,11 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
-from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
-from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FEATURES
 from oasis_torchrl.train.checkpoint import (
     LATEST,
     export_lerobot,
@@ -43,13 +39,13 @@ from oasis_torchrl.train.checkpoint import (
 from oasis_torchrl.train.config import save_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
 logger = logging.getLogger(__name__)
 
-LOSS_TERMS = ("loss_objective", "loss_critic", "loss_entropy")
 LOGGED_LOSS_KEYS = (
-    *LOSS_TERMS,
-    "loss_aux",
+    *PPO_TERMS,
+    AUX_TERM,
     "entropy",
     "kl_approx",
     "clip_fraction",
@@ -171,9 +167,9 @@ class PPOTrainer:
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.modules = make_actor_critic(self.net)
-        self.loss = ClipPPOLoss(
-            self.modules.operator.get_policy_head(),
-            self.modules.operator.get_value_head(),
+        self.loss = DrivingPPOLoss(
+            self.modules,
+            aux_coeff=cfg.loss.aux_coeff,
             clip_epsilon=cfg.loss.clip_epsilon,
             entropy_coeff=cfg.loss.entropy_coeff,
             critic_coeff=cfg.loss.critic_coeff,
@@ -323,7 +319,7 @@ class PPOTrainer:
         sums: dict[str, float] = {}
         updates = skipped = 0
         for minibatch in self._minibatches(flat):
-            losses = self._losses(minibatch)
+            losses = self.loss(minibatch)
             if not critic_only and self._kl_exceeded(losses):
                 break
             grad_norm = self._step(losses, critic_only)
@@ -368,18 +364,6 @@ class PPOTrainer:
             for index in torch.randperm(flat.numel()).split(self.cfg.optim.mini_batch_size):
                 yield flat[index]
 
-    def _losses(self, minibatch: TensorDictBase) -> TensorDictBase:
-        """ClipPPOLoss's terms on the minibatch's freshly encoded features, plus the weighted
-        auxiliary loss (the head's mean squared error on the privileged state) when the net
-        has that head."""
-        minibatch = self.modules.features(minibatch)  # replaces the collector's detached ones
-        losses = self.loss(minibatch)
-        if self.net.aux is not None:
-            prediction = self.net.predict_aux(minibatch.get(FEATURES))
-            aux = torch.nn.functional.mse_loss(prediction, minibatch.get(CRITIC_INPUTS))
-            losses["loss_aux"] = aux * self.cfg.loss.aux_coeff
-        return losses
-
     def _kl_exceeded(self, losses: TensorDictBase) -> bool:
         """Whether the minibatch's approximate KL passes ``optim.target_kl`` (``null``: never).
 
@@ -393,9 +377,7 @@ class PPOTrainer:
     def _step(self, losses: TensorDictBase, critic_only: bool) -> float | None:
         """One optimizer step on the loss terms; the gradient norm, or ``None`` when the loss or
         gradient is not finite (the step is skipped)."""
-        terms = ("loss_critic",) if critic_only else LOSS_TERMS
-        if self.net.aux is not None:
-            terms = (*terms, "loss_aux")
+        terms = ("loss_critic",) if critic_only else self.loss.terms
         total = sum(losses[key] for key in terms)
         if not torch.isfinite(total):
             return None
