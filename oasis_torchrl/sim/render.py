@@ -5,9 +5,12 @@ Cameras: pinhole, no roll, no pitch, :data:`CAMERA_HEIGHT` above the ground, yaw
 :data:`HORIZONTAL_FOV`, square pixels. Without pitch the horizon is the middle row and the ground
 depth of a row is ``height * focal / (row - horizon)``: one number per row.
 
-A frame is a ``uint8`` palette-index image ``[cameras, rows, columns]``. The 256-entry palette
-holds every material at several depth bands with light (ambient, night headlights) and distance
-fog baked in, so fog and headlights cost nothing per pixel:
+Several car poses (the 4 frames of a simulator step) are drawn in one pass, so the per-call
+overhead of the many small NumPy calls that plan a frame is shared: every per-column and
+per-object step runs over all views (cameras x poses) at once. The frames are a ``uint8``
+palette-index image ``[views, rows, columns]``. The 256-entry palette holds every material at
+several depth bands with light (ambient, night headlights) and distance fog baked in, so fog
+and headlights cost nothing per pixel:
 
 - sky: one gradient level per row (static per resolution);
 - ground: road coordinates ``(s, d)`` are exact at a few depths under knot columns (every
@@ -25,10 +28,11 @@ fog baked in, so fog and headlights cost nothing per pixel:
 - rain streaks and snow flakes are sparse pixels that fall frame by frame.
 
 Palette indices become packed RGB by three table gathers per 4 pixels (:class:`_QuadPalette`).
-Per-pixel work is a few large NumPy calls without temporaries (frame-sized allocations cost
-page faults), and on large frames runs as independent parts on a small thread pool (NumPy
-releases the GIL inside its loops). The same drawing code optionally fills a metric depth
-buffer (distance along the camera axis, ``inf`` for sky) for :meth:`Renderer.depth`.
+Per-pixel work is a few large NumPy calls over all views without temporaries (frame-sized
+allocations cost page faults), and on large frames runs as independent parts (per view and
+half image) on a small thread pool (NumPy releases the GIL inside its loops). The same drawing
+code optionally fills a metric depth buffer (distance along the camera axis, ``inf`` for sky)
+for :meth:`Renderer.depth`.
 """
 
 from __future__ import annotations
@@ -478,21 +482,25 @@ class CameraModel:
 #: The cameras in the order of the renderer's camera axis.
 CAMERAS = tuple(CAMERA_YAWS)
 
+#: Part of the per-pixel work: the views and the image rows it covers.
+_Part = tuple[slice, slice]
+
 
 @dataclass(frozen=True)
 class _Views:
-    """The cameras at one frame: a shared position and road position, axes per camera."""
+    """The cameras of one or more car poses, one entry per view (camera-major: view
+    ``camera * poses + pose``): position and road position of the pose, axes of the camera."""
 
-    x: float
-    y: float
-    s: float
+    x: np.ndarray
+    y: np.ndarray
+    s: np.ndarray
     forward: np.ndarray
     right: np.ndarray
 
     def to_camera(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Camera coordinates ``(right, forward)`` of world points, ``[cameras, *x.shape]``."""
+        """Camera coordinates ``(right, forward)`` of world points, ``[views, *x.shape]``."""
         shape = (-1,) + (1,) * np.ndim(x)
-        dx, dy = x - self.x, y - self.y
+        dx, dy = x - self.x.reshape(shape), y - self.y.reshape(shape)
         right = dx * self.right[:, 0].reshape(shape) + dy * self.right[:, 1].reshape(shape)
         forward = dx * self.forward[:, 0].reshape(shape) + dy * self.forward[:, 1].reshape(shape)
         return right, forward
@@ -500,10 +508,12 @@ class _Views:
 
 @dataclass(frozen=True)
 class _WallPlan:
-    """One roadside layer, ready to draw: per camera the rows its spans cover, per camera and
-    column the span's parameters (see :meth:`Renderer._draw_wall_rows`)."""
+    """One roadside layer, ready to draw: per view the rows its spans cover
+    (``first_row <= row < last_row``), per view and column the span's parameters (see
+    :meth:`Renderer._draw_wall_rows`)."""
 
-    rows: tuple[slice, ...]
+    first_row: np.ndarray
+    last_row: np.ndarray
     texels_per_row: np.ndarray
     top_texel: np.ndarray
     pattern: _RowPattern
@@ -516,34 +526,20 @@ class _WallPlan:
 
 @dataclass(frozen=True)
 class _GroundPlan:
-    """Per camera, ground row and knot interval: texel index (float32) at the interval's
+    """Per view, ground row and knot interval: texel index (float32) at the interval's
     first column and its step per column."""
 
     start: np.ndarray
     step: np.ndarray
 
 
-class _Buffers:
-    """Per-pixel work arrays, ``[cameras, rows, columns]``, allocated once per resolution."""
-
-    def __init__(self, height: int, width: int, ground_rows: int, knot: int) -> None:
-        shape = (len(CAMERAS), height, width)
-        self.index = np.zeros(shape, dtype=np.uint8)
-        ground_shape = (len(CAMERAS), ground_rows, width // knot, knot)
-        self.texel = np.empty(ground_shape, dtype=np.float32)
-        self.gather = np.empty(ground_shape, dtype=np.intp)
-        self.level = np.empty(shape, dtype=np.float32)
-        self.wall_texel = np.empty(shape, dtype=np.int16)
-        self.opaque = np.empty(shape, dtype=bool)
-        self.second = np.empty(shape, dtype=bool)
-        self.value = np.empty(shape, dtype=np.uint8)
-
-
 class Renderer:
     """Draws the three cameras of a car in a :class:`~oasis_torchrl.sim.scene.Scene`.
 
-    Per-column and per-object work is done for all cameras at once; per-pixel work runs as a
-    few large NumPy calls per camera and half image, spread over the cores.
+    Several poses of the car (e.g. the 4 frames of a step) can be drawn in one pass
+    (:meth:`render_many`): per-column and per-object work is done for all views (poses x
+    cameras) at once; per-pixel work runs as a few large NumPy calls over all views, or on
+    large images per view and half image, spread over the cores.
 
     Args:
         width: Image width in pixels (any size >= 8).
@@ -577,15 +573,8 @@ class Renderer:
         self._knot_steps = np.arange(model.knot, dtype=np.float32)
         self._knot_fraction = np.arange(model.knot) / model.knot
         self._yaws = np.array([CAMERA_YAWS[name] for name in CAMERAS])
-        self._buffers = _Buffers(height, model.padded_width, ground_depths.size, model.knot)
+        self._index = np.zeros(0, dtype=np.uint8)
         self._parallel = width * height >= PARALLEL_PIXELS
-        middle = height // 8 * 4 if self._parallel else height
-        self._rgb_parts = [
-            (camera, rows)
-            for camera in range(len(CAMERAS))
-            for rows in (slice(0, middle), slice(middle, height))
-            if rows.stop > rows.start
-        ]
         self._scene: Scene | None = None
 
     def prepare(self, scene: Scene) -> None:
@@ -614,48 +603,133 @@ class Renderer:
 
         ``frame`` (frames since the scene started) animates rain and snow.
         """
-        self._draw(self._views(car), None)
-        self._particles.draw(self._buffers.index, frame)
-        width = self.model.width
+        self._check_images(out, (self.model.height, self.model.width, 3))
+        self._render([car], [frame], {name: image[None] for name, image in out.items()})
 
-        def convert(part: tuple[int, slice]) -> None:
-            camera, rows = part
-            indices = self._buffers.index[camera, rows, :width]
-            if not indices.flags.c_contiguous:  # padded rows: gather the visible columns
-                scratch = _thread_scratch(rows.stop - rows.start, width)
-                np.copyto(scratch, indices)
-                indices = scratch
-            self._palettes[camera].convert(indices.reshape(-1), out[CAMERAS[camera]][rows])
+    def render_many(
+        self, cars: Sequence[VehicleState], frames: Sequence[int], out: dict[str, np.ndarray]
+    ) -> None:
+        """Draw every camera of several poses in one pass: ``out[name][k]`` (``out[name]`` is
+        ``uint8 [len(cars), H, W, 3]``, written in place) shows ``cars[k]`` at ``frames[k]``.
 
-        _in_parallel(convert, self._rgb_parts, self._parallel)
+        The same images as :meth:`render` of each pose in turn, at a fraction of the cost on
+        small images (the per-call overhead is shared).
+
+        Example:
+            >>> from oasis_torchrl.sim.scene import build_scene
+            >>> from oasis_torchrl.sim.world import World
+            >>> world = World(build_scene("rural snow", 0), 0.05)
+            >>> renderer = Renderer(96, 64)
+            >>> renderer.prepare(world.scene)
+            >>> poses = [world.state, world.state]
+            >>> frames = {name: np.zeros((2, 64, 96, 3), np.uint8) for name in CAMERAS}
+            >>> renderer.render_many(poses, [0, 5], frames)
+            >>> bool(np.array_equal(frames["front"][0], frames["front"][1]))  # snow falls
+            False
+        """
+        if len(frames) != len(cars):
+            raise ValueError(f"frames must have one entry per car ({len(cars)}), got {len(frames)}")
+        self._check_images(out, (len(cars), self.model.height, self.model.width, 3))
+        self._render(cars, frames, out)
 
     def depth(self, car: VehicleState) -> dict[str, np.ndarray]:
         """Metric depth (along each camera axis, ``inf`` for sky) per camera, float32 [H, W]."""
-        buffer = np.empty(self._buffers.index.shape, dtype=np.float32)
+        model = self.model
+        buffer = np.empty((len(CAMERAS), model.height, model.padded_width), dtype=np.float32)
         buffer[...] = self._row_depths[:, None]
-        self._draw(self._views(car), buffer)
-        width = self.model.width
+        self._draw(self._views([car]), buffer)
         return {
-            name: np.ascontiguousarray(buffer[camera, :, :width])
+            name: np.ascontiguousarray(buffer[camera, :, : model.width])
             for camera, name in enumerate(CAMERAS)
         }
+
+    def _render(
+        self, cars: Sequence[VehicleState], frames: Sequence[int], out: dict[str, np.ndarray]
+    ) -> None:
+        """Draw the poses ``cars`` into ``out`` (checked by the caller)."""
+        poses = len(cars)
+        index = self._draw(self._views(cars), None)
+        self._particles.draw(index, np.asarray(frames, dtype=np.float64))
+        index = index.reshape(len(CAMERAS), poses, *index.shape[1:])
+        width = self.model.width
+
+        def convert(part: tuple[int, slice, slice]) -> None:
+            camera, pose, rows = part
+            indices = index[camera, pose, rows, :width]
+            if not indices.flags.c_contiguous:  # padded rows: gather the visible columns
+                scratch = _thread_array("pixels", indices.shape, np.uint8)
+                np.copyto(scratch, indices)
+                indices = scratch
+            self._palettes[camera].convert(indices.reshape(-1), out[CAMERAS[camera]][pose, rows])
+
+        _in_parallel(convert, self._rgb_parts(poses), self._parallel)
+
+    def _check_images(self, out: dict[str, np.ndarray], shape: tuple[int, ...]) -> None:
+        """Raise unless ``out`` holds a writable C-contiguous uint8 ``shape`` array per camera."""
+        for name in CAMERAS:
+            image = out.get(name)
+            if not isinstance(image, np.ndarray):
+                raise TypeError(f"out[{name!r}] must be a numpy array, got {type(image).__name__}")
+            if (
+                image.shape != shape
+                or image.dtype != np.uint8
+                or not image.flags.c_contiguous
+                or not image.flags.writeable
+            ):
+                raise ValueError(
+                    f"out[{name!r}] must be a writable C-contiguous uint8 array of shape "
+                    f"{shape}, got {image.dtype} {image.shape}"
+                )
+
+    def _rgb_parts(self, poses: int) -> list[tuple[int, slice, slice]]:
+        """``(camera, poses, rows)`` of the palette conversions: one per camera, or per camera,
+        pose and half image when converting in parallel."""
+        height = self.model.height
+        if not self._parallel:
+            return [(camera, slice(0, poses), slice(0, height)) for camera in range(len(CAMERAS))]
+        middle = height // 8 * 4
+        return [
+            (camera, slice(pose, pose + 1), rows)
+            for camera in range(len(CAMERAS))
+            for pose in range(poses)
+            for rows in (slice(0, middle), slice(middle, height))
+            if rows.stop > rows.start
+        ]
 
     def _require_scene(self) -> Scene:
         if self._scene is None:
             raise RuntimeError("Renderer.prepare(scene) must be called before rendering")
         return self._scene
 
-    def _views(self, car: VehicleState) -> _Views:
-        """Where the cameras of ``car`` are and where they look."""
-        x = car.x + CAMERA_FORWARD * math.cos(car.heading)
-        y = car.y + CAMERA_FORWARD * math.sin(car.heading)
+    def _views(self, cars: Sequence[VehicleState]) -> _Views:
+        """Where the cameras of every pose in ``cars`` are and where they look."""
+        x = np.array([car.x + CAMERA_FORWARD * math.cos(car.heading) for car in cars])
+        y = np.array([car.y + CAMERA_FORWARD * math.sin(car.heading) for car in cars])
         s, _ = self._require_scene().road.locate(x, y)
-        yaw = car.heading - self._yaws
+        heading = np.array([car.heading for car in cars])
+        yaw = (heading - self._yaws[:, None]).ravel()
         cos, sin = np.cos(yaw), np.sin(yaw)
-        return _Views(x, y, float(s), np.stack([cos, sin], 1), np.stack([sin, -cos], 1))
+        cameras = len(CAMERAS)
+        return _Views(
+            np.tile(x, cameras),
+            np.tile(y, cameras),
+            np.tile(s, cameras),
+            np.stack([cos, sin], 1),
+            np.stack([sin, -cos], 1),
+        )
 
-    def _draw(self, views: _Views, depth: np.ndarray | None) -> None:
-        """Fill the index image (and ``depth`` if given) of every camera."""
+    def _index_image(self, views: int) -> np.ndarray:
+        """The palette-index image ``[views, rows, padded columns]`` (one buffer, grown to the
+        most views drawn at once)."""
+        model = self.model
+        size = views * model.height * model.padded_width
+        if self._index.size < size:
+            self._index = np.zeros(size, dtype=np.uint8)
+        return self._index[:size].reshape(views, model.height, model.padded_width)
+
+    def _draw(self, views: _Views, depth: np.ndarray | None) -> np.ndarray:
+        """Fill and return the index image (and ``depth`` if given) of every view."""
+        index = self._index_image(views.x.size)
         s_samples, d_samples = self._ground_samples(views)
         ground = self._plan_ground(s_samples, d_samples)
         walls = [
@@ -664,39 +738,40 @@ class Renderer:
             if (plan := self._plan_roadside(layer, s_samples, d_samples)) is not None
         ]
 
-        def draw_part(part: tuple[int, slice]) -> None:
-            camera, rows = part
-            np.copyto(self._buffers.index[camera, rows], self._background[rows])
-            self._draw_ground_rows(ground, camera, rows)
+        def draw_part(part: _Part) -> None:
+            np.copyto(index[part], self._background[part[1]])
+            self._draw_ground_rows(ground, index, part)
             for plan in walls:
-                self._draw_wall_rows(plan, camera, rows, depth)
+                self._draw_wall_rows(plan, index, part, depth)
 
-        _in_parallel(draw_part, self._draw_parts(walls), self._parallel)
-        self._draw_obstacles(views, walls, depth)
+        _in_parallel(draw_part, self._draw_parts(walls, views.x.size), self._parallel)
+        self._draw_obstacles(views, walls, index, depth)
+        return index
 
-    def _draw_parts(self, walls: list[_WallPlan]) -> list[tuple[int, slice]]:
-        """Each camera's rows, split in two parts of about equal per-pixel work when drawing
-        in parallel."""
+    def _draw_parts(self, walls: list[_WallPlan], views: int) -> list[_Part]:
+        """All views in one part, or when drawing in parallel each view's rows split in two
+        parts of about equal per-pixel work."""
         height = self.model.height
         if not self._parallel:
-            return [(camera, slice(0, height)) for camera in range(len(CAMERAS))]
+            return [(slice(0, views), slice(0, height))]
         parts = []
-        for camera in range(len(CAMERAS)):
+        for view in range(views):
             work = np.ones(height)
             work[self._first_ground :] += GROUND_WORK
             for plan in walls:
-                work[plan.rows[camera]] += WALL_WORK
+                work[plan.first_row[view] : plan.last_row[view]] += WALL_WORK
             middle = int(np.searchsorted(np.cumsum(work), work.sum() / 2))
-            parts += [(camera, slice(0, middle)), (camera, slice(middle, height))]
+            one = slice(view, view + 1)
+            parts += [(one, slice(0, middle)), (one, slice(middle, height))]
         return parts
 
     def _ground_samples(self, views: _Views) -> tuple[np.ndarray, np.ndarray]:
         """Road coordinates ``(s, d)`` of the ground at the sample depths (far first) under the
-        knot columns: ``[cameras, DEPTH_SAMPLES, knots]`` each."""
+        knot columns: ``[views, DEPTH_SAMPLES, knots]`` each."""
         ray_x = views.forward[:, None, 0] + self._knot_slopes * views.right[:, None, 0]
         ray_y = views.forward[:, None, 1] + self._knot_slopes * views.right[:, None, 1]
-        x = views.x + self._samples[:, None] * ray_x[:, None, :]
-        y = views.y + self._samples[:, None] * ray_y[:, None, :]
+        x = views.x[:, None, None] + self._samples[:, None] * ray_x[:, None, :]
+        y = views.y[:, None, None] + self._samples[:, None] * ray_y[:, None, :]
         return self._require_scene().road.locate(x, y)
 
     def _by_row(self, samples: np.ndarray) -> np.ndarray:
@@ -707,23 +782,23 @@ class Renderer:
         return samples[..., lower, :] * (1.0 - weight) + samples[..., upper, :] * weight
 
     def _row_profiles(self, s_samples: np.ndarray, d_rows: np.ndarray) -> np.ndarray:
-        """Per camera and ground row, the first entry of its lateral profile: the variant for
+        """Per view and ground row, the first entry of its lateral profile: the variant for
         the dashes where the row crosses each dashed line, and the row's depth band."""
         style = self._require_scene().style
-        cameras, rows = np.ogrid[: d_rows.shape[0], : d_rows.shape[1]]
+        views, rows = np.ogrid[: d_rows.shape[0], : d_rows.shape[1]]
         lower, upper, weight = self._row_samples
         variant = np.zeros(d_rows.shape[:-1], dtype=np.intp)
         for bit, (offset, _) in enumerate(self._dashed_lines):
             side = d_rows - offset
             crossed = side[..., :-1] * side[..., 1:] <= 0.0
             knot = np.argmax(crossed, axis=-1)
-            before, after = side[cameras, rows, knot], side[cameras, rows, knot + 1]
+            before, after = side[views, rows, knot], side[views, rows, knot + 1]
             fraction = np.divide(
                 before, before - after, out=np.zeros_like(before), where=before != after
             )
             s_knots = [
-                s_samples[cameras, lower, column] * (1.0 - weight)
-                + s_samples[cameras, upper, column] * weight
+                s_samples[views, lower, column] * (1.0 - weight)
+                + s_samples[views, upper, column] * weight
                 for column in (knot, knot + 1)
             ]
             s = s_knots[0] + fraction * (s_knots[1] - s_knots[0])
@@ -747,24 +822,26 @@ class Renderer:
         step = np.diff(columns, axis=-1) / np.float32(self.model.knot)
         return _GroundPlan(columns[..., :-1, None], step[..., None])
 
-    def _draw_ground_rows(self, plan: _GroundPlan, camera: int, rows: slice) -> None:
-        """Look up the ground pixels of ``rows`` (image rows) of ``camera`` in their profiles."""
+    def _draw_ground_rows(self, plan: _GroundPlan, index: np.ndarray, part: _Part) -> None:
+        """Look up the ground pixels of ``part`` in their profiles."""
+        views, rows = part
         first = self._first_ground
         ground = slice(max(rows.start - first, 0), max(rows.stop - first, 0))
         if ground.stop <= ground.start:
             return
-        buffers = self._buffers
-        texel, gather = buffers.texel[camera, ground], buffers.gather[camera, ground]
-        np.multiply(plan.step[camera, ground], self._knot_steps, out=texel)
-        texel += plan.start[camera, ground]
+        start, step = plan.start[views, ground], plan.step[views, ground]
+        texel = _thread_array("ground_texel", (*start.shape[:-1], self.model.knot), np.float32)
+        gather = _thread_array("ground_gather", texel.shape, np.intp)
+        np.multiply(step, self._knot_steps, out=texel)
+        texel += start
         np.copyto(gather, texel, casting="unsafe")
-        index = buffers.index[camera, first + ground.start : first + ground.stop]
-        np.take(self._ground_profiles, gather, out=index.reshape(gather.shape), mode="clip")
+        pixels = index[views, first + ground.start : first + ground.stop]
+        np.take(self._ground_profiles, gather, out=pixels.reshape(gather.shape), mode="clip")
 
     def _wall_samples(
         self, layer: RoadsideLayer, s_samples: np.ndarray, d_samples: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per camera and knot: inverse depth (0: no wall), ``s`` and side (true: left) where
+        """Per view and knot: inverse depth (0: no wall), ``s`` and side (true: left) where
         the knot's ground ray first meets the layer (interpolated between depth samples)."""
         left, right = layer.left.offset, -layer.right.offset
         near_first = ((d_samples >= left) | (d_samples <= right))[:, ::-1]
@@ -786,7 +863,7 @@ class Renderer:
     def _wall_columns(
         self, layer: RoadsideLayer, s_samples: np.ndarray, d_samples: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per camera and column: inverse depth (0: no wall), ``s`` and side.
+        """Per view and column: inverse depth (0: no wall), ``s`` and side.
 
         Perspective-correct between knots that see the same wall; across a change of wall (or
         its end) each column takes its nearest knot.
@@ -814,7 +891,7 @@ class Renderer:
     def _plan_roadside(
         self, layer: RoadsideLayer, s_samples: np.ndarray, d_samples: np.ndarray
     ) -> _WallPlan | None:
-        """Where one roadside layer stands in every camera's columns (None: nowhere)."""
+        """Where one roadside layer stands in every view's columns (None: nowhere)."""
         model = self.model
         inverse, s, is_left = self._wall_columns(layer, s_samples, d_samples)
         present, height, variant = _segments_at(layer, s, is_left)
@@ -827,15 +904,16 @@ class Renderer:
             visible, model.horizon - model.focal * (height - CAMERA_HEIGHT) * inverse, np.inf
         )
         bottom = np.where(visible, model.horizon + model.focal * CAMERA_HEIGHT * inverse, -np.inf)
-        first_row = np.clip(np.floor(top.min(axis=1)), 0, model.height)
-        last_row = np.clip(np.ceil(bottom.max(axis=1)), 0, model.height)
+        first_row = np.clip(np.floor(top.min(axis=1)), 0, model.height).astype(np.intp)
+        last_row = np.clip(np.ceil(bottom.max(axis=1)), 0, model.height).astype(np.intp)
         texels_per_row = np.where(visible, depth, 0.0) / (model.focal * ROADSIDE_TEXEL)
         top_texel = np.where(visible, np.minimum(height / ROADSIDE_TEXEL, 30000.0), 0.0)
         bands = depth_bands(depth, OBJECT_BANDS, self._look.band_distance)
         along = np.floor(np.where(visible, s, 0.0) / ROADSIDE_TEXEL).astype(np.intp)
         first_material, second_material = _roadside_materials(layer.kind, along, variant, bands)
         return _WallPlan(
-            rows=tuple(slice(int(a), int(b)) for a, b in zip(first_row, last_row, strict=True)),
+            first_row=first_row,
+            last_row=last_row,
             texels_per_row=texels_per_row.astype(np.float32),
             top_texel=top_texel.astype(np.uint16),
             pattern=_ROW_PATTERNS[layer.kind],
@@ -847,49 +925,60 @@ class Renderer:
         )
 
     def _draw_wall_rows(
-        self, plan: _WallPlan, camera: int, rows: slice, depth: np.ndarray | None
+        self, plan: _WallPlan, index: np.ndarray, part: _Part, depth: np.ndarray | None
     ) -> None:
-        """Draw the wall spans of ``camera`` within ``rows``.
+        """Draw the wall spans of ``part``.
 
         Per pixel, in small integers: the height above ground in texels (negative below
         ground, so huge as uint16), whether it is under the wall's top, and which of the
         column's two materials it shows.
         """
+        views, part_rows = part
+        first_row, last_row = plan.first_row[views], plan.last_row[views]
         rows = slice(
-            max(rows.start, plan.rows[camera].start), min(rows.stop, plan.rows[camera].stop)
+            max(part_rows.start, int(first_row.min())), min(part_rows.stop, int(last_row.max()))
         )
         if rows.stop <= rows.start:
             return
-        buffers = self._buffers
-        level = buffers.level[camera, rows]
-        np.multiply(self._row_offsets[rows, None], plan.texels_per_row[camera], out=level)
+        shape = (first_row.size, rows.stop - rows.start, self.model.padded_width)
+        level = _thread_array("wall_level", shape, np.float32)
+        np.multiply(self._row_offsets[rows, None], plan.texels_per_row[views, None], out=level)
         level += CAMERA_HEIGHT / ROADSIDE_TEXEL
-        texel = buffers.wall_texel[camera, rows]
+        texel = _thread_array("wall_texel", shape, np.int16)
         np.copyto(texel, level, casting="unsafe")
         texel = texel.view(np.uint16)
-        opaque, second = buffers.opaque[camera, rows], buffers.second[camera, rows]
-        np.less(texel, plan.top_texel[camera], out=opaque)
+        opaque = _thread_array("wall_opaque", shape, np.bool_)
+        second = _thread_array("wall_second", shape, np.bool_)
+        np.less(texel, plan.top_texel[views, None], out=opaque)
+        if first_row.size > 1:  # the rows are the views' union: keep each view's own rows
+            number = np.arange(rows.start, rows.stop)
+            opaque &= ((number >= first_row[:, None]) & (number < last_row[:, None]))[..., None]
         pattern = plan.pattern
         if pattern.mask is not None:
             texel &= pattern.mask
             texel -= pattern.low
         np.less(texel, pattern.span, out=second)
-        value, index = buffers.value[camera, rows], buffers.index[camera, rows]
-        np.multiply(second.view(np.uint8), plan.difference[camera], out=value)
-        value ^= plan.first_material[camera]
+        value = _thread_array("wall_value", shape, np.uint8)
+        np.multiply(second.view(np.uint8), plan.difference[views, None], out=value)
+        value ^= plan.first_material[views, None]
         if plan.see_through:
             np.not_equal(value, TRANSPARENT, out=second)
             opaque &= second
-        value -= index
+        pixels = index[views, rows]
+        value -= pixels
         value *= opaque.view(np.uint8)
-        index += value
+        pixels += value
         if depth is not None:
-            np.copyto(depth[camera, rows], plan.depth[camera], where=opaque)
+            np.copyto(depth[views, rows], plan.depth[views, None], where=opaque)
 
     def _draw_obstacles(
-        self, views: _Views, walls: list[_WallPlan], depth: np.ndarray | None
+        self,
+        views: _Views,
+        walls: list[_WallPlan],
+        index: np.ndarray,
+        depth: np.ndarray | None,
     ) -> None:
-        """Rasterise every visible obstacle face as pixel runs, far to near per camera."""
+        """Rasterise every visible obstacle face as pixel runs, far to near per view."""
         faces = self._obstacles.visible_faces(views)
         if faces is None:
             return
@@ -908,7 +997,7 @@ class Renderer:
         flat = np.repeat(first_flat, rows) + local * self.model.padded_width
         # Runs are ordered far to near; NumPy assigns repeated indices in order, so the last
         # (nearest) write wins, as in a painter's algorithm.
-        self._buffers.index.reshape(-1)[flat] = self._obstacles.textures[texel]
+        index.reshape(-1)[flat] = self._obstacles.textures[texel]
         if depth is not None:
             depth.reshape(-1)[flat] = np.repeat(span_depth, rows)
 
@@ -931,11 +1020,11 @@ def _interpolation_weights(
 
 @dataclass(frozen=True)
 class _Faces:
-    """Obstacle faces to draw, far to near per camera: camera, bottom-edge endpoints in camera
+    """Obstacle faces to draw, far to near per view: view, bottom-edge endpoints in camera
     coordinates (right, forward), texture coordinate along the face at each end, height and
     texture id."""
 
-    camera: np.ndarray
+    view: np.ndarray
     x0: np.ndarray
     z0: np.ndarray
     w0: np.ndarray
@@ -948,7 +1037,7 @@ class _Faces:
     def clipped(self) -> _Faces:
         """The faces cut at the near plane (faces wholly behind it dropped)."""
         keep = (self.z0 >= NEAR) | (self.z1 >= NEAR)
-        camera, x0, z0, w0, x1, z1, w1, height, texture = (
+        view, x0, z0, w0, x1, z1, w1, height, texture = (
             getattr(self, field.name)[keep] for field in fields(self)
         )
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -956,7 +1045,7 @@ class _Faces:
             cut1 = np.clip((NEAR - z1) / (z0 - z1), 0.0, 1.0)
         behind0, behind1 = z0 < NEAR, z1 < NEAR
         return _Faces(
-            camera,
+            view,
             np.where(behind0, x0 + cut0 * (x1 - x0), x0),
             np.where(behind0, NEAR, z0),
             np.where(behind0, w0 + cut0 * (w1 - w0), w0),
@@ -1014,10 +1103,12 @@ class _ObstacleGeometry:
         )
 
     def visible_faces(self, views: _Views) -> _Faces | None:
-        """Per camera, the vertical faces of obstacles in view: faces towards the camera, plus
+        """Per view, the vertical faces of obstacles in view: faces towards the camera, plus
         the back faces of boxes lower than the camera (what stays visible of those is the
         top), ordered far to near."""
-        near = slice(*np.searchsorted(self.s, (views.s - 30.0, views.s + OBSTACLE_FAR)))
+        first = np.searchsorted(self.s, views.s - 30.0)
+        end = np.searchsorted(self.s, views.s + OBSTACLE_FAR)
+        near = slice(int(first.min()), int(end.max()))
         corner_x, corner_y = self.corner_x[near], self.corner_y[near]
         if corner_x.size == 0:
             return None
@@ -1025,25 +1116,29 @@ class _ObstacleGeometry:
         spread = math.tan(HORIZONTAL_FOV / 2) * forward
         in_view = (forward.max(axis=2) > NEAR) & (forward.min(axis=2) < OBSTACLE_FAR)
         in_view &= ((right - spread).min(axis=2) < 0.0) & ((right + spread).max(axis=2) > 0.0)
+        # ``near`` spans every pose's window; each view keeps only the obstacles of its own.
+        number = np.arange(near.start, near.stop)
+        in_view &= (number >= first[:, None]) & (number < end[:, None])
         normal_x, normal_y, offset = self.facing[:, near]
-        front = normal_x * views.x + normal_y * views.y + offset > 0.0
+        x, y = views.x[:, None, None], views.y[:, None, None]
+        front = normal_x * x + normal_y * y + offset > 0.0
         height = self.height[near]
-        drawn = (front | (height < CAMERA_HEIGHT)[:, None])[None] & in_view[:, :, None]
-        camera, obstacle, face = np.nonzero(drawn)
-        if camera.size == 0:
+        drawn = (front | (height < CAMERA_HEIGHT)[:, None]) & in_view[:, :, None]
+        view, obstacle, face = np.nonzero(drawn)
+        if view.size == 0:
             return None
-        distance = np.hypot(self.x[near] - views.x, self.y[near] - views.y)[obstacle]
-        order = np.lexsort((front[obstacle, face], -distance, camera))
-        camera, obstacle, face = camera[order], obstacle[order], face[order]
+        distance = np.hypot(self.x[near] - views.x[:, None], self.y[near] - views.y[:, None])
+        order = np.lexsort((front[view, obstacle, face], -distance[view, obstacle], view))
+        view, obstacle, face = view[order], obstacle[order], face[order]
         after = (face + 1) % 4
         return _Faces(
-            camera,
-            right[camera, obstacle, face],
-            forward[camera, obstacle, face],
-            np.zeros(camera.size),
-            right[camera, obstacle, after],
-            forward[camera, obstacle, after],
-            np.ones(camera.size),
+            view,
+            right[view, obstacle, face],
+            forward[view, obstacle, face],
+            np.zeros(view.size),
+            right[view, obstacle, after],
+            forward[view, obstacle, after],
+            np.ones(view.size),
             height[obstacle],
             self.texture[near][obstacle],
         ).clipped()
@@ -1072,7 +1167,7 @@ def _face_spans(
         return None
     face = np.repeat(np.arange(widths.size), widths)
     column = np.arange(total) - np.repeat(np.cumsum(widths) - widths, widths) + first[face]
-    camera = faces.camera[face]
+    view = faces.view[face]
     along = (column + 0.5 - u0[face]) / (u1 - u0)[face]
     inverse = inverse0[face] + along * (inverse1 - inverse0)[face]
     weighted = (w0 * inverse0)[face] + along * (w1 * inverse1 - w0 * inverse0)[face]
@@ -1082,14 +1177,14 @@ def _face_spans(
     first_row = np.clip(np.ceil(top - 0.5), 0, model.height)
     end_row = np.clip(np.ceil(bottom - 0.5), 0, model.height)
     for wall in walls:
-        hidden = depth > wall.depth[camera, column]
-        wall_top = np.maximum(np.ceil(wall.top[camera, column] - 0.5), first_row)
+        hidden = depth > wall.depth[view, column]
+        wall_top = np.maximum(np.ceil(wall.top[view, column] - 0.5), first_row)
         end_row = np.where(hidden, np.minimum(end_row, wall_top), end_row)
     texels = _OBSTACLE_TEXTURE_START[-1] * 64
     bands = depth_bands(depth, OBJECT_BANDS, band_distance)
     texture_column = np.clip((weighted / inverse * 8).astype(np.intp), 0, 7)
     step = 8.0 / (bottom - top)
-    first_flat = (camera * model.height + first_row.astype(np.intp)) * model.padded_width
+    first_flat = (view * model.height + first_row.astype(np.intp)) * model.padded_width
     return (
         np.maximum(end_row - first_row, 0).astype(np.intp),
         first_flat + column,
@@ -1109,11 +1204,11 @@ class _Particles:
         rng = np.random.default_rng(scene.detail_seed)
         area = model.width * model.height
         count = {"rain": area // 1500, "snow": area // 1000}.get(self.weather, 0)
-        shape = (len(CAMERAS), count, 1)
+        # [cameras, poses (broadcast), particles, pixels along the streak (broadcast)]
+        shape = (len(CAMERAS), 1, count, 1)
         self._columns = rng.uniform(0, model.width, shape)
         self._phases = rng.uniform(0, model.height, shape)
         self._speeds = rng.uniform(0.7, 1.3, shape)
-        self._cameras = np.arange(len(CAMERAS)).reshape(-1, 1, 1)
         if self.weather == "rain":
             self.length = max(2, model.height // 20)
             self.speed, self.slant, self.colour = model.height / 9, 0.2, material("rail") + 2
@@ -1121,11 +1216,13 @@ class _Particles:
             self.length = 2 if model.width >= 256 else 1
             self.speed, self.slant, self.colour = model.height / 70, 0.0, material("barrier_white")
 
-    def draw(self, index: np.ndarray, frame: int) -> None:
-        """Paint the particles at ``frame`` into the index image ``[cameras, rows, columns]``."""
+    def draw(self, index: np.ndarray, frames: np.ndarray) -> None:
+        """Paint the particles into the index image ``[views, rows, columns]`` (camera-major
+        views) of poses at ``frames`` (float64, one per pose)."""
         if self._columns.size == 0:
             return
         height, width = self.model.height, self.model.width
+        frame = frames.reshape(1, -1, 1, 1)
         travel = self._phases + frame * self.speed * self._speeds
         top = travel % (height + self.length) - self.length
         steps = np.arange(self.length)
@@ -1135,9 +1232,10 @@ class _Particles:
         else:
             columns = self._columns + self.slant * steps
         columns = columns.astype(np.intp)
+        views = np.arange(len(CAMERAS) * frames.size).reshape(len(CAMERAS), -1, 1, 1)
+        views, rows, columns = np.broadcast_arrays(views, rows, columns)
         valid = (rows >= 0) & (rows < height) & (columns >= 0) & (columns < width)
-        cameras = np.broadcast_to(self._cameras, valid.shape)
-        flat = (cameras[valid] * height + rows[valid]) * index.shape[2] + columns[valid]
+        flat = (views[valid] * height + rows[valid]) * index.shape[2] + columns[valid]
         index.reshape(-1)[flat] = self.colour
 
 
@@ -1176,7 +1274,8 @@ class _QuadPalette:
         quads = indices.size // 4
         flat = out.reshape(-1)
         if quads:
-            pairs, words = _thread_quads(quads)
+            pairs = _thread_array("quad_pairs", (3, quads), np.intp)
+            words = _thread_array("quad_words", (3, quads), np.uint32)
             leading = indices[: 4 * quads].view(np.uint16)
             middle = indices[1 : 4 * quads - 1].view(np.uint16)
             np.copyto(pairs[0], leading[0::2])
@@ -1223,18 +1322,12 @@ def _in_parallel(function: Callable[[T], None], items: Sequence[T], parallel: bo
 _scratch = threading.local()
 
 
-def _thread_scratch(rows: int, width: int) -> np.ndarray:
-    """This thread's uint8 work array of ``rows x width`` (grown as needed)."""
-    pixels = getattr(_scratch, "pixels", np.empty(0, dtype=np.uint8))
-    if pixels.size < rows * width:
-        pixels = _scratch.pixels = np.empty(rows * width, dtype=np.uint8)
-    return pixels[: rows * width].reshape(rows, width)
-
-
-def _thread_quads(quads: int) -> tuple[np.ndarray, np.ndarray]:
-    """This thread's work arrays of :class:`_QuadPalette`: pair indices and words."""
-    pairs = getattr(_scratch, "pairs", np.empty((3, 0), dtype=np.intp))
-    if pairs.shape[1] < quads:
-        pairs = _scratch.pairs = np.empty((3, quads), dtype=np.intp)
-        _scratch.words = np.empty((3, quads), dtype=np.uint32)
-    return pairs[:, :quads], _scratch.words[:, :quads]
+def _thread_array(name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """This thread's work array ``name`` of ``shape`` (a view of a buffer grown as needed, so
+    per-pixel work allocates no frame-sized temporaries)."""
+    size = math.prod(shape)
+    buffer = getattr(_scratch, name, None)
+    if buffer is None or buffer.size < size:
+        buffer = np.empty(size, dtype=dtype)
+        setattr(_scratch, name, buffer)
+    return buffer[:size].reshape(shape)

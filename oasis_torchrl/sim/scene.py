@@ -249,11 +249,8 @@ class Road:
         self.s = self._integrate(1.0 / np.cos(headings))
         self.curvature = np.gradient(headings, self.s)
         columns = (self.y, np.cos(headings), np.sin(headings), self.s)
-        # Each value next to its forward difference, so one gather serves a linear interpolation.
-        self._table = np.stack(
-            [part for column in columns for part in (column, np.append(np.diff(column), 0.0))],
-            axis=1,
-        )
+        # Each value with its forward difference: two gathers serve a linear interpolation.
+        self._table = tuple((column, np.append(np.diff(column), 0.0)) for column in columns)
 
     def _integrate(self, derivative: np.ndarray) -> np.ndarray:
         """Trapezoidal integral of ``derivative`` over x, zero at x = 0."""
@@ -266,13 +263,12 @@ class Road:
         """Arc length from the start (s = 0) to the end of the table, metres."""
         return float(self.s[-1])
 
-    def _lookup(self, x: np.ndarray) -> np.ndarray:
-        """Interpolated ``(y, cos, sin, s)`` of the centreline at ``x``: ``[*x.shape, 4]``."""
+    def _lookup(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Interpolated ``(y, cos, sin, s)`` of the centreline at ``x``, each shaped like ``x``."""
         position = (x - self.x0) * (1.0 / self.step)
         index = np.clip(position.astype(np.int64), 0, self.x.size - 2)
-        rows = self._table[index]
-        fraction = (position - index)[..., None]
-        return rows[..., 0::2] + fraction * rows[..., 1::2]
+        fraction = position - index
+        return tuple(value.take(index) + fraction * step.take(index) for value, step in self._table)
 
     def locate(
         self, x: np.ndarray, y: np.ndarray, iterations: int = 1
@@ -287,7 +283,7 @@ class Road:
         y = np.asarray(y, dtype=np.float64)
         foot = x
         for iteration in range(iterations):
-            centre_y, cos, sin, s = np.moveaxis(self._lookup(foot), -1, 0)
+            centre_y, cos, sin, s = self._lookup(foot)
             dx, dy = x - foot, y - centre_y
             along = cos * dx + sin * dy
             if iteration + 1 < iterations:
@@ -299,7 +295,7 @@ class Road:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World ``(x, y, heading)`` of road coordinates ``(s, d)`` (heading of the road)."""
         x = np.interp(s, self.s, self.x)
-        centre_y, cos, sin, _ = np.moveaxis(self._lookup(np.asarray(x)), -1, 0)
+        centre_y, cos, sin, _ = self._lookup(np.asarray(x))
         return x - np.multiply(d, sin), centre_y + np.multiply(d, cos), np.arctan2(sin, cos)
 
     def curvature_at(self, s: np.ndarray | float) -> np.ndarray:

@@ -225,14 +225,15 @@ class Simulator:
             name: np.empty((count, self._height, self._width, 3), dtype=np.uint8)
             for name in CAMERA_NAMES
         }
-        truth = []
-        for index, (throttle, steering) in enumerate(actions):
+        truth, states, frames = [], [], []
+        for throttle, steering in actions:
             truth.append(world.advance(float(throttle), float(steering)))
-            if render:
-                frames = {name: rgb[name][index] for name in CAMERA_NAMES}
-                self._renderer.render(world.state, world.steps, frames)
-                self._rendered_state = world.state
-                self._depth = None
+            states.append(world.state)
+            frames.append(world.steps)
+        if render:  # all poses in one pass: the renderer's per-call overhead is shared
+            self._renderer.render_many(states, frames, rgb)
+            self._rendered_state = world.state
+            self._depth = None
         return StepResult(rgb=rgb, truth=tuple(truth))
 
     def depth(self) -> dict[str, np.ndarray]:
