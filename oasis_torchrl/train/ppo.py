@@ -256,14 +256,19 @@ class PPOTrainer:
             disable=not cfg.progress,
         )
         try:
-            started = time.perf_counter()
+            started = waiting = time.perf_counter()
+            first_frame = self.frames
             for batch in collector:
+                collected = time.perf_counter()
                 if cfg.ray.enabled:  # [collectors, rows, time] -> [rows, time]
                     batch = batch.flatten(0, 1)
                 self.frames += batch.numel()
                 self.iteration += 1
                 metrics = {**_prefixed("train", episode_stats(batch)), **self._update(batch)}
-                metrics["time/env_steps_per_s"] = self.frames / (time.perf_counter() - started)
+                updated = time.perf_counter()
+                metrics["time/collect_s"] = collected - waiting
+                metrics["time/update_s"] = updated - collected
+                metrics["time/env_steps_per_s"] = (self.frames - first_frame) / (updated - started)
                 if cfg.eval.every and self.iteration % cfg.eval.every == 0:
                     metrics.update(_prefixed("eval", self._evaluate().summary()))
                 if self.iteration % cfg.checkpoint.every == 0:
@@ -273,6 +278,7 @@ class PPOTrainer:
                 bar.set_postfix(_postfix(metrics))
                 if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
                     collector.update_policy_weights_(self.modules.policy)
+                waiting = time.perf_counter()
         finally:
             bar.close()
             if cfg.ray.enabled:

@@ -72,6 +72,9 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
         values = _csv_values(scalars / "loss" / f"{name}.csv")
         assert values and all(math.isfinite(v) for v in values), name
     assert _csv_values(scalars / "eval" / "mean_distance.csv")
+    for name in ("collect_s", "update_s", "env_steps_per_s"):
+        values = _csv_values(scalars / "time" / f"{name}.csv")
+        assert values and all(v > 0 for v in values), name
 
     state = load_checkpoint(result.checkpoint)
     assert (state["iteration"], state["frames"]) == (1, 16)
