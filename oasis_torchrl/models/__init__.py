@@ -6,7 +6,6 @@
 
 from oasis_torchrl.models.actor_critic import (
     ActorCritic,
-    as_float_frames,
     make_actor_critic,
     observation_keys,
 )
@@ -22,7 +21,6 @@ __all__ = [
     "DrivingNet",
     "DrivingNetConfig",
     "MultiCameraEncoder",
-    "as_float_frames",
     "make_actor_critic",
     "observation_keys",
 ]

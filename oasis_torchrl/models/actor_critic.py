@@ -3,7 +3,7 @@
 Keys in: each camera's frames and ``"state"`` ``[*B, 2]``. Frames are read from
 ``("pixels", <camera>)`` by default: the env's uint8 ``[*B, 4, H, W, 3]`` (``all_frames=True``,
 as :func:`oasis_torchrl.train.environment.build_env` makes it) or ``[*B, H, W, 3]``, converted
-to float in the module, so rollouts store compact uint8 frames; ``image_key="images"`` reads
+to float by the encoder, so rollouts store compact uint8 frames; ``image_key="images"`` reads
 float ``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (:func:`oasis_torchrl.envs.make_training_env`).
 With ``critic_inputs`` configured, the critic also reads ``"critic_inputs"`` ``[*B, k]``.
 Keys out: ``"features"`` (shared), ``"loc"``, ``"scale"``, ``"action"`` ``[*B, 4, 2]``,
@@ -29,18 +29,6 @@ FEATURES = "features"
 CRITIC_INPUTS = "critic_inputs"
 
 
-def as_float_frames(frames: torch.Tensor) -> torch.Tensor:
-    """uint8 ``[..., H, W, 3]`` -> float ``[..., 3, H, W]`` in ``[0, 1]``; float passes through.
-
-    Example:
-        >>> as_float_frames(torch.full((2, 4, 8, 12, 3), 255, dtype=torch.uint8)).shape
-        torch.Size([2, 4, 3, 8, 12])
-    """
-    if frames.dtype != torch.uint8:
-        return frames
-    return frames.movedim(-1, -3).float().div_(255.0)
-
-
 class _Features(nn.Module):
     """``(*frames, state) -> features`` for a TensorDictModule (positional in_keys)."""
 
@@ -49,10 +37,7 @@ class _Features(nn.Module):
         self.net = net
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        state = inputs[-1]
-        # Only the frames the network reads are converted (2 of the env's 4 by default).
-        frames = [self.net.last_frames(x, state.dim() - 1) for x in inputs[:-1]]
-        return self.net.features([as_float_frames(x) for x in frames], state)
+        return self.net.features(inputs[:-1], inputs[-1])
 
 
 class _ChunkParams(nn.Module):

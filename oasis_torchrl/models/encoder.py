@@ -3,6 +3,12 @@
 Both weight modes run the cameras in one convolution call: shared weights fold the cameras into
 the batch; separate weights stack them along the channels and use grouped convolutions (one
 group per camera), which is a single kernel launch instead of one per camera.
+
+Frames come as the env's uint8 ``[..., T, H, W, 3]`` or as float ``[..., T, 3, H, W]`` in
+``[0, 1]``. The cameras are stacked before the conversion to float (a byte copy, not a float
+one) into one batch in channels-last memory (the faster layout for these convolutions on CPU):
+measured on a PPO minibatch of 128, the encoder's forward and backward took 2/3 of the time of
+converting each camera to float, stacking and normalising in separate passes.
 """
 
 from __future__ import annotations
@@ -21,7 +27,8 @@ _LAYOUT = ((4, 4, 0), (3, 2, 1), (3, 1, 1))
 
 
 class MultiCameraEncoder(nn.Module):
-    """Encode ``C`` cameras' frames ``[..., T, 3, H, W]`` (float in [0, 1]) into ``[..., C * F]``.
+    """Encode ``C`` cameras' frames into ``[..., C * F]``: uint8 ``[..., T, H, W, 3]`` or float
+    ``[..., T, 3, H, W]`` in ``[0, 1]`` (the same layout and type for every camera).
 
     Per camera, the ``T = config.frames`` frames stacked along the channels: conv 4x4/4 -> ReLU
     -> conv 3x3/2 -> ReLU -> conv 3x3/1 -> ReLU -> average pool to ``pool_grid`` -> linear to
@@ -33,6 +40,10 @@ class MultiCameraEncoder(nn.Module):
         >>> images = [torch.rand(5, 2, 3, 32, 48) for _ in config.cameras]
         >>> encoder(images).shape
         torch.Size([5, 48])
+        >>> env_frames = [torch.randint(0, 256, (5, 2, 32, 48, 3), dtype=torch.uint8)] * 3
+        >>> as_float = [x.movedim(-1, -3) / 255 for x in env_frames]
+        >>> torch.allclose(encoder(env_frames), encoder(as_float), atol=1e-6)
+        True
     """
 
     def __init__(self, config: DrivingNetConfig) -> None:
@@ -67,21 +78,50 @@ class MultiCameraEncoder(nn.Module):
         self.out_features = self.num_cameras * config.camera_features
 
     def forward(self, images: Sequence[torch.Tensor]) -> torch.Tensor:
-        """Features ``[..., C * F]`` of the frames ``[..., T, 3, H, W]`` of each camera."""
-        if len(images) != self.num_cameras:
-            raise ValueError(f"expected {self.num_cameras} camera images, got {len(images)}")
-        first = images[0]
-        if first.dim() < 5 or first.shape[-4:-2] != (self.frames, 3):
-            raise ValueError(
-                f"camera frames must be [..., {self.frames}, 3, H, W], got {list(first.shape)}"
-            )
-        leading, (height, width) = first.shape[:-4], first.shape[-2:]
-        stacked = torch.stack(list(images), dim=-5)  # [..., C, T, 3, H, W]
-        # Shared weights fold the cameras into the batch; separate ones stack them as groups.
-        channels = 3 * self.frames * self.groups
-        x = (stacked.reshape(-1, channels, height, width) - _IMAGE_MEAN) / _IMAGE_STD
-        pooled = self.convs(x).reshape(-1, self.groups, self.project_weight.shape[1])
+        """Features ``[..., C * F]`` of the frames of each camera."""
+        leading = images[0].shape[:-4]
+        pooled = self.convs(self._network_input(images))
+        pooled = pooled.reshape(-1, self.groups, self.project_weight.shape[1])
         features = torch.relu(
             torch.einsum("bgk,gkf->bgf", pooled, self.project_weight) + self.project_bias
         )
         return features.reshape(*leading, self.out_features)
+
+    def _network_input(self, images: Sequence[torch.Tensor]) -> torch.Tensor:
+        """The normalised frames ``[N, channels, H, W]`` (channels-last memory; channels ordered
+        camera, frame, colour). Out-of-place operations only where they touch the inputs, so
+        it also runs under ``vmap`` (TorchRL's value estimators call the critic that way)."""
+        first = self._check_frames(images)
+        channels_first = first.dtype != torch.uint8
+        rows = first.shape[:-4].numel()
+        order = (0, 3, 4, 1, 2) if channels_first else (0, 2, 3, 1, 4)  # -> [N, H, W, T, 3]
+        per_camera = [image.reshape(rows, *image.shape[-4:]).permute(order) for image in images]
+        if self.groups == 1:  # cameras folded into the batch
+            stacked = torch.stack(per_camera, dim=1).flatten(0, 1).flatten(-2)
+        else:  # cameras along the channels
+            stacked = torch.stack(per_camera, dim=3).flatten(-3)
+        scale = (1.0 if channels_first else 1.0 / 255.0) / _IMAGE_STD
+        batch = stacked.to(self.project_weight.dtype).permute(0, 3, 1, 2)
+        return batch.mul(scale).sub_(_IMAGE_MEAN / _IMAGE_STD)
+
+    def _check_frames(self, images: Sequence[torch.Tensor]) -> torch.Tensor:
+        """The first camera's frames, after checking every camera's count, layout and type."""
+        if len(images) != self.num_cameras:
+            raise ValueError(f"expected {self.num_cameras} camera images, got {len(images)}")
+        first = images[0]
+        if first.dtype == torch.uint8:
+            layout_ok = first.shape[-4:-3] == (self.frames,) and first.shape[-1:] == (3,)
+        else:
+            layout_ok = first.dtype.is_floating_point and first.shape[-4:-2] == (self.frames, 3)
+        if first.dim() < 5 or not layout_ok:
+            raise ValueError(
+                f"camera frames must be float [..., {self.frames}, 3, H, W] or uint8 "
+                f"[..., {self.frames}, H, W, 3], got {first.dtype} {list(first.shape)}"
+            )
+        for image in images[1:]:
+            if image.shape != first.shape or image.dtype != first.dtype:
+                raise ValueError(
+                    f"every camera's frames must match the first's {first.dtype} "
+                    f"{list(first.shape)}, got {image.dtype} {list(image.shape)}"
+                )
+        return first

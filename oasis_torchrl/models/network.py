@@ -34,7 +34,8 @@ class DrivingNet(nn.Module):
     """Camera frames and the previous action in; an action chunk distribution and a value out.
 
     Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` (the
-    last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1; the state
+    last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1, or the
+    env's uint8 frames in the same shapes with the colour last (``[*B, K, H, W, 3]``); the state
     is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state (if ``use_state``).
     The actor MLP gives ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned,
     observation-independent ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning

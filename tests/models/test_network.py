@@ -11,7 +11,6 @@ from oasis_torchrl.models import (
     DrivingNet,
     DrivingNetConfig,
     MultiCameraEncoder,
-    as_float_frames,
     make_actor_critic,
 )
 from oasis_torchrl.models.network import LOC_BOUND
@@ -64,12 +63,36 @@ def test_shared_weights_treat_cameras_alike() -> None:
     assert not torch.allclose(*separate([frames, frames, frames]).view(2, 3, -1)[:, :2].unbind(1))
 
 
+@pytest.mark.parametrize("shared", [True, False])
+def test_env_frames_and_float_frames_give_the_reference_encoding(shared: bool) -> None:
+    torch.manual_seed(0)
+    encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE, shared_encoder=shared))
+    frames = _frames((2, 5))
+    # The layout trained checkpoints expect: channels ordered camera, frame, colour.
+    groups = 1 if shared else 3
+    stacked = torch.stack(frames, dim=-5).reshape(-1, groups * 2 * 3, *SIZE)
+    pooled = encoder.convs((stacked - 0.5) / 0.25).reshape(-1, groups, 64 * 4 * 6)
+    projected = torch.einsum("bgk,gkf->bgf", pooled, encoder.project_weight)
+    reference = torch.relu(projected + encoder.project_bias).reshape(2, 5, -1)
+    torch.testing.assert_close(encoder(frames), reference)
+    env_frames = [(x * 255).round().to(torch.uint8).movedim(-3, -1) for x in frames]
+    as_float = [x.movedim(-1, -3) / 255.0 for x in env_frames]
+    torch.testing.assert_close(encoder(env_frames), encoder(as_float), atol=1e-5, rtol=1e-4)
+
+
 def test_encoder_rejects_wrong_inputs() -> None:
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE))
     with pytest.raises(ValueError, match="expected 3 camera images, got 2"):
         encoder(_frames((1,), cameras=2))
-    with pytest.raises(ValueError, match=r"camera frames must be \[\.\.\., 2, 3, H, W\]"):
+    with pytest.raises(ValueError, match=r"camera frames must be float \[\.\.\., 2, 3, H, W\]"):
         encoder(_frames((1,), frames=1))
+    channels_first_bytes = [torch.zeros(1, 2, 3, *SIZE, dtype=torch.uint8)] * 3
+    with pytest.raises(ValueError, match=r"or uint8 \[\.\.\., 2, H, W, 3\]"):
+        encoder(channels_first_bytes)
+    mixed = _frames((1,))
+    mixed[2] = torch.zeros(1, 2, *SIZE, 3, dtype=torch.uint8)
+    with pytest.raises(ValueError, match="every camera's frames must match the first's"):
+        encoder(mixed)
 
 
 def test_the_network_sees_motion_between_frames() -> None:
@@ -94,9 +117,9 @@ def test_deterministic_actor_is_the_bc_chunk() -> None:
     policy = make_actor_critic(net).policy
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         action = policy(td.clone())["action"]
-        frames = [as_float_frames(td["pixels", camera]) for camera in net.config.cameras]
-        chunk = net(frames, td["state"])
-    torch.testing.assert_close(action, chunk)
+        frames = [td["pixels", camera].movedim(-1, -3) / 255.0 for camera in net.config.cameras]
+        chunk = net(frames, td["state"])  # what LeRobot's float images give
+    torch.testing.assert_close(action, chunk, atol=1e-5, rtol=1e-4)
     assert chunk.abs().max() < 1 and chunk.std() > 0.1
 
 
