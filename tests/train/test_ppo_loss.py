@@ -2,34 +2,36 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 from tensordict import TensorDict
 from torchrl.objectives import ClipPPOLoss
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.train.config import load_config
+from oasis_torchrl.train.environment import build_env
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
+
+from .conftest import TINY_ENV
 
 SIZE = (32, 48)
 PPO_KWARGS = {"clip_epsilon": 0.2, "entropy_coeff": 0.0, "normalize_advantage": True}
 
 
-def _batch(net: DrivingNet, rows: int = 12) -> TensorDict:
+@pytest.fixture(scope="module")
+def rollout() -> TensorDict:
+    """Six steps of two rows on the embedded server, as a collector stores them (with the
+    acting pass's features, detached); advantages and targets are random."""
+    env = build_env(load_config("ppo", TINY_ENV).env, num_envs=2, privileged=True)
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
+    try:
+        steps = env.rollout(6, make_actor_critic(net).policy, break_when_any_done=False)
+    finally:
+        env.close()
     generator = torch.Generator().manual_seed(0)
-    pixels = {
-        camera: torch.randint(0, 256, (rows, 4, *SIZE, 3), dtype=torch.uint8, generator=generator)
-        for camera in net.config.cameras
-    }
-    batch = TensorDict(
-        {"pixels": pixels, "state": torch.rand(rows, 2), "critic_inputs": torch.rand(rows, 4)},
-        [rows],
-    )
-    with torch.no_grad():
-        batch = make_actor_critic(net).policy(batch)
-    batch["advantage"] = torch.randn(rows, 1, generator=generator)
-    batch["value_target"] = torch.randn(rows, 1, generator=generator)
-    # What a collector stores: the features of the acting pass, detached and soon stale.
-    batch["features"] = torch.zeros_like(batch["features"])
-    return batch
+    steps["advantage"] = torch.randn(*steps.shape, 1, generator=generator)
+    steps["value_target"] = torch.randn(*steps.shape, 1, generator=generator)
+    return steps.exclude("next").reshape(-1).detach()
 
 
 def _gradients(net: DrivingNet, loss: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -38,15 +40,14 @@ def _gradients(net: DrivingNet, loss: torch.Tensor) -> dict[str, torch.Tensor]:
     return {name: p.grad.clone() for name, p in net.named_parameters() if p.grad is not None}
 
 
-def test_matches_clip_ppo_loss_over_the_full_operators() -> None:
+def test_matches_clip_ppo_loss_over_the_full_operators(rollout: TensorDict) -> None:
     torch.manual_seed(0)
     net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4, aux_outputs=4))
     modules = make_actor_critic(net)
-    batch = _batch(net)
     terms = ("loss_objective", "loss_critic", "loss_entropy")
 
-    reference = ClipPPOLoss(modules.policy, modules.value, **PPO_KWARGS)(batch.clone())
-    ours = DrivingPPOLoss(modules, aux_coeff=0.0, **PPO_KWARGS)(batch.clone())
+    reference = ClipPPOLoss(modules.policy, modules.value, **PPO_KWARGS)(rollout.clone())
+    ours = DrivingPPOLoss(modules, aux_coeff=0.0, **PPO_KWARGS)(rollout.clone())
     for key in terms:
         torch.testing.assert_close(ours[key], reference[key])
     expected = _gradients(net, sum(reference[key] for key in terms))
@@ -56,26 +57,28 @@ def test_matches_clip_ppo_loss_over_the_full_operators() -> None:
         torch.testing.assert_close(got[name], gradient, msg=name)
 
 
-def test_adds_the_weighted_auxiliary_loss_only_with_the_head() -> None:
+def test_adds_the_weighted_auxiliary_loss_only_with_the_head(rollout: TensorDict) -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4, aux_outputs=4))
-    batch = _batch(net)
     loss = DrivingPPOLoss(make_actor_critic(net), aux_coeff=2.0, **PPO_KWARGS)
-    losses = loss(batch)
+    losses = loss(rollout)
     assert loss.terms[-1] == "loss_aux"
     with torch.no_grad():
-        prediction = net.predict_aux(make_actor_critic(net).features(batch.clone())["features"])
-    expected = 2.0 * torch.nn.functional.mse_loss(prediction, batch["critic_inputs"])
+        features = make_actor_critic(net).features(rollout.clone())["features"]
+    expected = 2.0 * torch.nn.functional.mse_loss(
+        net.predict_aux(features), rollout["critic_inputs"]
+    )
     torch.testing.assert_close(losses["loss_aux"].detach(), expected)
 
     plain = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
     without = DrivingPPOLoss(make_actor_critic(plain), aux_coeff=2.0, **PPO_KWARGS)
-    assert "loss_aux" not in without(_batch(plain)).keys()
+    assert "loss_aux" not in without(rollout).keys()
     assert "loss_aux" not in without.terms
 
 
-def test_leaves_the_callers_minibatch_alone() -> None:
+def test_leaves_the_callers_minibatch_alone(rollout: TensorDict) -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
-    batch = _batch(net)
-    DrivingPPOLoss(make_actor_critic(net), **PPO_KWARGS)(batch)
-    assert not batch["features"].requires_grad
-    assert batch["features"].abs().sum() == 0
+    stored = rollout["features"].clone()
+    losses = DrivingPPOLoss(make_actor_critic(net), **PPO_KWARGS)(rollout)
+    assert losses["loss_objective"].requires_grad
+    assert not rollout["features"].requires_grad
+    torch.testing.assert_close(rollout["features"], stored)
