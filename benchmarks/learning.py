@@ -12,6 +12,9 @@ images), fixed evaluation seeds, one episode per env row of up to ``--max-steps`
    action's mean distance;
 4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning alone.
 
+Each PPO stage keeps the policy its periodic evaluations on ``--selection-seeds`` rate best
+(early stopping), then evaluates that one on the evaluation seeds, which no choice has seen.
+
 Prints JSON (every evaluation, the targets and whether they are met, the exact settings and
 wall times) and writes it with a PNG of the learning curves to ``--results``. Stages cache
 their outputs under ``--work`` (a rerun reuses finished stages). Budgets are stated in env
@@ -65,6 +68,8 @@ COLORS = {
     "bc": (31, 119, 180),
     "ppo (scratch)": (214, 39, 40),
     "bc + ppo": (44, 160, 44),
+    "ppo (scratch), kept": (214, 39, 40),
+    "bc + ppo, kept": (44, 160, 44),
 }
 
 
@@ -137,15 +142,24 @@ def benchmark_config(args: argparse.Namespace) -> DictConfig:
 
 
 def ppo_stage(
-    cfg: DictConfig, init_from: Path | None, name: str, frames: int, overrides: list[str]
+    cfg: DictConfig,
+    init_from: Path | None,
+    name: str,
+    frames: int,
+    args: argparse.Namespace,
 ) -> DictConfig:
-    """A PPO stage of the benchmark: its own folder, budget and evaluations every
-    ``EVAL_EVERY`` batches; fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides,
-    PPO from scratch the ``configs/ppo.yaml`` defaults; ``overrides`` (``KEY=VALUE``) last."""
+    """A PPO stage of the benchmark: its own folder, budget and evaluations on the selection
+    seeds every ``EVAL_EVERY`` batches; fine-tuning (``init_from`` set) takes the demo's ``ppo``
+    overrides, PPO from scratch the ``configs/ppo.yaml`` defaults; ``args.ppo_overrides``
+    (``KEY=VALUE``) last."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
-    evaluations = {"every": EVAL_EVERY, "episodes": cfg.eval.episodes}
+    evaluations = {
+        "every": EVAL_EVERY,
+        "episodes": cfg.eval.episodes,
+        "selection_seeds": list(args.selection_seeds),
+    }
     budget = {"collector": {"total_frames": frames}, "eval": evaluations}
-    return OmegaConf.merge(stage, budget, OmegaConf.from_dotlist(overrides))
+    return OmegaConf.merge(stage, budget, OmegaConf.from_dotlist(args.ppo_overrides))
 
 
 def plot(
@@ -172,7 +186,8 @@ def plot(
         x = x_max * k / 5
         draw.text((to_pixel(x, 0)[0] - 15, height - margin + 8), f"{x:.0f}", fill="black")
     draw.text((width / 2 - 90, height - 30), "env steps (4 frames each)", fill="black")
-    draw.text((margin, 20), "mean distance before collision (eval seeds)", fill="black")
+    title = "mean distance before collision (PPO curves: selection seeds; levels: eval seeds)"
+    draw.text((margin, 20), title, fill="black")
     legend_y = margin + 8
     for name, level in levels.items():
         color = COLORS.get(name, (0, 0, 0))
@@ -201,6 +216,13 @@ def main() -> None:
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
     parser.add_argument("--eval-episodes", type=int, default=32)
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
+    parser.add_argument(
+        "--selection-seeds",
+        type=int,
+        nargs="+",
+        default=[2000],
+        help="seeds of PPO's periodic evaluations, which pick the policy each PPO stage keeps",
+    )
     parser.add_argument("--demo-episodes", type=int, default=64)
     parser.add_argument("--bc-steps", type=int, default=3000)
     parser.add_argument("--dagger-rounds", type=int, default=6)
@@ -262,11 +284,11 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
             results["bc"] = cache.evaluate(cfg, {"bc": str(bc_policy)})["bc"]
     if "bc_ppo" in stages:
         with cache.timed("bc_ppo"):
-            finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args.ppo_overrides)
+            finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args)
             results["bc_ppo"] = run_ppo(finetune).history
     if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
-            scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args.ppo_overrides)
+            scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args)
             results["ppo_scratch"] = run_ppo(scratch).history
     return results
 
@@ -297,15 +319,18 @@ def full_report(results: dict[str, Any]) -> dict[str, Any]:
 def plot_report(report: dict[str, Any], path: Path) -> None:
     """The learning curves of a full report against the reference levels, as a PNG."""
     bc = report["bc"]["mean_distance"]
+    scratch, finetune = report["ppo_scratch"], report["bc_ppo"]
     curves = {
-        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in report["ppo_scratch"]],
-        "bc + ppo": [(0.0, bc)] + [(h["frames"], h["mean_distance"]) for h in report["bc_ppo"]],
+        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in scratch[:-1]],
+        "bc + ppo": [(h["frames"], h["mean_distance"]) for h in finetune[:-1]],
     }
     references = report["references"]
     levels = {
         "autopilot": references["autopilot"]["mean_distance"],
         "best constant": references[report["best_constant"]]["mean_distance"],
         "bc": bc,
+        "ppo (scratch), kept": scratch[-1]["mean_distance"],
+        "bc + ppo, kept": finetune[-1]["mean_distance"],
     }
     plot(curves, levels, path)
 

@@ -27,6 +27,7 @@ logger = logging.getLogger(__name__)
 
 CHECKPOINT_VERSION = 1
 LATEST = "latest.pt"
+BEST = "best.pt"  # the policy PPO keeps when evaluations on selection seeds choose it
 
 
 def save_checkpoint(path: str | Path, net: DrivingNet, **state: Any) -> Path:

@@ -286,10 +286,13 @@ class Evaluator:
         )
         self.recorders = EpisodeRecorders(eval_cfg.get("rerun"), eval_cfg.get("lerobot"))
 
-    def evaluate(self, policy: Policy) -> EvalReport:
-        """Run one batch of episodes per seed; the report holds all of them."""
+    def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
+        """Run one batch of episodes per seed (``seeds``, default ``eval.seeds``); the report
+        holds all of them."""
         report = EvalReport()
-        seeds = [int(seed) for seed in self.cfg.seeds]
+        seeds = [int(seed) for seed in (self.cfg.seeds if seeds is None else seeds)]
+        if not seeds:
+            raise ValueError("evaluate needs at least one seed")
         steps = len(seeds) * self.cfg.max_steps
         with tqdm(total=steps, desc="evaluating", unit="step", disable=not self.progress) as bar:
 

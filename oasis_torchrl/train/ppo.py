@@ -6,15 +6,17 @@ with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared en
 per minibatch: :mod:`oasis_torchrl.train.ppo_loss`) for a few epochs of minibatches per batch.
 Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar, checkpoints with resume,
 periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot dataset when
-configured), a warm start from a behaviour-cloning policy, and the final policy exported as a
-LeRobot policy folder. Config: ``configs/ppo.yaml``.
+configured; on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early
+stopping that never looks at the seeds reported at the end), a warm start from a
+behaviour-cloning policy, and the kept policy exported as a LeRobot policy folder. Config:
+``configs/ppo.yaml``.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,7 @@ from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.train.checkpoint import (
+    BEST,
     LATEST,
     export_lerobot,
     load_checkpoint,
@@ -66,7 +69,7 @@ class PPOResult:
     checkpoint: Path
     policy_dir: Path | None
     final_eval: EvalReport | None
-    history: list[dict[str, float]] = field(default_factory=list)
+    history: list[dict[str, Any]] = field(default_factory=list)
 
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
@@ -161,7 +164,8 @@ class PPOTrainer:
         resumed = self._resume_state()
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
-        self.history: list[dict[str, float]] = resumed.get("history", [])
+        self.history: list[dict[str, Any]] = resumed.get("history", [])
+        self.best_selection: float | None = resumed.get("best_selection")
         self.env = build_env(cfg.env, privileged=uses_ground_truth(cfg))
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
@@ -200,7 +204,7 @@ class PPOTrainer:
             experiment_name=cfg.logger.exp_name,
         )
         self._evaluator: Evaluator | None = None
-        self._last_eval: tuple[int, EvalReport] | None = None
+        self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
 
     def _param_groups(self) -> list[dict[str, Any]]:
         """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
@@ -243,12 +247,13 @@ class PPOTrainer:
         try:
             if remaining:
                 self._train(remaining)
-            final = self._final_evaluation() if cfg.eval.episodes else None
+            kept, kept_checkpoint = self._kept_net()
+            final = self._final_evaluation(kept) if cfg.eval.episodes else None
             checkpoint = self._save_checkpoint()
-            policy_dir = self._export()
+            policy_dir = self._export(kept)
         finally:
             self.close()
-        return PPOResult(self.net, checkpoint, policy_dir, final, self.history)
+        return PPOResult(kept, kept_checkpoint or checkpoint, policy_dir, final, self.history)
 
     def _train(self, remaining: int) -> None:
         cfg = self.cfg
@@ -275,7 +280,7 @@ class PPOTrainer:
                 metrics["time/update_s"] = updated - collected
                 metrics["time/env_steps_per_s"] = (self.frames - first_frame) / (updated - started)
                 if cfg.eval.every and self.iteration % cfg.eval.every == 0:
-                    metrics.update(_prefixed("eval", self._evaluate().summary()))
+                    metrics.update(_prefixed("eval", self._periodic_evaluation().summary()))
                 if self.iteration % cfg.checkpoint.every == 0:
                     self._save_checkpoint()
                 self._log(metrics)
@@ -406,24 +411,63 @@ class PPOTrainer:
 
     # -- evaluation, logging, files ----------------------------------------------------------
 
-    def _final_evaluation(self) -> EvalReport:
-        """The evaluation of the final policy (reusing the last one if nothing changed since)."""
-        if self._last_eval is not None and self._last_eval[0] == self.frames:
-            return self._last_eval[1]
-        return self._evaluate()
+    def _periodic_evaluation(self) -> EvalReport:
+        """Evaluate on ``eval.selection_seeds`` if set, keeping the best policy so far as
+        ``checkpoints/best.pt``; otherwise on ``eval.seeds``."""
+        selection_seeds = self.cfg.eval.get("selection_seeds")
+        report = self._evaluate(self.net, selection_seeds)
+        if selection_seeds and (
+            self.best_selection is None or report.mean_distance > self.best_selection
+        ):
+            self.best_selection = report.mean_distance
+            save_checkpoint(
+                self.checkpoint_dir / BEST,
+                self.net,
+                iteration=self.iteration,
+                frames=self.frames,
+                selection=report.summary(),
+            )
+        return report
 
-    def _evaluate(self) -> EvalReport:
+    def _kept_net(self) -> tuple[DrivingNet, Path | None]:
+        """The policy a run leaves: the best on the selection seeds (and its checkpoint) when
+        ``eval.selection_seeds`` chose one, else the last."""
+        if self.best_selection is None:
+            return self.net, None
+        path = self.checkpoint_dir / BEST
+        state = load_checkpoint(path)
+        logger.info(
+            "keeping the policy of %d env steps (mean distance %.1f on the selection seeds)",
+            state["frames"],
+            self.best_selection,
+        )
+        return net_from_checkpoint(state), path
+
+    def _final_evaluation(self, net: DrivingNet) -> EvalReport:
+        """The evaluation of the kept policy on ``eval.seeds`` (reusing the last one if it
+        evaluated the same policy on those seeds)."""
+        seeds = tuple(self.cfg.eval.seeds)
+        last = self._last_eval
+        if net is self.net and last is not None and last[:2] == (self.frames, seeds):
+            return last[2]
+        return self._evaluate(net)
+
+    def _evaluate(self, net: DrivingNet, seeds: Sequence[int] | None = None) -> EvalReport:
         if self._evaluator is None:
             self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
-        self.net.eval()
+        policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
+        seeds = tuple(int(seed) for seed in (seeds or self.cfg.eval.seeds))
+        net.eval()
         try:
-            report = self._evaluator.evaluate(self.modules.policy)
+            report = self._evaluator.evaluate(policy, seeds)
         finally:
-            self.net.train()
-        self._last_eval = (self.frames, report)
+            net.train()
+        self._last_eval = (self.frames, seeds, report)
         summary = report.summary()
-        self.history.append({"iteration": self.iteration, "frames": self.frames, **summary})
-        logger.info("evaluation at %d env steps: %s", self.frames, summary)
+        self.history.append(
+            {"iteration": self.iteration, "frames": self.frames, "seeds": list(seeds), **summary}
+        )
+        logger.info("evaluation at %d env steps on seeds %s: %s", self.frames, seeds, summary)
         return report
 
     def _log(self, metrics: dict[str, float]) -> None:
@@ -438,12 +482,13 @@ class PPOTrainer:
             iteration=self.iteration,
             frames=self.frames,
             history=self.history,
+            best_selection=self.best_selection,
             config=OmegaConf.to_container(self.cfg),
         )
 
-    def _export(self) -> Path | None:
+    def _export(self, net: DrivingNet) -> Path | None:
         try:
-            return export_lerobot(self.net, self.output_dir / "policy")
+            return export_lerobot(net, self.output_dir / "policy")
         except ImportError as error:
             logger.warning("not exporting a LeRobot policy folder: %s", error)
             return None

@@ -98,6 +98,29 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
         PPOTrainer(_ppo_config(tmp_path, 48, f"resume={tmp_path / 'old.pt'}"))
 
 
+def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
+    cfg = _ppo_config(tmp_path, 48, "eval.selection_seeds=[5]", "eval.max_steps=4")
+    result = PPOTrainer(cfg).run()
+
+    *periodic, final = result.history
+    assert [entry["seeds"] for entry in periodic] == [[5]] * 3
+    assert final["seeds"] == [1000] and final["frames"] == 48
+    distances = [entry["mean_distance"] for entry in periodic]
+    chosen = periodic[distances.index(max(distances))]  # the first of equals: no later tie wins
+    assert result.checkpoint == tmp_path / "checkpoints" / "best.pt"
+    best = load_checkpoint(result.checkpoint)
+    assert best["frames"] == chosen["frames"]
+    assert best["selection"]["mean_distance"] == chosen["mean_distance"]
+    for key, value in result.net.state_dict().items():
+        torch.testing.assert_close(value, best["net_state"][key])
+    exported = load_net(result.policy_dir)
+    torch.testing.assert_close(
+        exported.state_dict()["actor.2.bias"], best["net_state"]["actor.2.bias"]
+    )
+    latest = load_checkpoint(tmp_path / "checkpoints" / "latest.pt")  # the training state
+    assert (latest["frames"], latest["best_selection"]) == (48, max(distances))
+
+
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=1.5))
     folder = export_lerobot(source, tmp_path / "bc_policy")
