@@ -205,6 +205,7 @@ class PPOTrainer:
         )
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
+        self._kept_frames = 0  # env steps the kept policy had trained for, when not the last
 
     def _param_groups(self) -> list[dict[str, Any]]:
         """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
@@ -441,6 +442,7 @@ class PPOTrainer:
             state["frames"],
             self.best_selection,
         )
+        self._kept_frames = state["frames"]
         return net_from_checkpoint(state), path
 
     def _final_evaluation(self, net: DrivingNet) -> EvalReport:
@@ -465,7 +467,13 @@ class PPOTrainer:
         self._last_eval = (self.frames, seeds, report)
         summary = report.summary()
         self.history.append(
-            {"iteration": self.iteration, "frames": self.frames, "seeds": list(seeds), **summary}
+            {
+                "iteration": self.iteration,
+                "frames": self.frames,
+                "policy_frames": self.frames if net is self.net else self._kept_frames,
+                "seeds": list(seeds),
+                **summary,
+            }
         )
         logger.info("evaluation at %d env steps on seeds %s: %s", self.frames, seeds, summary)
         return report

@@ -105,11 +105,12 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
     *periodic, final = result.history
     assert [entry["seeds"] for entry in periodic] == [[5]] * 3
     assert final["seeds"] == [1000] and final["frames"] == 48
+    assert [entry["policy_frames"] for entry in periodic] == [16, 32, 48]
     distances = [entry["mean_distance"] for entry in periodic]
     chosen = periodic[distances.index(max(distances))]  # the first of equals: no later tie wins
     assert result.checkpoint == tmp_path / "checkpoints" / "best.pt"
     best = load_checkpoint(result.checkpoint)
-    assert best["frames"] == chosen["frames"]
+    assert best["frames"] == chosen["frames"] == final["policy_frames"]
     assert best["selection"]["mean_distance"] == chosen["mean_distance"]
     for key, value in result.net.state_dict().items():
         torch.testing.assert_close(value, best["net_state"][key])
