@@ -54,7 +54,13 @@ def test_evaluation_is_repeatable(tmp_path: Path) -> None:
     with Evaluator(cfg.env, cfg, progress=False) as evaluator:
         first = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
         second = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
+        other_seed = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"), seeds=[4])
+        with pytest.raises(ValueError, match="at least one seed"):
+            evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"), seeds=[])
     assert first.to_dict() == second.to_dict()
+    assert {e.episode_seed for e in other_seed.episodes}.isdisjoint(
+        e.episode_seed for e in first.episodes
+    )
     assert len(first.episodes) == 2 and first.mean_distance > 0
     assert first.episodes[0].episode_seed != first.episodes[1].episode_seed
     assert all(episode.steps == 4 for episode in first.episodes)
