@@ -23,8 +23,9 @@ steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps)
 Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 61440]``
 (about two and a half hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO
 from scratch in one process (``--stages ppo_scratch``) and the rest in another; a last run
-with every stage then assembles the report from the cache. A partial run writes what it ran to
-``learning_<stages>.json`` beside the full report.
+with every stage then assembles the report from the cache. A partial run writes what it ran,
+with the targets its stages allow, to ``learning_<stages>.json`` and ``.png`` beside the full
+report.
 """
 
 from __future__ import annotations
@@ -255,17 +256,13 @@ def main() -> None:
         "settings": {**vars(args), "work": str(args.work), "results": str(args.results)},
         "config": OmegaConf.to_container(cfg),
     }
-    if set(results) != set(STAGES):
-        # A partial run (e.g. one stage on its own) still leaves its numbers in the results.
-        path = args.results / f"learning_{'_'.join(results)}.json"
-        write_json(path, {**settings, **results, "seconds": cache.seconds})
-        logger.info(
-            "ran %s (results in %s); the full report needs every stage", list(results), path
-        )
-        return
-    report = {**settings, **full_report(results), "seconds": cache.seconds}
-    write_json(args.results / "learning.json", report)
-    plot_report(report, args.results / "learning.png")
+    # A partial run (e.g. one stage on its own) leaves what it ran beside the full report.
+    name = "learning" if set(results) == set(STAGES) else f"learning_{'_'.join(results)}"
+    report = {**settings, **summarise(results), "seconds": cache.seconds}
+    write_json(args.results / f"{name}.json", report)
+    plot_report(report, args.results / f"{name}.png")
+    if name != "learning":
+        logger.info("ran %s; the full report needs every stage", list(results))
 
 
 def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> dict[str, Any]:
@@ -293,45 +290,55 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
     return results
 
 
-def full_report(results: dict[str, Any]) -> dict[str, Any]:
-    """Every stage's results, the best constant action and the targets, met or not."""
-    references, bc = results["references"], results["bc"]
+def summarise(results: dict[str, Any]) -> dict[str, Any]:
+    """The stages' results with the best constant action and every target their stages allow
+    (each met or not): BC needs the references, PPO from scratch the references, BC + PPO the
+    clone."""
+    report = dict(results)
+    targets: dict[str, float | bool] = {}
+    bc = results["bc"]["mean_distance"] if "bc" in results else None
+    if "references" in results:
+        references = results["references"]
+        report["best_constant"] = best_constant(references)
+        autopilot = references["autopilot"]["mean_distance"]
+        constant = references[report["best_constant"]]["mean_distance"]
+        if bc is not None:
+            targets["bc_over_autopilot"] = bc / autopilot
+            targets["bc_target_met"] = bc >= 0.7 * autopilot
+        if "ppo_scratch" in results:
+            scratch = results["ppo_scratch"][-1]["mean_distance"]
+            targets["ppo_scratch_over_best_constant"] = scratch / constant
+            targets["ppo_scratch_target_met"] = scratch >= 1.5 * constant
+    if bc is not None and "bc_ppo" in results:
+        finetune = results["bc_ppo"][-1]["mean_distance"]
+        targets["bc_ppo_over_bc"] = finetune / bc
+        targets["bc_ppo_target_met"] = finetune > bc
+    report["targets"] = targets
+    return report
+
+
+def best_constant(references: dict[str, dict[str, float]]) -> str:
+    """The name of the constant action that drives furthest."""
     constants = [name for name in REFERENCES if name.startswith("constant")]
-    best_constant = max(constants, key=lambda name: references[name]["mean_distance"])
-    autopilot = references["autopilot"]["mean_distance"]
-    constant = references[best_constant]["mean_distance"]
-    scratch_final = results["ppo_scratch"][-1]["mean_distance"]
-    finetune_final = results["bc_ppo"][-1]["mean_distance"]
-    return {
-        **results,
-        "best_constant": best_constant,
-        "targets": {
-            "bc_over_autopilot": bc["mean_distance"] / autopilot,
-            "bc_target_met": bc["mean_distance"] >= 0.7 * autopilot,
-            "ppo_scratch_over_best_constant": scratch_final / constant,
-            "ppo_scratch_target_met": scratch_final >= 1.5 * constant,
-            "bc_ppo_over_bc": finetune_final / bc["mean_distance"],
-            "bc_ppo_target_met": finetune_final > bc["mean_distance"],
-        },
-    }
+    return max(constants, key=lambda name: references[name]["mean_distance"])
 
 
 def plot_report(report: dict[str, Any], path: Path) -> None:
-    """The learning curves of a full report against the reference levels, as a PNG."""
-    bc = report["bc"]["mean_distance"]
-    scratch, finetune = report["ppo_scratch"], report["bc_ppo"]
-    curves = {
-        "ppo (scratch)": [(h["frames"], h["mean_distance"]) for h in scratch[:-1]],
-        "bc + ppo": [(h["frames"], h["mean_distance"]) for h in finetune[:-1]],
-    }
-    references = report["references"]
-    levels = {
-        "autopilot": references["autopilot"]["mean_distance"],
-        "best constant": references[report["best_constant"]]["mean_distance"],
-        "bc": bc,
-        "ppo (scratch), kept": scratch[-1]["mean_distance"],
-        "bc + ppo, kept": finetune[-1]["mean_distance"],
-    }
+    """The PPO stages' curves (their last point, the kept policy, as a level) against the
+    reference and BC levels of whichever stages the report holds, as a PNG."""
+    curves: dict[str, list[tuple[float, float]]] = {}
+    levels: dict[str, float] = {}
+    if "references" in report:
+        references = report["references"]
+        levels["autopilot"] = references["autopilot"]["mean_distance"]
+        levels["best constant"] = references[report["best_constant"]]["mean_distance"]
+    if "bc" in report:
+        levels["bc"] = report["bc"]["mean_distance"]
+    for stage, name in (("ppo_scratch", "ppo (scratch)"), ("bc_ppo", "bc + ppo")):
+        if stage in report:
+            *periodic, kept = report[stage]
+            curves[name] = [(entry["frames"], entry["mean_distance"]) for entry in periodic]
+            levels[f"{name}, kept"] = kept["mean_distance"]
     plot(curves, levels, path)
 
 
