@@ -157,6 +157,7 @@ class PPOTrainer:
         target_kl = cfg.optim.get("target_kl")
         if target_kl is not None and not target_kl > 0:
             raise ValueError(f"optim.target_kl must be positive or null, got {target_kl}")
+        _check_selection_seeds(cfg.eval.get("selection_seeds"))
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
@@ -205,7 +206,6 @@ class PPOTrainer:
         )
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
-        self._kept_frames = 0  # env steps the kept policy had trained for, when not the last
 
     def _param_groups(self) -> list[dict[str, Any]]:
         """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
@@ -248,8 +248,8 @@ class PPOTrainer:
         try:
             if remaining:
                 self._train(remaining)
-            kept, kept_checkpoint = self._kept_net()
-            final = self._final_evaluation(kept) if cfg.eval.episodes else None
+            kept, kept_checkpoint, kept_frames = self._kept_net()
+            final = self._final_evaluation(kept, kept_frames) if cfg.eval.episodes else None
             checkpoint = self._save_checkpoint()
             policy_dir = self._export(kept)
         finally:
@@ -430,11 +430,11 @@ class PPOTrainer:
             )
         return report
 
-    def _kept_net(self) -> tuple[DrivingNet, Path | None]:
-        """The policy a run leaves: the best on the selection seeds (and its checkpoint) when
-        ``eval.selection_seeds`` chose one, else the last."""
+    def _kept_net(self) -> tuple[DrivingNet, Path | None, int]:
+        """The policy a run leaves, its checkpoint and the env steps it trained for: the best
+        on the selection seeds when ``eval.selection_seeds`` chose one, else the last."""
         if self.best_selection is None:
-            return self.net, None
+            return self.net, None, self.frames
         path = self.checkpoint_dir / BEST
         state = load_checkpoint(path)
         logger.info(
@@ -442,19 +442,26 @@ class PPOTrainer:
             state["frames"],
             self.best_selection,
         )
-        self._kept_frames = state["frames"]
-        return net_from_checkpoint(state), path
+        return net_from_checkpoint(state), path, state["frames"]
 
-    def _final_evaluation(self, net: DrivingNet) -> EvalReport:
+    def _final_evaluation(self, net: DrivingNet, policy_frames: int) -> EvalReport:
         """The evaluation of the kept policy on ``eval.seeds`` (reusing the last one if it
         evaluated the same policy on those seeds)."""
         seeds = tuple(self.cfg.eval.seeds)
         last = self._last_eval
         if net is self.net and last is not None and last[:2] == (self.frames, seeds):
             return last[2]
-        return self._evaluate(net)
+        return self._evaluate(net, policy_frames=policy_frames)
 
-    def _evaluate(self, net: DrivingNet, seeds: Sequence[int] | None = None) -> EvalReport:
+    def _evaluate(
+        self,
+        net: DrivingNet,
+        seeds: Sequence[int] | None = None,
+        *,
+        policy_frames: int | None = None,
+    ) -> EvalReport:
+        """Evaluate ``net`` (trained for ``policy_frames`` env steps, default: all of this run's)
+        on ``seeds`` (default ``eval.seeds``) and add the summary to the history."""
         if self._evaluator is None:
             self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
@@ -470,7 +477,7 @@ class PPOTrainer:
             {
                 "iteration": self.iteration,
                 "frames": self.frames,
-                "policy_frames": self.frames if net is self.net else self._kept_frames,
+                "policy_frames": self.frames if policy_frames is None else policy_frames,
                 "seeds": list(seeds),
                 **summary,
             }
@@ -510,6 +517,22 @@ class PPOTrainer:
             self._evaluator = None
             if not self.env.is_closed:
                 self.env.close()
+
+
+def _check_selection_seeds(seeds: Any) -> None:
+    """Refuse ``eval.selection_seeds`` other than null or a non-empty list of integers, before
+    a run that would only fail at its first evaluation."""
+    if seeds is None:
+        return
+    if (
+        isinstance(seeds, (str, bytes))
+        or not isinstance(seeds, Sequence)
+        or not seeds
+        or not all(isinstance(seed, int) and not isinstance(seed, bool) for seed in seeds)
+    ):
+        raise ValueError(
+            f"eval.selection_seeds must be null or a non-empty list of integers, got {seeds!r}"
+        )
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
