@@ -29,9 +29,9 @@ class FrameTruth:
     """Ground truth of one frame (same fields and meaning as ``sim.proto`` ``FrameTruth``).
 
     Example:
-        >>> truth = FrameTruth(0, 0, 0, 0, 0, 0, 0, 0, False, math.inf, False)
-        >>> truth.to_proto().obstacle_distance
-        inf
+        >>> truth = FrameTruth(0, 0, 0, 0, 0, 0, 0, 0, False, math.inf, False, 5.0, math.inf)
+        >>> truth.to_proto().obstacle_distance, truth.to_proto().obstacle_distance_left
+        (inf, 5.0)
     """
 
     x: float
@@ -45,6 +45,8 @@ class FrameTruth:
     collided: bool
     obstacle_distance: float
     off_road: bool
+    obstacle_distance_left: float
+    obstacle_distance_right: float
 
     def to_proto(self) -> sim_pb2.FrameTruth:
         """The protobuf message of this truth."""
@@ -60,6 +62,8 @@ class FrameTruth:
             collided=self.collided,
             obstacle_distance=self.obstacle_distance,
             off_road=self.off_road,
+            obstacle_distance_left=self.obstacle_distance_left,
+            obstacle_distance_right=self.obstacle_distance_right,
         )
 
 
@@ -235,11 +239,36 @@ class World:
         )
         return float(max(np.min(along - reach) - half_length, 0.0))
 
+    def _side_distances(self) -> tuple[float, float]:
+        """Road distance from the front bumper to the nearest obstacle ahead in the strips one
+        lane width to the left and to the right of the car (0 where the strip is off the road).
+
+        Measured along the road (``s``, ``d``), not the car's heading: the question is whether
+        the next lane over is open, whichever way the car points right now.
+        """
+        s, lateral = self._road_position
+        style, obstacles = self.scene.style, self.scene.obstacles
+        half_length = self.params.length / 2
+        near = obstacles.between(s - COLLISION_REACH, s + CORRIDOR_LENGTH + 15.0)
+        centres = lateral + np.array([[style.lane_width], [-style.lane_width]])
+        in_strip = np.abs(obstacles.d[near] - centres) < obstacles.half_across[near] + (
+            self.params.width / 2
+        )
+        gaps = obstacles.s[near] - obstacles.half_along[near] - s - half_length
+        not_behind = obstacles.s[near] + obstacles.half_along[near] > s - half_length
+        in_reach = in_strip & not_behind & (gaps < CORRIDOR_LENGTH)
+        ahead = np.where(in_reach, np.maximum(gaps, 0.0), math.inf)
+        distances = ahead.min(axis=1, initial=math.inf)
+        off_road = np.abs(centres[:, 0]) > style.road_half_width + OFF_ROAD_MARGIN
+        left, right = np.where(off_road, 0.0, distances)
+        return float(left), float(right)
+
     def _measure(self) -> FrameTruth:
         """Truth of the current state."""
         state = self.state
         s, lateral = self._road_position
         _, _, road_heading = self.scene.road.pose_at(s)
+        left, right = self._side_distances()
         return FrameTruth(
             x=state.x,
             y=state.y,
@@ -252,4 +281,6 @@ class World:
             collided=self._collided,
             obstacle_distance=self._obstacle_distance(),
             off_road=self._off_road,
+            obstacle_distance_left=left,
+            obstacle_distance_right=right,
         )

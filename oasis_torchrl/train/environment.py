@@ -38,14 +38,24 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.shaping import ClearanceShaping
 
 REWARD_KINDS = ("ground_truth", "depth")
-PRIVILEGED_FIELDS = ("speed", "lateral_offset", "heading_error", "obstacle_distance")
-_PRIVILEGED_SCALE = torch.tensor([10.0, 4.0, 1.0, 60.0])
-"""Rough magnitudes: m/s, m, rad, m (the obstacle distance is capped at 60 m, none = 60 m)."""
+PRIVILEGED_FIELDS = (
+    "speed",
+    "lateral_offset",
+    "heading_error",
+    "obstacle_distance",
+    "obstacle_distance_left",
+    "obstacle_distance_right",
+)
+_PRIVILEGED_SCALE = torch.tensor([10.0, 4.0, 1.0, 60.0, 60.0, 60.0])
+"""Rough magnitudes: m/s, m, rad, then metres (the obstacle distances are capped at 60 m, as
+where no obstacle is: the critic and the auxiliary head need to know which lane is open)."""
+_FIRST_DISTANCE = PRIVILEGED_FIELDS.index("obstacle_distance")
 
 
 class PrivilegedState(Transform):
-    """Writes ``"critic_inputs"`` ``[N, 4]``: the last frame's ground-truth speed, lateral
-    offset, heading error and obstacle distance, scaled to about unit size.
+    """Writes ``"critic_inputs"`` ``[N, 6]``: the last frame's ground truth in
+    :data:`PRIVILEGED_FIELDS` (speed, lateral offset, heading error, obstacle distances ahead,
+    one lane left and one lane right), scaled to about unit size.
 
     For an asymmetric actor-critic on the embedded server: the critic may use the simulator's
     state, the actor (what is deployed) only sees the cameras and the previous action.
@@ -53,7 +63,7 @@ class PrivilegedState(Transform):
     Example:
         >>> from tensordict import TensorDict
         >>> truth = {field: torch.full((2, 4), 2.0) for field in PRIVILEGED_FIELDS}
-        >>> truth["obstacle_distance"][0] = float("inf")
+        >>> truth["obstacle_distance_right"][0] = float("inf")
         >>> out = PrivilegedState()(TensorDict({"truth": truth}, [2]))
         >>> out["critic_inputs"][:, -1].tolist()
         [1.0, 0.03333333507180214]
@@ -65,7 +75,8 @@ class PrivilegedState(Transform):
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         last = torch.stack([next_tensordict.get(key)[..., -1] for key in self.in_keys], dim=-1)
-        last[..., -1] = last[..., -1].nan_to_num(posinf=60.0).clamp(max=60.0)
+        distances = last[..., _FIRST_DISTANCE:]
+        distances.copy_(distances.nan_to_num(posinf=60.0).clamp(max=60.0))
         scale = _PRIVILEGED_SCALE.to(last.device)
         return next_tensordict.set(CRITIC_INPUTS, (last / scale).nan_to_num(0.0))
 

@@ -64,3 +64,19 @@ def test_truth_at_start() -> None:
     assert truth.lateral_offset == pytest.approx(scene.style.lane_offset(0))
     assert truth.obstacle_distance == math.inf and not truth.collided
     assert truth.to_proto().lateral_offset == pytest.approx(truth.lateral_offset)
+
+
+def test_side_distances_report_the_lanes_beside_the_car() -> None:
+    scene = build_scene("rural", 0)  # two lanes: the car starts in the right one
+    left_lane = scene.style.lane_offset(scene.start_lane + 1)
+    scene = scene.with_obstacles(obstacles_at(scene.road, ["car"], [30.0], [left_lane]))
+    world = World(scene, dt=0.05)
+    truth = world.advance(0.0, 0.0)
+    assert truth.obstacle_distance == math.inf
+    assert truth.obstacle_distance_left == pytest.approx(30.0 - 2.2 - 2.25, abs=0.3)
+    assert truth.obstacle_distance_right == 0.0  # one lane to the right is off the road
+    for _ in range(200):
+        truth = world.advance(1.0, 0.0)
+        if truth.progress > 40.0:
+            break
+    assert truth.obstacle_distance_left == math.inf and not truth.collided

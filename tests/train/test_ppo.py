@@ -14,6 +14,7 @@ from tensordict import TensorDict
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
 from oasis_torchrl.train.config import load_config
+from oasis_torchrl.train.environment import PRIVILEGED_FIELDS
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 
 from .conftest import TINY_ENV
@@ -58,7 +59,7 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     trained = ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "aux.2.weight")
     for key in (*trained, "log_scale"):
         assert not torch.equal(before[key], after[key]), key
-    assert result.net.config.critic_inputs == 4  # the asymmetric critic
+    assert result.net.config.critic_inputs == len(PRIVILEGED_FIELDS)  # the asymmetric critic
     assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(1.0)}))  # null: off
     trainer.cfg.optim.target_kl = 0.05
     assert trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.06)}))
@@ -134,7 +135,7 @@ def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) 
     torch.testing.assert_close(net.encoder.convs[0].weight, source.encoder.convs[0].weight)
     assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.25] * 8)
     privileged = build_net(OmegaConf.merge(cfg, {"privileged_critic": True}), CAMERAS)
-    assert privileged.critic[0].in_features == source.critic[0].in_features + 4
+    assert privileged.critic[0].in_features == source.critic[0].in_features + len(PRIVILEGED_FIELDS)
     torch.testing.assert_close(privileged.actor[0].weight, source.actor[0].weight)
 
     with pytest.raises(ValueError, match=r"optim\.target_kl must be positive or null, got 0"):

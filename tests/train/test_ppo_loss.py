@@ -9,12 +9,14 @@ from torchrl.objectives import ClipPPOLoss
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.train.config import load_config
-from oasis_torchrl.train.environment import build_env
+from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
 from .conftest import TINY_ENV
 
 SIZE = (32, 48)
+PRIVILEGED = len(PRIVILEGED_FIELDS)
+ASYMMETRIC = DrivingNetConfig(image_size=SIZE, critic_inputs=PRIVILEGED, aux_outputs=PRIVILEGED)
 PPO_KWARGS = {"clip_epsilon": 0.2, "entropy_coeff": 0.0, "normalize_advantage": True}
 
 
@@ -23,7 +25,7 @@ def rollout() -> TensorDict:
     """Six steps of two rows on the embedded server, as a collector stores them (with the
     acting pass's features, detached); advantages and targets are random."""
     env = build_env(load_config("ppo", TINY_ENV).env, num_envs=2, privileged=True)
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=PRIVILEGED))
     try:
         steps = env.rollout(6, make_actor_critic(net).policy, break_when_any_done=False)
     finally:
@@ -42,7 +44,7 @@ def _gradients(net: DrivingNet, loss: torch.Tensor) -> dict[str, torch.Tensor]:
 
 def test_matches_clip_ppo_loss_over_the_full_operators(rollout: TensorDict) -> None:
     torch.manual_seed(0)
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4, aux_outputs=4))
+    net = DrivingNet(ASYMMETRIC)
     modules = make_actor_critic(net)
     terms = ("loss_objective", "loss_critic", "loss_entropy")
 
@@ -58,7 +60,7 @@ def test_matches_clip_ppo_loss_over_the_full_operators(rollout: TensorDict) -> N
 
 
 def test_adds_the_weighted_auxiliary_loss_only_with_the_head(rollout: TensorDict) -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4, aux_outputs=4))
+    net = DrivingNet(ASYMMETRIC)
     loss = DrivingPPOLoss(make_actor_critic(net), aux_coeff=2.0, **PPO_KWARGS)
     losses = loss(rollout)
     assert loss.terms[-1] == "loss_aux"
@@ -69,14 +71,14 @@ def test_adds_the_weighted_auxiliary_loss_only_with_the_head(rollout: TensorDict
     )
     torch.testing.assert_close(losses["loss_aux"].detach(), expected)
 
-    plain = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
+    plain = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=PRIVILEGED))
     without = DrivingPPOLoss(make_actor_critic(plain), aux_coeff=2.0, **PPO_KWARGS)
     assert "loss_aux" not in without(rollout).keys()
     assert "loss_aux" not in without.terms
 
 
 def test_leaves_the_callers_minibatch_alone(rollout: TensorDict) -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=4))
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=PRIVILEGED))
     stored = rollout["features"].clone()
     losses = DrivingPPOLoss(make_actor_critic(net), **PPO_KWARGS)(rollout)
     assert losses["loss_objective"].requires_grad
