@@ -22,6 +22,9 @@ OFF_ROAD_MARGIN = 0.5
 CORRIDOR_LENGTH = 60.0
 #: Obstacles whose centre is further along the road than this cannot touch the car, metres.
 COLLISION_REACH = 12.0
+#: Obstacles whose centre is within this many metres of the car's along the road are searched for
+#: the distances ahead (the corridor plus room for long obstacles on curves), metres.
+CORRIDOR_REACH = CORRIDOR_LENGTH + 15.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -213,16 +216,20 @@ class World:
     def _check_collisions(self) -> None:
         """Stop the car for good if it hits an obstacle or leaves the road surface."""
         lateral = self._road_position[1]
-        self._off_road = abs(lateral) > self.scene.style.road_half_width + OFF_ROAD_MARGIN
+        self._off_road = bool(self._beyond_road(lateral))
         near = self._nearby(COLLISION_REACH)
         if self._off_road or bool(self._overlapping(self.car_box(), near).any()):
             self._collided = True
             self.state = VehicleState(self.state.x, self.state.y, self.state.heading, 0.0)
 
-    def _obstacle_distance(self) -> float:
-        """Distance from the front bumper to the nearest obstacle in the corridor ahead."""
+    def _beyond_road(self, lateral: float | np.ndarray) -> bool | np.ndarray:
+        """Whether lateral offsets ``d`` lie off the road surface (a collision for the car)."""
+        return np.abs(lateral) > self.scene.style.road_half_width + OFF_ROAD_MARGIN
+
+    def _obstacle_distance(self, near: slice) -> float:
+        """Distance from the front bumper to the nearest obstacle in the corridor ahead, among
+        the obstacles in ``near``."""
         state, obstacles = self.state, self.scene.obstacles
-        near = self._nearby(CORRIDOR_LENGTH + 15.0)
         forward = np.array([math.cos(state.heading), math.sin(state.heading)])
         half_length = self.params.length / 2
         centre = np.array([state.x, state.y]) + forward * (half_length + CORRIDOR_LENGTH / 2)
@@ -239,9 +246,10 @@ class World:
         )
         return float(max(np.min(along - reach) - half_length, 0.0))
 
-    def _side_distances(self) -> tuple[float, float]:
+    def _side_distances(self, near: slice) -> tuple[float, float]:
         """Road distance from the front bumper to the nearest obstacle ahead in the strips one
-        lane width to the left and to the right of the car (0 where the strip is off the road).
+        lane width to the left and to the right of the car (0 where the strip is off the road),
+        among the obstacles in ``near``.
 
         Measured along the road (``s``, ``d``), not the car's heading: the question is whether
         the next lane over is open, whichever way the car points right now.
@@ -249,7 +257,6 @@ class World:
         s, lateral = self._road_position
         style, obstacles = self.scene.style, self.scene.obstacles
         half_length = self.params.length / 2
-        near = obstacles.between(s - COLLISION_REACH, s + CORRIDOR_LENGTH + 15.0)
         centres = lateral + np.array([[style.lane_width], [-style.lane_width]])
         in_strip = np.abs(obstacles.d[near] - centres) < obstacles.half_across[near] + (
             self.params.width / 2
@@ -259,8 +266,7 @@ class World:
         in_reach = in_strip & not_behind & (gaps < CORRIDOR_LENGTH)
         ahead = np.where(in_reach, np.maximum(gaps, 0.0), math.inf)
         distances = ahead.min(axis=1, initial=math.inf)
-        off_road = np.abs(centres[:, 0]) > style.road_half_width + OFF_ROAD_MARGIN
-        left, right = np.where(off_road, 0.0, distances)
+        left, right = np.where(self._beyond_road(centres[:, 0]), 0.0, distances)
         return float(left), float(right)
 
     def _measure(self) -> FrameTruth:
@@ -268,7 +274,8 @@ class World:
         state = self.state
         s, lateral = self._road_position
         _, _, road_heading = self.scene.road.pose_at(s)
-        left, right = self._side_distances()
+        near = self._nearby(CORRIDOR_REACH)
+        left, right = self._side_distances(near)
         return FrameTruth(
             x=state.x,
             y=state.y,
@@ -279,7 +286,7 @@ class World:
             lateral_offset=lateral,
             heading_error=math.remainder(state.heading - float(road_heading), math.tau),
             collided=self._collided,
-            obstacle_distance=self._obstacle_distance(),
+            obstacle_distance=self._obstacle_distance(near),
             off_road=self._off_road,
             obstacle_distance_left=left,
             obstacle_distance_right=right,
