@@ -20,9 +20,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.sim.autopilot import Autopilot
-from oasis_torchrl.sim.render import CAMERAS, Renderer
-from oasis_torchrl.sim.simulator import CHUNK, Simulator
+from oasis_torchrl.sim.render import Renderer
+from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.vehicle import VehicleState
 
 PROMPTS = ("urban", "highway", "rural at night", "city in the rain", "rural snow")

@@ -21,8 +21,9 @@ import time
 import av
 import numpy as np
 
+from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.autopilot import Autopilot
-from oasis_torchrl.sim.simulator import CAMERA_NAMES, Simulator
+from oasis_torchrl.sim.simulator import Simulator
 
 PROMPTS = ("urban", "highway", "rural at night", "city in the rain")
 SIZES = ((768, 512), (192, 128))
@@ -74,7 +75,7 @@ def replay(simulator: Simulator, prompt: str, chunks: list[np.ndarray]) -> np.nd
         encoded = np.array([time.perf_counter(), time.process_time()])
         totals += np.concatenate([rendered - start, encoded - rendered])[[0, 2, 1, 3]]
     codec.encode(None)
-    return totals * 1000 / (frames * np.array([len(CAMERA_NAMES), 1, len(CAMERA_NAMES), 1]))
+    return totals * 1000 / (frames * np.array([len(CAMERAS), 1, len(CAMERAS), 1]))
 
 
 def main() -> None:

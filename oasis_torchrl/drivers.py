@@ -29,8 +29,7 @@ from tensordict import NonTensorData, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from oasis_torchrl.client import TRUTH_FIELDS
-from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
-from oasis_torchrl.client.wire import ACTIONS_PER_CHUNK
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
 from oasis_torchrl.sim.autopilot import Autopilot as SimAutopilot
 from oasis_torchrl.sim.scene import Scene, cached_scene
 from oasis_torchrl.sim.vehicle import VehicleState
@@ -102,7 +101,7 @@ class _RowPilot:
         world.state = VehicleState(truth.x, truth.y, truth.heading, truth.speed)
         world.truth = truth
         # A fresh episode has not moved yet (its reset chunk stands still).
-        world.steps = 0 if truth.distance == 0.0 else world.steps + ACTIONS_PER_CHUNK
+        world.steps = 0 if truth.distance == 0.0 else world.steps + CHUNK
         return self.pilot.act()
 
 
@@ -126,7 +125,7 @@ class Autopilot(Driver):
 
     def __init__(
         self,
-        fps: float = 20.0,
+        fps: float = FPS,
         target_speed: float | None = None,
         *,
         chunk_actions: bool = True,
@@ -155,7 +154,7 @@ class Autopilot(Driver):
         truth = truth.double().cpu().numpy()
         prompts = _row_strings(td, "prompt")
         seeds = td.get("episode_seed").reshape(-1).tolist()
-        chunks = np.zeros((len(prompts), ACTIONS_PER_CHUNK, 2), np.float32)
+        chunks = np.zeros((len(prompts), CHUNK, 2), np.float32)
         for row, (prompt, seed) in enumerate(zip(prompts, seeds, strict=True)):
             if not np.isnan(truth[row]).any():  # NaN: no truth (inf is a valid distance)
                 fields = dict(zip(TRUTH_FIELDS, truth[row].tolist(), strict=True))
@@ -223,8 +222,8 @@ class ScriptedDriver(Driver):
 
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """The next 4 frames of the script, the same for every row."""
-        frames = self._frame + np.arange(ACTIONS_PER_CHUNK)
-        self._frame += ACTIONS_PER_CHUNK
+        frames = self._frame + np.arange(CHUNK)
+        self._frame += CHUNK
         chunk = np.stack([signal(frames) for signal in self._signals], axis=-1)
         rows = td.batch_size[0] if td.batch_dims else 1
         return torch.from_numpy(chunk.astype(np.float32)).expand(rows, -1, -1)
@@ -258,10 +257,10 @@ def load_module(path: str | Path) -> torch.nn.Module:
 def _as_chunks(action: torch.Tensor, rows: int) -> torch.Tensor:
     """A policy output ``[N, 4, 2]``, ``[N, 8]`` or ``[N, 2]`` as ``[N, 4, 2]`` chunks."""
     action = action.detach().to("cpu", torch.float32)
-    if action.shape in ((rows, ACTIONS_PER_CHUNK, 2), (rows, ACTIONS_PER_CHUNK * 2)):
-        return action.reshape(rows, ACTIONS_PER_CHUNK, 2)
+    if action.shape in ((rows, CHUNK, 2), (rows, CHUNK * 2)):
+        return action.reshape(rows, CHUNK, 2)
     if action.shape == (rows, 2):
-        return action.unsqueeze(1).expand(-1, ACTIONS_PER_CHUNK, 2)
+        return action.unsqueeze(1).expand(-1, CHUNK, 2)
     raise ValueError(
         f"policy action must be [{rows}, 4, 2], [{rows}, 8] or [{rows}, 2], "
         f"got {list(action.shape)}"
@@ -312,7 +311,7 @@ class PolicyDriver(Driver):
         if self.in_keys is not None:
             return [td.get(key) for key in self.in_keys]
         keys = td.keys(True)
-        pixels = [("pixels", c) for c in DEFAULT_REQUIRED_STREAMS if ("pixels", c) in keys]
+        pixels = [("pixels", c) for c in CAMERAS if ("pixels", c) in keys]
         return [td.get(key) for key in pixels] + [td.get("state")]
 
     @torch.no_grad()
@@ -356,7 +355,7 @@ class DriverSpec:
     script: str = "throttle=0.5"
     policy: Path | None = None
     policy_in_keys: tuple[tuple[str, ...], ...] | None = None
-    fps: float = 20.0
+    fps: float = FPS
 
     def __post_init__(self) -> None:
         if self.kind not in DRIVER_KINDS:

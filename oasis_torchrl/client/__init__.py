@@ -26,24 +26,20 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.extras import TRUTH_FIELDS
 from oasis_torchrl.client.pool import SessionPool
 from oasis_torchrl.client.retry import RetryPolicy
-from oasis_torchrl.client.sync_client import (
-    DEFAULT_API_KEY_ENV_VAR,
-    DEFAULT_ENDPOINT,
-    DEFAULT_ENDPOINT_ENV_VAR,
-    DEFAULT_SDK_VERSION,
-    A2VClient,
-)
+from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION, A2VClient
 from oasis_torchrl.client.types import (
-    DEFAULT_REQUIRED_STREAMS,
     JPEG,
     VP9,
     A2VResult,
     FrameConsumer,
-    FrameFormat,
     PoolStep,
     SessionStatus,
     StreamInfo,
 )
+from oasis_torchrl.protocol import API_KEY_ENV_VAR as DEFAULT_API_KEY_ENV_VAR
+from oasis_torchrl.protocol import CAMERAS as DEFAULT_REQUIRED_STREAMS
+from oasis_torchrl.protocol import DEFAULT_ENDPOINT, FrameFormat
+from oasis_torchrl.protocol import ENDPOINT_ENV_VAR as DEFAULT_ENDPOINT_ENV_VAR
 
 __all__ = [
     "DEFAULT_API_KEY_ENV_VAR",

@@ -15,14 +15,13 @@ from grpc_health.v1 import health_pb2
 
 from oasis_torchrl.client.errors import TransportError, UnsupportedFeatureError
 from oasis_torchrl.proto import sim_pb2
+from oasis_torchrl.protocol import SIM_SERVICE, TRUTH_METADATA
 
-TRUTH_METADATA_KEY = "x-oasis-truth-bin"
 TRUTH_FIELDS: tuple[str, ...] = tuple(
     field.name for field in sorted(sim_pb2.FrameTruth.DESCRIPTOR.fields, key=lambda f: f.number)
 )
 """FrameTruth field names, in the order of the last axis of ``PoolStep.truth``."""
 
-SIM_SERVICE = "oasis_torchrl.sim.v1.SimService"
 NOT_SERVING_CODES = frozenset({grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED})
 
 
@@ -32,13 +31,13 @@ def parse_truth(
     """The InferTruth in an Infer's trailing metadata, or None if the server sent none.
 
     >>> truth = sim_pb2.InferTruth(sequence_num=3)
-    >>> parse_truth([(TRUTH_METADATA_KEY, truth.SerializeToString())]).sequence_num
+    >>> parse_truth([(TRUTH_METADATA, truth.SerializeToString())]).sequence_num
     3
     >>> parse_truth([]) is None
     True
     """
     for key, value in trailing_metadata or ():
-        if key == TRUTH_METADATA_KEY:
+        if key == TRUTH_METADATA:
             return sim_pb2.InferTruth.FromString(value)
     return None
 

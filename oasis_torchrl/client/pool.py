@@ -58,7 +58,6 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
-    DEFAULT_REQUIRED_STREAMS,
     JPEG,
     VP9,
     FrameFormat,
@@ -67,14 +66,14 @@ from oasis_torchrl.client.types import (
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
 
-FRAMES_PER_CHUNK = wire.ACTIONS_PER_CHUNK
 # Finish at close is best effort: a hung server must not hold close() for the full call timeout.
 FINISH_TIMEOUT_S = 5.0
-ZERO_CHUNK = np.zeros((FRAMES_PER_CHUNK, 2), np.float32)
-FRAME_SELECTIONS = {"all": FRAMES_PER_CHUNK, "last": 1}
+ZERO_CHUNK = np.zeros((CHUNK, 2), np.float32)
+FRAME_SELECTIONS = {"all": CHUNK, "last": 1}
 """``frames=`` of :class:`SessionPool`: frames kept per chunk (``"last"`` skips the RGB
 conversion of the first three, which an env observing only the last frame never reads)."""
 RECOVERABLE_STEP_ERRORS = (TransportError, SessionLostError, SequenceError, DecodeError)
@@ -227,7 +226,7 @@ class _PoolSession:
                     self.decoders[name],
                     packets.get(name, ()),
                     out,
-                    FRAMES_PER_CHUNK,
+                    CHUNK,
                 )
                 for name, out in slots.items()
             ]
@@ -331,7 +330,7 @@ class SessionPool:
         retry: RetryPolicy | None = None,
         accepted_formats: Sequence[int] = (VP9, JPEG),
         resize: tuple[int, int] | None = None,
-        required_streams: Sequence[str] = DEFAULT_REQUIRED_STREAMS,
+        required_streams: Sequence[str] = CAMERAS,
         decode_threads: int | None = None,
         client_sdk_version: str = DEFAULT_SDK_VERSION,
         frames: str = "all",
@@ -345,7 +344,7 @@ class SessionPool:
                 f"decode_threads must be a positive int or None, got {decode_threads!r}"
             )
         self.endpoint = endpoint
-        self.api_key = api_key if api_key is not None else os.getenv(wire.API_KEY_ENV_VAR)
+        self.api_key = api_key if api_key is not None else os.getenv(API_KEY_ENV_VAR)
         self.tls = tls
         self.timeout = timeout
         self.retry = RetryPolicy() if retry is None else retry
@@ -514,7 +513,7 @@ class SessionPool:
         rows = self._select(indices)
         prompts, seeds = self._prompt_args(prompts, seeds, rows)
         chunk = (
-            np.zeros((len(rows), FRAMES_PER_CHUNK, 2), np.float32)
+            np.zeros((len(rows), CHUNK, 2), np.float32)
             if actions is None
             else wire.validate_action_batch(actions, rows)
         )
@@ -763,10 +762,10 @@ def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolSt
     truths = [o.truth for o in outcomes]
     truth = None
     if any(t is not None for t in truths):
-        truth = np.full((len(outcomes), FRAMES_PER_CHUNK, len(extras.TRUTH_FIELDS)), np.nan)
+        truth = np.full((len(outcomes), CHUNK, len(extras.TRUTH_FIELDS)), np.nan)
         for j, row_truth in enumerate(truths):
             if row_truth is not None:
-                truth[j, : len(row_truth)] = row_truth[:FRAMES_PER_CHUNK]
+                truth[j, : len(row_truth)] = row_truth[:CHUNK]
     return PoolStep(
         frames=frames,
         truth=truth,

@@ -41,7 +41,6 @@ from oasis_torchrl.client.errors import (
 )
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
 from oasis_torchrl.client.types import (
-    DEFAULT_REQUIRED_STREAMS,
     JPEG,
     VP9,
     A2VResult,
@@ -49,12 +48,10 @@ from oasis_torchrl.client.types import (
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, DEFAULT_ENDPOINT, ENDPOINT_ENV_VAR
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_ENDPOINT = "https://oasis-grpc.decart.ai"
-DEFAULT_ENDPOINT_ENV_VAR = "DECART_ROBOTICS_ENDPOINT"
-DEFAULT_API_KEY_ENV_VAR = wire.API_KEY_ENV_VAR
 # The decart-oasis release whose protocol this client speaks; the service may check it.
 DEFAULT_SDK_VERSION = "0.0.2"
 
@@ -80,7 +77,7 @@ class A2VClient:
         client_sdk_version: str = DEFAULT_SDK_VERSION,
         timeout: float | None = 120.0,
         tls: TlsSetting = None,
-        required_streams: Sequence[str] = DEFAULT_REQUIRED_STREAMS,
+        required_streams: Sequence[str] = CAMERAS,
         frame_consumer: FrameConsumer | None = None,
         stub: a2v_pb2_grpc.A2VServiceStub | None = None,
         channel: grpc.Channel | None = None,
@@ -92,7 +89,7 @@ class A2VClient:
         if not endpoint and stub is None:
             raise ValueError("endpoint is required")
         self.endpoint = endpoint
-        self.api_key = api_key if api_key is not None else os.getenv(DEFAULT_API_KEY_ENV_VAR)
+        self.api_key = api_key if api_key is not None else os.getenv(API_KEY_ENV_VAR)
         self.client_sdk_version = client_sdk_version
         self.timeout = timeout
         self.tls = tls
@@ -116,7 +113,7 @@ class A2VClient:
     def from_env(
         cls,
         *,
-        env_var: str = DEFAULT_ENDPOINT_ENV_VAR,
+        env_var: str = ENDPOINT_ENV_VAR,
         default_endpoint: str | None = DEFAULT_ENDPOINT,
         **kwargs: Any,
     ) -> A2VClient:

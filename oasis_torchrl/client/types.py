@@ -13,23 +13,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-DEFAULT_REQUIRED_STREAMS: tuple[str, ...] = ("left_forward", "front", "right_forward")
-
-
-class FrameFormat(enum.IntEnum):
-    """``decart.inference.common.FrameFormat`` as a Python enum.
-
-    >>> FrameFormat.VP9.value
-    3
-    """
-
-    UNSPECIFIED = 0
-    JPEG = 1
-    H264 = 2
-    VP9 = 3
-    VP8 = 4
-    RAW_YUV420 = 5
-
+from oasis_torchrl.protocol import FrameFormat
 
 VP9 = FrameFormat.VP9
 JPEG = FrameFormat.JPEG

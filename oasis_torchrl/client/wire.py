@@ -15,13 +15,14 @@ from oasis_torchrl.client.decoding import DECODABLE_FORMATS
 from oasis_torchrl.client.errors import DecartRoboticsError, a2v_error_from_proto
 from oasis_torchrl.client.types import FrameFormat, StreamInfo
 from oasis_torchrl.proto import a2v_pb2
-
-API_KEY_METADATA_KEY = "x-api-key"
-SESSION_TARGET_METADATA_KEY = "x-session-target"
-SEED_METADATA_KEY = "x-oasis-seed"
-API_KEY_ENV_VAR = "DECART_API_KEY"
-ACTIONS_PER_CHUNK = 4
-MAX_SEED = 2**64 - 1
+from oasis_torchrl.protocol import (
+    API_KEY_ENV_VAR,
+    API_KEY_METADATA,
+    CHUNK,
+    MAX_SEED,
+    SEED_METADATA,
+    SESSION_TARGET_METADATA,
+)
 
 Metadata = tuple[tuple[str, str], ...]
 
@@ -60,9 +61,9 @@ def call_metadata(api_key: str | None, session_target: str | None = None) -> Met
     """
     metadata: list[tuple[str, str]] = []
     if api_key:
-        metadata.append((API_KEY_METADATA_KEY, api_key))
+        metadata.append((API_KEY_METADATA, api_key))
     if session_target:
-        metadata.append((SESSION_TARGET_METADATA_KEY, session_target))
+        metadata.append((SESSION_TARGET_METADATA, session_target))
     return tuple(metadata)
 
 
@@ -74,7 +75,7 @@ def prompt_metadata(metadata: Metadata, seed: int | None) -> Metadata:
     """
     if seed is None:
         return metadata
-    return (*metadata, (SEED_METADATA_KEY, str(validate_seed(seed))))
+    return (*metadata, (SEED_METADATA, str(validate_seed(seed))))
 
 
 def validate_seed(seed: int) -> int:
@@ -101,7 +102,7 @@ def session_target_from(initial_metadata: Iterable[tuple[str, str | bytes]]) -> 
     'node-3'
     """
     for key, value in initial_metadata:
-        if key == SESSION_TARGET_METADATA_KEY:
+        if key == SESSION_TARGET_METADATA:
             return value.decode() if isinstance(value, bytes) else value
     return None
 
@@ -215,7 +216,7 @@ def validate_action_chunk(actions: Iterable[Iterable[float]], name: str = "actio
     ValueError: actions must be in [-1, 1]
     """
     array = np.asarray(actions if isinstance(actions, np.ndarray) else list(actions), np.float32)
-    return _check_actions(array, (ACTIONS_PER_CHUNK, 2), name)
+    return _check_actions(array, (CHUNK, 2), name)
 
 
 def validate_action_batch(actions: object, rows: Sequence[int]) -> np.ndarray:
@@ -231,7 +232,7 @@ def validate_action_batch(actions: object, rows: Sequence[int]) -> np.ndarray:
     ValueError: actions for row 5 must be finite
     """
     array = np.asarray(actions, dtype=np.float32)
-    expected = (len(rows), ACTIONS_PER_CHUNK, 2)
+    expected = (len(rows), CHUNK, 2)
     if array.shape != expected:
         raise ValueError(f"actions must have shape {expected}, got {array.shape}")
     bad_rows = ~(np.isfinite(array) & (np.abs(array) <= 1.0)).all(axis=(1, 2))

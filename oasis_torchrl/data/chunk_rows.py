@@ -41,9 +41,9 @@ import torch
 from lerobot.utils.constants import ACTION, DONE, OBS_STATE, REWARD
 from tensordict import NonTensorData, TensorDictBase
 
-from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
-from oasis_torchrl.data.features import ACTIONS_PER_CHUNK, SEED_KEY, DatasetLayout, image_key
+from oasis_torchrl.data.features import SEED_KEY, DatasetLayout, image_key
 from oasis_torchrl.data.images import resize_frames
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 PIXELS = "pixels"
 NEXT = "next"
@@ -99,7 +99,7 @@ def _as_steps(batch: TensorDictBase) -> TensorDictBase:
 def _cameras(batch: TensorDictBase) -> tuple[str, ...]:
     """Camera names in the conventional order (TensorDict ops may reorder keys)."""
     names = [str(key) for key in _get(batch, PIXELS, "the camera frames").keys()]
-    known = [camera for camera in DEFAULT_REQUIRED_STREAMS if camera in names]
+    known = [camera for camera in CAMERAS if camera in names]
     return (*known, *sorted(set(names) - set(known)))
 
 
@@ -175,15 +175,14 @@ def _actions(steps: TensorDictBase, rows: int) -> tuple[torch.Tensor, torch.Tens
     batch = tuple(steps.batch_size)
     if previous.shape != (*batch, 2):
         raise ValueError(f"'state' must be {[*batch, 2]}, got {list(previous.shape)}")
-    if action.shape not in ((*batch, 2), (*batch, ACTIONS_PER_CHUNK, 2)):
+    if action.shape not in ((*batch, 2), (*batch, CHUNK, 2)):
         raise ValueError(
-            f"'action' must be {[*batch, ACTIONS_PER_CHUNK, 2]} or {[*batch, 2]}, "
-            f"got {list(action.shape)}"
+            f"'action' must be {[*batch, CHUNK, 2]} or {[*batch, 2]}, got {list(action.shape)}"
         )
     if rows == 1:
         return previous.unsqueeze(2), action.reshape(*batch, 1, -1)
     if action.dim() == 3:  # one action repeated over the chunk
-        action = action.unsqueeze(2).expand(*batch, ACTIONS_PER_CHUNK, 2)
+        action = action.unsqueeze(2).expand(*batch, CHUNK, 2)
     if action.shape[2] != rows:
         raise ValueError(f"{rows} frames per step but {action.shape[2]} actions per chunk")
     state = torch.cat([previous.unsqueeze(2), action[:, :, :-1]], dim=2)

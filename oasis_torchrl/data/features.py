@@ -31,9 +31,8 @@ from typing import Any
 import numpy as np
 from lerobot.utils.constants import ACTION, DONE, OBS_IMAGES, OBS_STATE, REWARD
 
-from oasis_torchrl.client.wire import ACTIONS_PER_CHUNK
+from oasis_torchrl.protocol import CHUNK
 
-DEFAULT_FPS = 20
 """Frame rate of the world model (frames per second of its video)."""
 SEED_KEY = "episode_seed"
 ACTION_NAMES = ("throttle", "steering")
@@ -86,10 +85,8 @@ class DatasetLayout:
                 f"image_size must be positive and even (4:2:0 video), got {height}x{width} "
                 "(height x width); pass an even image size to store reduced frames"
             )
-        if self.actions_per_row not in (1, ACTIONS_PER_CHUNK):
-            raise ValueError(
-                f"actions_per_row must be 1 or {ACTIONS_PER_CHUNK}, got {self.actions_per_row}"
-            )
+        if self.actions_per_row not in (1, CHUNK):
+            raise ValueError(f"actions_per_row must be 1 or {CHUNK}, got {self.actions_per_row}")
 
     @property
     def action_dim(self) -> int:

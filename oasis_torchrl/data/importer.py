@@ -28,16 +28,14 @@ import torch
 from lerobot.utils.constants import ACTION, DONE, OBS_STATE
 from PIL import Image
 
-from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
 from oasis_torchrl.data.features import (
-    ACTIONS_PER_CHUNK,
-    DEFAULT_FPS,
     DatasetLayout,
     build_features,
     image_key,
 )
 from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
 
 logger = logging.getLogger(__name__)
 
@@ -118,9 +116,9 @@ def _parse_action(value: Any, manifest: Path, line: int) -> np.ndarray:
         action = np.asarray(value, dtype=np.float32)
     except (TypeError, ValueError):
         raise RecordingError(manifest, f"action is not a numeric array: {value!r}", line) from None
-    if action.shape != (ACTIONS_PER_CHUNK, 2):
+    if action.shape != (CHUNK, 2):
         raise RecordingError(
-            manifest, f"action must have shape ({ACTIONS_PER_CHUNK}, 2), got {action.shape}", line
+            manifest, f"action must have shape ({CHUNK}, 2), got {action.shape}", line
         )
     if not np.isfinite(action).all() or np.abs(action).max() > 1.0:
         raise RecordingError(manifest, f"action outside [-1, 1]: {action.tolist()}", line)
@@ -154,7 +152,7 @@ def _frame_path(
 
 def read_manifest(
     episode: Path,
-    cameras: Sequence[str] = DEFAULT_REQUIRED_STREAMS,
+    cameras: Sequence[str] = CAMERAS,
     source_size: tuple[int, int] = SOURCE_SIZE,
 ) -> list[RecordedStep]:
     """Parse and check one episode's manifest without decoding any frame.
@@ -260,7 +258,7 @@ def import_recordings(
     *,
     repo_id: str | None = None,
     task: str = DEFAULT_TASK,
-    fps: int = DEFAULT_FPS,
+    fps: int = FPS,
     drop_idle: bool = False,
     source_size: tuple[int, int] = SOURCE_SIZE,
     image_size: tuple[int, int] | None = None,
@@ -291,12 +289,12 @@ def import_recordings(
         >>> [str(error) for error in report.skipped]  # doctest: +SKIP
         ['recordings/episode_7/manifest.jsonl:12: broken JSON: Expecting value']
     """
-    if fps % ACTIONS_PER_CHUNK:
-        raise ValueError(f"fps {fps} is not divisible by {ACTIONS_PER_CHUNK} (one row per chunk)")
+    if fps % CHUNK:
+        raise ValueError(f"fps {fps} is not divisible by {CHUNK} (one row per chunk)")
     layout = DatasetLayout(
-        DEFAULT_REQUIRED_STREAMS,
+        CAMERAS,
         image_size or source_size,
-        actions_per_row=ACTIONS_PER_CHUNK,
+        actions_per_row=CHUNK,
         with_reward=False,
         with_seed=False,
     )
@@ -309,7 +307,7 @@ def import_recordings(
                     dataset = open_dataset(
                         root,
                         build_features(layout),
-                        fps // ACTIONS_PER_CHUNK,
+                        fps // CHUNK,
                         repo_id=repo_id,
                         vcodec=vcodec,
                         append=append,

@@ -11,9 +11,10 @@ from typing import Any
 
 from lerobot.utils.constants import ACTION
 
+from oasis_torchrl.protocol import CHUNK
+
 logger = logging.getLogger(__name__)
 
-ACTION_HORIZON = 4
 """Actions a chunk policy predicts per sample by default (one world-model call)."""
 
 
@@ -46,9 +47,7 @@ def default_video_backend() -> str:
     return "torchcodec"
 
 
-def action_delta_timestamps(
-    fps: int, action_dim: int, horizon: int = ACTION_HORIZON
-) -> list[float]:
+def action_delta_timestamps(fps: int, action_dim: int, horizon: int = CHUNK) -> list[float]:
     """Offsets (seconds) of the rows that together hold the next ``horizon`` actions.
 
     A dataset with one ``[throttle, steering]`` per row (``action_dim`` 2) needs ``horizon``
@@ -69,7 +68,7 @@ def action_delta_timestamps(
 def open_for_bc(
     root: str | Path,
     *,
-    horizon: int = ACTION_HORIZON,
+    horizon: int = CHUNK,
     repo_id: str | None = None,
     episodes: Sequence[int] | None = None,
     image_transforms: Callable[[Any], Any] | None = None,

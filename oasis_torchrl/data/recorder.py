@@ -25,14 +25,13 @@ from oasis_torchrl.data.chunk_rows import (
 )
 from oasis_torchrl.data.episode_buffer import EpisodeBuffer
 from oasis_torchrl.data.features import (
-    ACTIONS_PER_CHUNK,
-    DEFAULT_FPS,
     DatasetLayout,
     Feature,
     build_features,
     check_columns,
 )
 from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+from oasis_torchrl.protocol import CHUNK, FPS
 
 if TYPE_CHECKING:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -84,7 +83,7 @@ class LeRobotRecorder:
         root: str | Path,
         *,
         repo_id: str | None = None,
-        fps: float = DEFAULT_FPS,
+        fps: float = FPS,
         image_size: tuple[int, int] | None = None,
         vcodec: str = DEFAULT_VCODEC,
         append: bool = False,
@@ -173,11 +172,9 @@ class LeRobotRecorder:
         self, layout: DatasetLayout, features: dict[str, Feature], rows_per_step: int, env_rows: int
     ) -> None:
         """Open the dataset for the first batch's layout."""
-        if rows_per_step == 1 and self.fps % ACTIONS_PER_CHUNK:
-            raise ValueError(
-                f"fps {self.fps} is not divisible by {ACTIONS_PER_CHUNK} (one row per chunk)"
-            )
-        dataset_fps = self.fps if rows_per_step > 1 else self.fps // ACTIONS_PER_CHUNK
+        if rows_per_step == 1 and self.fps % CHUNK:
+            raise ValueError(f"fps {self.fps} is not divisible by {CHUNK} (one row per chunk)")
+        dataset_fps = self.fps if rows_per_step > 1 else self.fps // CHUNK
         self.dataset = open_dataset(
             self.root,
             features,

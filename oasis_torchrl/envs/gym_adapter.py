@@ -15,7 +15,7 @@ from gymnasium import spaces
 from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv
-from oasis_torchrl.envs.specs import CHUNK
+from oasis_torchrl.protocol import CHUNK
 
 
 class OasisGymEnv(gym.Env):

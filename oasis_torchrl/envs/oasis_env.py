@@ -31,23 +31,20 @@ from torchrl.envs import EnvBase
 from oasis_torchrl.client import TRUTH_FIELDS, PoolStep, RetryPolicy, SessionPool, SessionStatus
 from oasis_torchrl.envs.episodes import EpisodePlanner, Prompts
 from oasis_torchrl.envs.specs import (
-    CHUNK,
     EnvLayout,
     build_action_spec,
     build_done_spec,
     build_observation_spec,
     build_reward_spec,
 )
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
 from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
-from oasis_torchrl.sim.simulator import CAMERA_NAMES
 
 logger = logging.getLogger(__name__)
 
 LOCAL = "local"
-DEFAULT_FPS = 20.0
-"""Frame rate assumed for servers that do not say (the protocol has no field for it)."""
 
 
 class OasisEnv(EnvBase):
@@ -131,7 +128,7 @@ class OasisEnv(EnvBase):
         self._api_key = api_key
         self._server_config = server if server is not None else ServerConfig()
         # The A2V protocol does not advertise a frame rate; the hosted model's preview uses 20.
-        self.fps = self._server_config.fps if self.is_local else DEFAULT_FPS
+        self.fps = self._server_config.fps if self.is_local else FPS
         self._planner = EpisodePlanner(prompts, num_envs)
         self.ground_truth = self.is_local if ground_truth is None else ground_truth
         self._reward = _resolve_reward(reward, self.ground_truth)
@@ -180,7 +177,7 @@ class OasisEnv(EnvBase):
     def _discover_streams(self) -> tuple[tuple[str, ...], tuple[int, int]]:
         if self.is_local:
             cfg = self._server_config
-            return CAMERA_NAMES, (cfg.height, cfg.width)
+            return CAMERAS, (cfg.height, cfg.width)
         pool = self.pool  # a remote server must be asked what it streams
         return tuple(pool.stream_names), tuple(pool.frame_size)
 

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import torch
 from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 
-CHUNK = 4
+from oasis_torchrl.protocol import CHUNK
+
 """Actions per Infer call and frames per stream in every response."""
 
 

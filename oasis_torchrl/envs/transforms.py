@@ -7,9 +7,7 @@ from typing import Any
 from torchrl.envs import Compose, Resize, RewardSum, StepCounter, ToTensorImage, TransformedEnv
 
 from oasis_torchrl.envs.oasis_env import OasisEnv
-
-POLICY_IMAGE_SIZE = (128, 192)
-"""Default ``(height, width)`` of policy inputs (the reference policy's 128x192)."""
+from oasis_torchrl.models.config import POLICY_IMAGE_SIZE
 
 
 def make_training_env(

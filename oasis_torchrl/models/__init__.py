@@ -9,9 +9,10 @@ from oasis_torchrl.models.actor_critic import (
     make_actor_critic,
     observation_keys,
 )
-from oasis_torchrl.models.config import CAMERAS, CHUNK, POLICY_IMAGE_SIZE, DrivingNetConfig
+from oasis_torchrl.models.config import POLICY_IMAGE_SIZE, DrivingNetConfig
 from oasis_torchrl.models.encoder import MultiCameraEncoder
 from oasis_torchrl.models.network import DrivingNet
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 __all__ = [
     "CAMERAS",

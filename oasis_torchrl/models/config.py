@@ -7,13 +7,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from oasis_torchrl.client.types import DEFAULT_REQUIRED_STREAMS
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 
-CAMERAS: tuple[str, ...] = DEFAULT_REQUIRED_STREAMS
 """The world model's cameras, in the conventional order."""
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 """Default ``(height, width)`` the network sees."""
-CHUNK = 4
 """Actions per world-model call."""
 ACTION_DIM = 2
 """``[throttle, steering]``."""

@@ -17,6 +17,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import TensorDictBase
 
+from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.rewards.base import get_entry
 
 if TYPE_CHECKING:
@@ -24,7 +25,6 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-CAMERAS = ("left_forward", "front", "right_forward")
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
 DepthFn = Callable[[torch.Tensor], torch.Tensor]
 InputSize = int | tuple[int, int]

@@ -18,8 +18,9 @@ import math
 
 import numpy as np
 
+from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.sim.scene import Scene
-from oasis_torchrl.sim.simulator import CHUNK, Simulator
+from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.vehicle import VehicleState, step_vehicle
 
 #: Fraction of the layout's speed cap the autopilot cruises at.

@@ -8,10 +8,10 @@ import re
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from oasis_torchrl.protocol import FPS, SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 
 #: Environment variable read when a config names no API keys (comma-separated keys).
-API_KEYS_ENV_VAR = "OASIS_SERVER_API_KEYS"
 
 # Keys travel as gRPC metadata (printable ASCII) and in a comma-separated variable.
 _API_KEY_PATTERN = re.compile(r"[\x21-\x2b\x2d-\x7e]{1,256}")
@@ -24,7 +24,7 @@ def keys_from_env(environ: dict[str, str] | None = None) -> tuple[str, ...]:
         >>> keys_from_env({"OASIS_SERVER_API_KEYS": "alpha, beta,,"})
         ('alpha', 'beta')
     """
-    raw = (os.environ if environ is None else environ).get(API_KEYS_ENV_VAR, "")
+    raw = (os.environ if environ is None else environ).get(SERVER_API_KEYS_ENV_VAR, "")
     return tuple(key.strip() for key in raw.split(",") if key.strip())
 
 
@@ -49,7 +49,7 @@ class ServerConfig:
     port: int = 0  # 0: the OS picks a free port
     width: int = 768
     height: int = 512
-    fps: float = 20.0
+    fps: float = FPS
     api_keys: tuple[str, ...] = ()
     allow_any_key: bool = False
     latency_ms: float = 0.0  # added to every Infer, emulating a GPU world model

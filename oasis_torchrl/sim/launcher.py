@@ -26,7 +26,8 @@ from typing import TYPE_CHECKING, Any
 import grpc
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from oasis_torchrl.sim.config import API_KEYS_ENV_VAR, ServerConfig
+from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR
+from oasis_torchrl.sim.config import ServerConfig
 
 if TYPE_CHECKING:
     from oasis_torchrl.sim.server import A2VServer
@@ -196,7 +197,7 @@ class ServerProcess:
         port_file = self._workdir / "port"
         command = [self.python, "-m", "oasis_torchrl", "serve", *config_to_argv(self.config)]
         command += ["--port-file", str(port_file)]
-        environment = {**os.environ, API_KEYS_ENV_VAR: ",".join(self.config.api_keys)}
+        environment = {**os.environ, SERVER_API_KEYS_ENV_VAR: ",".join(self.config.api_keys)}
         with open(self.log_path, "wb") as log:
             self._process = subprocess.Popen(
                 command,

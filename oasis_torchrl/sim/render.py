@@ -49,6 +49,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.scene import (
     OBSTACLE_KINDS,
     OBSTACLE_VARIANTS,
@@ -64,7 +65,7 @@ logger = logging.getLogger(__name__)
 T = TypeVar("T")
 
 #: Camera yaw relative to the car heading, radians, + is right.
-CAMERA_YAWS = {"left_forward": -math.pi / 4, "front": 0.0, "right_forward": math.pi / 4}
+CAMERA_YAWS = dict(zip(CAMERAS, (-math.pi / 4, 0.0, math.pi / 4), strict=True))
 HORIZONTAL_FOV = math.radians(80.0)
 CAMERA_HEIGHT = 1.4
 #: Cameras sit this far ahead of the car's centre (the windscreen).
@@ -480,7 +481,6 @@ class CameraModel:
 
 
 #: The cameras in the order of the renderer's camera axis.
-CAMERAS = tuple(CAMERA_YAWS)
 
 #: Part of the per-pixel work: the views and the image rows it covers.
 _Part = tuple[slice, slice]

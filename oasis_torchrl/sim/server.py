@@ -28,12 +28,19 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.protocol import (
+    API_KEY_METADATA,
+    CAMERAS,
+    SEED_METADATA,
+    SESSION_TARGET_METADATA,
+    TRUTH_METADATA,
+)
 from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.errors import RequestError, StatusError
 from oasis_torchrl.sim.faults import FailureInjector
 from oasis_torchrl.sim.sessions import Session, SessionRegistry, SimulatorFactory
-from oasis_torchrl.sim.simulator import CAMERA_NAMES, Simulator
+from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.validation import (
     actions_to_array,
     check_prompt,
@@ -44,10 +51,6 @@ from oasis_torchrl.sim.validation import (
 
 logger = logging.getLogger(__name__)
 
-API_KEY_METADATA = "x-api-key"
-SESSION_TARGET_METADATA = "x-session-target"
-SEED_METADATA = "x-oasis-seed"
-TRUTH_METADATA = "x-oasis-truth-bin"
 A2V_SERVICE_NAME = a2v_pb2.DESCRIPTOR.services_by_name["A2VService"].full_name
 SIM_SERVICE_NAME = sim_pb2.DESCRIPTOR.services_by_name["SimService"].full_name
 
@@ -151,7 +154,7 @@ class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
             a2v_pb2.StreamInfo(
                 name=name, type=a2v_pb2.SENSOR_TYPE_RGB, width=config.width, height=config.height
             )
-            for name in CAMERA_NAMES
+            for name in CAMERAS
         ]
 
     def Initialize(

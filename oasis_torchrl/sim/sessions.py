@@ -25,11 +25,12 @@ import grpc
 import numpy as np
 
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
+from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.auth import key_fingerprint
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.encoding import FrameEncoder, make_encoder
 from oasis_torchrl.sim.errors import RequestError, StatusError
-from oasis_torchrl.sim.simulator import CAMERA_NAMES, Simulator
+from oasis_torchrl.sim.simulator import Simulator
 
 logger = logging.getLogger(__name__)
 
@@ -106,7 +107,7 @@ class Session:
                     config.fps,
                     **config.encoder_settings(),
                 )
-                for name in CAMERA_NAMES
+                for name in CAMERAS
             }
         self._simulator.reset(prompt, seed)
         for encoder in self._encoders.values():
@@ -135,7 +136,7 @@ class Session:
                 {"expected": str(self._next_sequence_num), "got": str(sequence_num)},
             )
         result = self._simulator.step(actions)
-        streams = list(pool.map(lambda name: self._encode(name, result.rgb[name]), CAMERA_NAMES))
+        streams = list(pool.map(lambda name: self._encode(name, result.rgb[name]), CAMERAS))
         truth = sim_pb2.InferTruth(
             sequence_num=sequence_num,
             seed=self._seed,
@@ -162,7 +163,7 @@ class Session:
                     width=depths[name].shape[1],
                     depth_f16=depths[name].astype("<f2").tobytes(),
                 )
-                for name in CAMERA_NAMES
+                for name in CAMERAS
             ]
         last_sequence_num = self._last.sequence_num if self._last is not None else 0
         return sim_pb2.DepthResponse(sequence_num=last_sequence_num, maps=maps)

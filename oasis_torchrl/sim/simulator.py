@@ -18,21 +18,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from oasis_torchrl.proto import sim_pb2
-from oasis_torchrl.sim.render import CAMERAS, Renderer
+from oasis_torchrl.protocol import CAMERAS, CHUNK, MAX_SEED
+from oasis_torchrl.sim.render import Renderer
 from oasis_torchrl.sim.scene import OBSTACLE_KINDS, Scene, cached_scene
 from oasis_torchrl.sim.world import FrameTruth, World
 
-__all__ = ["CAMERA_NAMES", "FrameTruth", "Simulator", "StepResult"]
+__all__ = ["CAMERAS", "FrameTruth", "Simulator", "StepResult"]
 
 logger = logging.getLogger(__name__)
 
-CAMERA_NAMES: tuple[str, ...] = CAMERAS
 #: Actions per step (one A2V Infer).
-CHUNK = 4
 #: Spacing of the centreline samples in :meth:`Simulator.scene_proto`, metres.
 CENTERLINE_SPACING = 2.0
 #: Scenes kept for reuse across resets (building one takes a few tens of milliseconds).
-_MAX_SEED = 2**64 - 1
 _MIN_SIZE = 8
 
 
@@ -177,7 +175,7 @@ class Simulator:
     @property
     def camera_names(self) -> tuple[str, ...]:
         """The cameras, in stream order."""
-        return CAMERA_NAMES
+        return CAMERAS
 
     @property
     def scene(self) -> Scene:
@@ -200,7 +198,7 @@ class Simulator:
             raise TypeError(f"prompt must be a str, got {type(prompt).__name__}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
-        if not 0 <= seed <= _MAX_SEED:
+        if not 0 <= seed <= MAX_SEED:
             raise ValueError(f"seed must be within [0, 2**64 - 1], got {seed}")
         self.load_scene(cached_scene(prompt, int(seed)))
 
@@ -223,7 +221,7 @@ class Simulator:
         count = CHUNK if render else 0
         rgb = {
             name: np.empty((count, self._height, self._width, 3), dtype=np.uint8)
-            for name in CAMERA_NAMES
+            for name in CAMERAS
         }
         truth, states, frames = [], [], []
         for throttle, steering in actions:

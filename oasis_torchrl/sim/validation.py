@@ -8,12 +8,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from oasis_torchrl.proto import a2v_pb2, common_pb2
+from oasis_torchrl.protocol import CHUNK, MAX_SEED
 from oasis_torchrl.sim.encoding import format_name
 from oasis_torchrl.sim.errors import RequestError
 
 #: Actions per Infer call, fixed by the protocol.
-ACTIONS_PER_INFER = 4
-_MAX_SEED = (1 << 64) - 1
 # "0.0.2", "1.2.3rc1", "0.0.0+unknown", "oasis-torchrl/0.1.0", "v2.1-beta".
 _SDK_VERSION = re.compile(r"(?:[A-Za-z][\w.-]{0,63}/)?v?\d{1,6}(?:\.\d{1,6}){0,3}[\w.+-]{0,32}")
 
@@ -97,7 +96,7 @@ def parse_seed(value: str | bytes | None) -> int:
     if value is None:
         return 0
     text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
-    if text.isascii() and text.isdigit() and len(text) <= 20 and int(text) <= _MAX_SEED:
+    if text.isascii() and text.isdigit() and len(text) <= 20 and int(text) <= MAX_SEED:
         return int(text)
     raise RequestError(
         common_pb2.ERROR_CODE_INVALID_REQUEST,
@@ -113,10 +112,10 @@ def actions_to_array(actions: Sequence[a2v_pb2.Action]) -> np.ndarray:
         >>> actions_to_array([a2v_pb2.Action(throttle=1.0, steering=-0.5)] * 4).shape
         (4, 2)
     """
-    if len(actions) != ACTIONS_PER_INFER:
+    if len(actions) != CHUNK:
         raise RequestError(
             common_pb2.ERROR_CODE_INVALID_REQUEST,
-            f"Infer takes exactly {ACTIONS_PER_INFER} actions, got {len(actions)}",
+            f"Infer takes exactly {CHUNK} actions, got {len(actions)}",
         )
     array = np.array([(a.throttle, a.steering) for a in actions], dtype=np.float32)
     bad = ~(np.isfinite(array) & (np.abs(array) <= 1.0))

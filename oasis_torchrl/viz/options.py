@@ -6,6 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from oasis_torchrl.proto import sim_pb2
+from oasis_torchrl.protocol import FPS
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY
 from oasis_torchrl.viz.topdown import local_scene
 
@@ -52,7 +53,7 @@ class LogOptions:
     depth: bool = True
     topdown: bool = True
     truth_series: tuple[str, ...] = DEFAULT_TRUTH_SERIES
-    fps: float = 20.0
+    fps: float = FPS
     scene_source: SceneSource | None = local_scene
     topdown_radius: float = 60.0
     trail_frames: int = 200

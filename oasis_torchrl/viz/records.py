@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from oasis_torchrl.envs.specs import CHUNK
+from oasis_torchrl.protocol import CHUNK
 
 PIXELS, DEPTH, TRUTH, TERMS = "pixels", "depth", "truth", "reward_terms"
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import rerun as rr
 
-from oasis_torchrl.envs.specs import CHUNK
+from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import depth_archetype, image_archetype
 from oasis_torchrl.viz.options import LogOptions

@@ -24,6 +24,7 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.retry import RetryBudget, RetryPolicy, acall_with_retry, call_with_retry
 from oasis_torchrl.client.types import FrameFormat
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
+from oasis_torchrl.protocol import TRUTH_METADATA
 
 # ------------------------------------------------------------------------ errors
 
@@ -263,9 +264,7 @@ def test_truth_and_depth_parsing() -> None:
         sequence_num=2,
         frames=[sim_pb2.FrameTruth(speed=float(k), off_road=k == 3) for k in range(4)],
     )
-    parsed = extras.parse_truth(
-        [("other", "x"), (extras.TRUTH_METADATA_KEY, truth.SerializeToString())]
-    )
+    parsed = extras.parse_truth([("other", "x"), (TRUTH_METADATA, truth.SerializeToString())])
     table = extras.truth_array(parsed)
     assert table.shape == (4, len(extras.TRUTH_FIELDS))
     assert table[:, extras.TRUTH_FIELDS.index("speed")].tolist() == [0.0, 1.0, 2.0, 3.0]

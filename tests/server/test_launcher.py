@@ -14,7 +14,8 @@ from grpc_health.v1 import health_pb2
 from oasis_torchrl.cli import build_parser, main
 from oasis_torchrl.commands.serve import config_from_args, config_to_argv
 from oasis_torchrl.proto import common_pb2
-from oasis_torchrl.sim.config import API_KEYS_ENV_VAR, ServerConfig
+from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR as API_KEYS_ENV_VAR
+from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
 if TYPE_CHECKING:

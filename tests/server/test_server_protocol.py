@@ -14,9 +14,9 @@ import pytest
 from grpc_health.v1 import health_pb2
 
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
+from oasis_torchrl.protocol import CAMERAS as CAMERA_NAMES
 from oasis_torchrl.sim.encoding import Vp9Encoder
 from oasis_torchrl.sim.launcher import LocalServer
-from oasis_torchrl.sim.simulator import CAMERA_NAMES
 
 from ._vp9 import sdk_decode
 

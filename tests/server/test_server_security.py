@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2
-from oasis_torchrl.sim.config import API_KEYS_ENV_VAR, ServerConfig
+from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR as API_KEYS_ENV_VAR
+from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.sim.server import A2VServer
 from oasis_torchrl.sim.simulator import Simulator

@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.sim.autopilot import Autopilot
-from oasis_torchrl.sim.render import CAMERAS, OBSTACLE_FAR, Renderer, _QuadPalette
+from oasis_torchrl.sim.render import OBSTACLE_FAR, Renderer, _QuadPalette
 from oasis_torchrl.sim.scene import build_scene, obstacles_at
-from oasis_torchrl.sim.simulator import CHUNK, Simulator
+from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.vehicle import VehicleState
 from oasis_torchrl.sim.world import World
 

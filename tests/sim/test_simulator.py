@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from oasis_torchrl.sim.simulator import CAMERA_NAMES, Simulator
+from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.sim.simulator import Simulator
 
 WIDTH, HEIGHT = 64, 48
 FORWARD = np.array([[0.8, 0.0]] * 4, np.float32)
@@ -29,7 +30,7 @@ def test_same_prompt_and_seed_give_identical_frames_and_truth() -> None:
     chunks = [FORWARD, np.array([[0.5, -0.4]] * 4, np.float32)]
     first, again, other = (drive("urban dusk", seed, chunks) for seed in (7, 7, 8))
     for frames, repeated in zip(first[0], again[0], strict=True):
-        for name in CAMERA_NAMES:
+        for name in CAMERAS:
             assert np.array_equal(frames[name], repeated[name])
     assert first[1] == again[1]
     assert not np.array_equal(first[0][-1]["front"], other[0][-1]["front"])
@@ -39,7 +40,7 @@ def test_frames_layout() -> None:
     simulator = Simulator(WIDTH, HEIGHT)
     simulator.reset("highway", 0)
     result = simulator.step(FORWARD)
-    assert set(result.rgb) == set(CAMERA_NAMES) and len(result.truth) == 4
+    assert set(result.rgb) == set(CAMERAS) and len(result.truth) == 4
     for frames in result.rgb.values():
         assert frames.shape == (4, HEIGHT, WIDTH, 3) and frames.dtype == np.uint8
         assert frames.flags["C_CONTIGUOUS"]
@@ -113,5 +114,5 @@ def test_scene_proto_and_depth() -> None:
     assert {obstacle.kind for obstacle in scene.obstacles} <= {"car", "barrier", "pedestrian"}
     simulator.step(FORWARD)
     depth = simulator.depth()
-    assert set(depth) == set(CAMERA_NAMES)
+    assert set(depth) == set(CAMERAS)
     assert all(value.shape == (HEIGHT, WIDTH) for value in depth.values())

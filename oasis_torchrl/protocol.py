@@ -1,0 +1,72 @@
+"""The A2V protocol's constants, defined once: every other module imports them from here.
+
+What the hosted Oasis service and the official ``decart-oasis`` SDK agree on (chunk length,
+camera names, metadata keys, environment variables, the default endpoint, the frame rate the
+SDK's preview assumes), plus this project's own extensions of it (the embedded server's seed and
+ground-truth metadata, its API-key variable). The wire protocol itself is described in
+``docs/PROTOCOL.md``; the message definitions are the generated modules in
+:mod:`oasis_torchrl.proto`.
+
+Example:
+    >>> from oasis_torchrl import protocol
+    >>> protocol.CHUNK, protocol.CAMERAS[1], protocol.FrameFormat.VP9.value
+    (4, 'front', 3)
+"""
+
+from __future__ import annotations
+
+import enum
+
+CHUNK = 4
+"""Actions per Infer call, and frames per camera in its answer (frame k follows action k)."""
+
+ACTION_DIM = 2
+"""``[throttle, steering]``: throttle + is forward; steering - is left, + is right."""
+
+ACTION_NAMES: tuple[str, ...] = ("throttle", "steering")
+"""The action's components, in wire order."""
+
+CAMERAS: tuple[str, ...] = ("left_forward", "front", "right_forward")
+"""The streams the hosted model advertises, left to right."""
+
+FPS = 20.0
+"""Frames per second: the protocol has no field for it; the SDK's live preview treats 20 as
+real speed (one Infer = 0.2 s of world time)."""
+
+DEFAULT_ENDPOINT = "https://oasis-grpc.decart.ai"
+API_KEY_ENV_VAR = "DECART_API_KEY"
+ENDPOINT_ENV_VAR = "DECART_ROBOTICS_ENDPOINT"
+DEFAULT_TIMEOUT_S = 120.0
+"""The SDK's per-RPC deadline."""
+
+API_KEY_METADATA = "x-api-key"
+"""Sent on every call (besides ``InitializeRequest.api_key``)."""
+SESSION_TARGET_METADATA = "x-session-target"
+"""Initial metadata of an Initialize answer; replayed on every later call of that session."""
+
+# -- this project's extensions (the hosted service ignores or never sends them) ----------------
+
+SEED_METADATA = "x-oasis-seed"
+"""Decimal seed of a Prompt call's scene on the embedded server (no seed means seed 0)."""
+TRUTH_METADATA = "x-oasis-truth-bin"
+"""Binary trailing metadata of an Infer answer: ``oasis_torchrl.sim.v1.InferTruth``."""
+MAX_SEED = 2**64 - 1
+SERVER_API_KEYS_ENV_VAR = "OASIS_SERVER_API_KEYS"
+"""Comma-separated API keys the embedded server accepts."""
+SIM_SERVICE = "oasis_torchrl.sim.v1.SimService"
+"""The embedded server's local-only side channel (depth maps, scene layout)."""
+
+
+class FrameFormat(enum.IntEnum):
+    """``decart.inference.common.FrameFormat`` as a Python enum (same values).
+
+    >>> FrameFormat.VP9.value
+    3
+    """
+
+    UNSPECIFIED = 0
+    JPEG = 1
+    H264 = 2
+    VP9 = 3
+    VP8 = 4
+    RAW_YUV420 = 5
