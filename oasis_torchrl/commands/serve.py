@@ -1,19 +1,14 @@
 """``oasis-torchrl serve``: run the embedded A2V server until SIGTERM or SIGINT.
 
-Every :class:`~oasis_torchrl.sim.config.ServerConfig` field has a flag; the same table turns a
-config back into flags (:func:`config_to_argv`) so a launcher can start the identical server
-as a subprocess. API keys are better passed in ``OASIS_SERVER_API_KEYS`` than with
-``--api-key``: command lines are visible to every user of the machine.
+Every :class:`~oasis_torchrl.sim.config.ServerConfig` field has a flag. API keys are better
+passed in ``OASIS_SERVER_API_KEYS`` than with ``--api-key``: command lines are visible to every
+user of the machine.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
-import os
-import signal
-import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,11 +34,6 @@ def _parse_formats(text: str) -> tuple[int, ...]:
             f"formats must be a comma-separated list of {', '.join(_FORMATS)}, got {text!r}"
         )
     return tuple(_FORMATS[name] for name in names)
-
-
-def _format_formats(formats: tuple[int, ...]) -> str:
-    names = {value: name for name, value in _FORMATS.items()}
-    return ",".join(names[value] for value in formats)
 
 
 # (flag, ServerConfig field, argparse keywords); every default is None = the config default.
@@ -114,65 +104,13 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
     return ServerConfig(**{field: value for field, value in values.items() if value is not None})
 
 
-def config_to_argv(config: ServerConfig) -> list[str]:
-    """Flags reproducing ``config``, API keys excepted (pass those in the environment).
-
-    Example:
-        >>> from oasis_torchrl.sim.config import ServerConfig
-        >>> config_to_argv(ServerConfig(width=96, height=64, api_keys=("k",), allow_any_key=True))
-        ['--width', '96', '--height', '64', '--allow-any-key']
-    """
-    defaults = {field.name: field.default for field in dataclasses.fields(config)}
-    argv: list[str] = []
-    for flag, field, _ in _FLAGS:
-        value = getattr(config, field)
-        if field == "api_keys" or value == defaults[field]:
-            continue
-        if isinstance(value, bool):
-            argv.append(flag)
-        elif field == "formats":
-            argv += [flag, _format_formats(value)]
-        else:
-            argv += [flag, str(value)]
-    return argv
-
-
-def _write_port_file(path: Path, port: int) -> None:
-    """Write the port atomically, so a reader never sees a partial file."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(f"{port}\n")
-    os.replace(partial, path)
-
-
-def _wait_for_signal() -> None:
-    """Block until SIGTERM or SIGINT (handlers can only be set from the main thread)."""
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(signum, lambda received, frame: stop.set())
-    # Short waits keep the main thread responsive to signals on every platform.
-    while not stop.wait(0.5):
-        pass
-
-
 def run(args: argparse.Namespace) -> int:
     """Start the server, write ``--port-file``, serve until a signal, then stop cleanly."""
-    from oasis_torchrl.sim.server import A2VServer
+    from oasis_torchrl.sim.serving import serve
 
     try:
         config = config_from_args(args)
-        server = A2VServer(config)
-        logger.info("starting with %s", config.redacted())
-        server.start()
-    except (ValueError, OSError, RuntimeError) as error:
+    except ValueError as error:
         logger.error("cannot start the server: %s", error)
         return 2
-    if args.port_file is not None:
-        _write_port_file(args.port_file, server.port)
-    logger.info("serving %s; stop with SIGTERM or Ctrl-C", server.endpoint)
-    try:
-        _wait_for_signal()
-    finally:
-        logger.info("shutting down")
-        server.stop(args.grace)
-    return 0
+    return serve(config, port_file=args.port_file, grace=args.grace)
