@@ -146,7 +146,6 @@ def driver_spec(args: argparse.Namespace) -> DriverSpec:
         script=args.script,
         policy=None if args.policy is None else args.policy.absolute(),  # Ray workers: other cwd
         policy_in_keys=in_keys,
-        fps=float(args.fps),
     )
 
 
