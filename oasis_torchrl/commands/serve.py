@@ -64,6 +64,15 @@ _FLAGS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("--tls-cert", "tls_cert", {"help": "PEM certificate chain (with --tls-key)"}),
     ("--tls-key", "tls_key", {"help": "PEM private key (with --tls-cert)"}),
     ("--workers", "workers", {"type": int, "help": "gRPC handler threads (default 32)"}),
+    (
+        "--processes",
+        "processes",
+        {
+            "type": int,
+            "help": "worker processes running the sessions (default: one per core; "
+            "0: all in the server's process)",
+        },
+    ),
     ("--encode-workers", "encode_workers", {"type": int, "help": "encoder threads (0: auto)"}),
     ("--formats", "formats", {"type": _parse_formats, "help": "allowed formats, e.g. vp9,jpeg"}),
     ("--vp9-cpu-used", "vp9_cpu_used", {"type": int, "help": "libvpx speed 0-8 (default 8)"}),

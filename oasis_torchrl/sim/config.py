@@ -64,7 +64,8 @@ class ServerConfig:
     tls_cert: str | None = None
     tls_key: str | None = None
     workers: int = 32  # gRPC handler threads
-    encode_workers: int = 0  # threads encoding streams, shared by all sessions; 0: automatic
+    processes: int | None = None  # worker processes running the sessions; None: one per core
+    encode_workers: int = 0  # threads encoding streams per process; 0: automatic
     formats: tuple[int, ...] = field(default=SUPPORTED_FORMATS)  # allowed, in preference order
     vp9_cpu_used: int = 8
     vp9_bit_rate: int | None = None  # None: scales with the frame size
@@ -108,6 +109,17 @@ class ServerConfig:
             'http://127.0.0.1:50051'
         """
         return f"{'https' if self.tls_enabled else 'http'}://{self.client_address(port)}"
+
+    @property
+    def resolved_processes(self) -> int:
+        """Worker processes to run: the configured number, or one per core (0: none, the
+        sessions run in the server's own process).
+
+        Example:
+            >>> ServerConfig(processes=0, api_keys=("k",)).resolved_processes
+            0
+        """
+        return os.cpu_count() or 1 if self.processes is None else self.processes
 
     @property
     def resolved_encode_workers(self) -> int:
@@ -164,6 +176,8 @@ class ServerConfig:
             raise ValueError("host must be a non-empty host name or address")
         _require_int("port", self.port, 0, 65535)
         _require_int("workers", self.workers, 1, 1024)
+        if self.processes is not None:
+            _require_int("processes", self.processes, 0, 1024)
         _require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
         if (self.tls_cert is None) != (self.tls_key is None):
             raise ValueError(
