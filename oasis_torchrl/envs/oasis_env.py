@@ -19,6 +19,7 @@ collectors with the ``spawn`` start method each get their own.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -40,7 +41,7 @@ from oasis_torchrl.envs.specs import (
 from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
 from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.sim.launcher import LocalServer
+from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
 logger = logging.getLogger(__name__)
 
@@ -51,15 +52,19 @@ class OasisEnv(EnvBase):
     """A batched TorchRL env over ``num_envs`` concurrent Oasis (A2V) sessions.
 
     Args:
-        endpoint: ``"local"`` (start the embedded simulator server on a free loopback port in
-            the stepping process, stop it on close), or any A2V endpoint such as
-            ``"https://oasis-grpc.decart.ai"`` or ``"http://127.0.0.1:50051"``.
+        endpoint: ``"local"`` (the process that steps starts the embedded simulator server on
+            a free loopback port, as a server process with its worker processes, and stops it
+            on close), or any A2V endpoint such as ``"https://oasis-grpc.decart.ai"`` or
+            ``"http://127.0.0.1:50051"``.
         num_envs: rows of the batch, one session each.
         prompts: one prompt, one per row, or a sampler ``sampler(row, rng) -> str`` called at
             every reset of a row.
         api_key: key for a remote endpoint (defaults to ``DECART_API_KEY``); ignored for local.
         tls: force TLS on or off (default: from the endpoint's scheme).
         server: embedded-server settings for ``endpoint="local"`` (resolution, latency, ...).
+            Its ``processes`` (default: one per core) is capped at ``num_envs``;
+            ``processes=0`` runs the server and the worlds inside the stepping process
+            instead, which is slower but easier to debug.
         frame_size: ``(height, width)`` to resize frames to while decoding; default: what the
             server advertises.
         all_frames: return all 4 frames of each chunk instead of the last one.
@@ -134,7 +139,7 @@ class OasisEnv(EnvBase):
         self._planner = EpisodePlanner(prompts, num_envs)
         self.ground_truth = self.is_local if ground_truth is None else ground_truth
         self._reward = _resolve_reward(reward, self.ground_truth)
-        self._server: LocalServer | None = None
+        self._server: LocalServer | ServerProcess | None = None
         self._pool: SessionPool | None = None
         self._frame_size = frame_size
         cameras, advertised = self._discover_streams()
@@ -168,6 +173,11 @@ class OasisEnv(EnvBase):
         return self.endpoint == LOCAL
 
     @property
+    def server(self) -> LocalServer | ServerProcess | None:
+        """The embedded server of ``endpoint="local"`` once started (None otherwise)."""
+        return self._server
+
+    @property
     def pool(self) -> SessionPool:
         """The session pool, opened on first use in the calling process."""
         if self._pool is None:
@@ -186,8 +196,7 @@ class OasisEnv(EnvBase):
     def _open_pool(self) -> SessionPool:
         endpoint, api_key = self.endpoint, self._api_key
         if self.is_local:
-            self._server = LocalServer(self._server_config)
-            self._server.start()
+            self._server = self._launch_server()
             endpoint, api_key = self._server.endpoint, self._server.api_key
         pool = SessionPool(
             endpoint,
@@ -206,6 +215,15 @@ class OasisEnv(EnvBase):
             self._stop_server()
             raise
         return pool
+
+    def _launch_server(self) -> LocalServer | ServerProcess:
+        """The embedded server: in a process of its own (workers at most one per row), or in
+        this one with ``processes=0``."""
+        config = self._server_config
+        if config.resolved_processes == 0:
+            return LocalServer(config).start()
+        processes = min(config.resolved_processes, self.num_envs)
+        return ServerProcess(dataclasses.replace(config, processes=processes)).start()
 
     def _stop_server(self) -> None:
         if self._server is not None:
