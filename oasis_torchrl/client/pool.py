@@ -66,8 +66,6 @@ from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
 from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
-    JPEG,
-    VP9,
     PoolStep,
     SessionStatus,
     StreamInfo,
@@ -288,7 +286,7 @@ class SessionPool:
         tls: TlsSetting = None,
         timeout: float | None = 120.0,
         retry: RetryPolicy | None = None,
-        accepted_formats: Sequence[int] = (VP9, JPEG),
+        accepted_formats: Sequence[int] | None = None,
         resize: tuple[int, int] | None = None,
         required_streams: Sequence[str] = CAMERAS,
         decode_threads: int | None = None,
@@ -308,7 +306,7 @@ class SessionPool:
         self.tls = tls
         self.timeout = timeout
         self.retry = RetryPolicy() if retry is None else retry
-        self.accepted_formats = wire.accepted_format_list(accepted_formats)
+        self.accepted_formats = wire.accepted_format_list(accepted_formats, endpoint)
         self.resize = validate_resize(resize)
         self.required_streams = tuple(required_streams)
         self.decode_threads = decode_threads

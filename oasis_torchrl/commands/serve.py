@@ -12,7 +12,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from oasis_torchrl.proto import common_pb2
+from oasis_torchrl.protocol import FORMAT_NAMES
 
 if TYPE_CHECKING:
     from oasis_torchrl.sim.config import ServerConfig
@@ -22,18 +22,16 @@ logger = logging.getLogger(__name__)
 NAME = "serve"
 HELP = "run the embedded A2V server (procedural driving simulator) until SIGTERM/SIGINT"
 
-_FORMATS = {"vp9": common_pb2.FRAME_FORMAT_VP9, "jpeg": common_pb2.FRAME_FORMAT_JPEG}
-
 
 def _parse_formats(text: str) -> tuple[int, ...]:
     """``"vp9,jpeg"`` -> format enum values, in the given order."""
     names = [name.strip().lower() for name in text.split(",") if name.strip()]
-    unknown = [name for name in names if name not in _FORMATS]
+    unknown = [name for name in names if name not in FORMAT_NAMES]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
-            f"formats must be a comma-separated list of {', '.join(_FORMATS)}, got {text!r}"
+            f"formats must be a comma-separated list of {', '.join(FORMAT_NAMES)}, got {text!r}"
         )
-    return tuple(_FORMATS[name] for name in names)
+    return tuple(FORMAT_NAMES[name] for name in names)
 
 
 # (flag, ServerConfig field, argparse keywords); every default is None = the config default.
@@ -74,7 +72,11 @@ _FLAGS: tuple[tuple[str, str, dict[str, Any]], ...] = (
         },
     ),
     ("--encode-workers", "encode_workers", {"type": int, "help": "encoder threads (0: auto)"}),
-    ("--formats", "formats", {"type": _parse_formats, "help": "allowed formats, e.g. vp9,jpeg"}),
+    (
+        "--formats",
+        "formats",
+        {"type": _parse_formats, "help": "allowed formats, e.g. vp9,jpeg (default raw,vp9,jpeg)"},
+    ),
     ("--vp9-cpu-used", "vp9_cpu_used", {"type": int, "help": "libvpx speed 0-8 (default 8)"}),
     ("--vp9-bit-rate", "vp9_bit_rate", {"type": int, "help": "VP9 bits/s (default: by size)"}),
     ("--vp9-threads", "vp9_threads", {"type": int, "help": "libvpx threads per stream"}),

@@ -38,7 +38,7 @@ from oasis_torchrl.envs.specs import (
     build_observation_spec,
     build_reward_spec,
 )
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, FrameFormat
 from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
@@ -67,6 +67,9 @@ class OasisEnv(EnvBase):
             instead, which is slower but easier to debug.
         frame_size: ``(height, width)`` to resize frames to while decoding; default: what the
             server advertises.
+        frame_format: how frames travel: ``"raw"`` (uncompressed RGB, for a server on this
+            machine), ``"vp9"`` (what the hosted model sends: train on its compression
+            artefacts) or ``"jpeg"``; default: raw on this machine, else VP9.
         all_frames: return all 4 frames of each chunk instead of the last one.
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
@@ -109,6 +112,7 @@ class OasisEnv(EnvBase):
         tls: bool | None = None,
         server: ServerConfig | None = None,
         frame_size: tuple[int, int] | None = None,
+        frame_format: str | None = None,
         all_frames: bool = False,
         chunk_actions: bool = True,
         max_steps: int = 512,
@@ -142,6 +146,11 @@ class OasisEnv(EnvBase):
         self._server: LocalServer | ServerProcess | None = None
         self._pool: SessionPool | None = None
         self._frame_size = frame_size
+        if frame_format is not None and frame_format not in FORMAT_NAMES:
+            raise ValueError(
+                f"frame_format must be None or one of {sorted(FORMAT_NAMES)}, got {frame_format!r}"
+            )
+        self.frame_format = frame_format
         cameras, advertised = self._discover_streams()
         unknown = set(depth_cameras) - set(cameras)
         if unknown:
@@ -206,6 +215,7 @@ class OasisEnv(EnvBase):
             timeout=self.timeout,
             retry=self.retry,
             resize=self._frame_size,
+            accepted_formats=self._accepted_formats(),
             frames="all" if self.all_frames else "last",
         )
         try:
@@ -215,6 +225,9 @@ class OasisEnv(EnvBase):
             self._stop_server()
             raise
         return pool
+
+    def _accepted_formats(self) -> list[FrameFormat] | None:
+        return None if self.frame_format is None else [FORMAT_NAMES[self.frame_format]]
 
     def _launch_server(self) -> LocalServer | ServerProcess:
         """The embedded server: in a process of its own (workers at most one per row), or in

@@ -158,7 +158,9 @@ class SessionWorld:
                 {"expected": str(self._next_sequence_num), "got": str(sequence_num)},
             )
         result = self._simulator.step(actions)
-        streams = self._encode_pool.map(lambda name: self._encode(name, result.rgb[name]), CAMERAS)
+        encode = lambda name: self._encode(name, result.rgb[name])  # noqa: E731
+        threaded = self._encoders[CAMERAS[0]].threaded
+        streams = self._encode_pool.map(encode, CAMERAS) if threaded else map(encode, CAMERAS)
         truth = sim_pb2.InferTruth(
             sequence_num=sequence_num,
             seed=self._seed,
