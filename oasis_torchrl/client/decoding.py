@@ -42,6 +42,8 @@ class FrameDecoder(Protocol):
     """Decodes one stream's packets in order into caller-provided RGB arrays."""
 
     stream: str
+    #: Whether decoding is slow enough to run on a thread (it releases the GIL).
+    threaded: bool
 
     def decode_into(self, packet: bytes, out: np.ndarray) -> None:
         """Decode ``packet`` into ``out`` (uint8 ``[H, W, 3]``), scaling to ``out``'s size."""
@@ -69,6 +71,8 @@ class Vp9Decoder:
     ...
     oasis_torchrl.client.errors.DecodeError: cannot decode stream 'front': ...
     """
+
+    threaded = True
 
     def __init__(self, stream: str, *, threads: int = 0) -> None:
         self.stream = stream
@@ -129,6 +133,8 @@ class JpegDecoder:
     True
     """
 
+    threaded = True
+
     def __init__(self, stream: str) -> None:
         self.stream = stream
 
@@ -163,6 +169,8 @@ class RawRgbDecoder:
     >>> out[1, 2].tolist()
     [15, 16, 17]
     """
+
+    threaded = False  # a copy: faster than a hop to a thread
 
     def __init__(self, stream: str, size: tuple[int, int]) -> None:
         self.stream = stream

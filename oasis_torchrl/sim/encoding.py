@@ -233,10 +233,10 @@ def make_encoder(
 ) -> FrameEncoder:
     """Create the encoder for one stream in ``frame_format`` (a ``common_pb2.FRAME_FORMAT_*``).
 
-        Example:
-            >>> from oasis_torchrl.proto import common_pb2
-            >>> type(make_encoder(common_pb2.FRAME_FORMAT_VP9, 64, 48, 20.0)).__name__
-            'Vp9Encoder'
+    Example:
+        >>> from oasis_torchrl.proto import common_pb2
+        >>> type(make_encoder(common_pb2.FRAME_FORMAT_VP9, 64, 48, 20.0)).__name__
+        'Vp9Encoder'
     """
     if frame_format == common_pb2.FRAME_FORMAT_VP9:
         return Vp9Encoder(
