@@ -19,11 +19,13 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import grpc
+import yaml
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR
@@ -43,6 +45,13 @@ def _with_api_key(config: ServerConfig | None, overrides: dict[str, Any]) -> Ser
     if not config.api_keys:
         config = dataclasses.replace(config, api_keys=(secrets.token_urlsafe(24),))
     return config
+
+
+def _write_settings(config: ServerConfig, path: Path) -> None:
+    """``config`` as the YAML settings file of ``serve --config``, API keys left out (they go
+    through the environment: a file or a command line may be read by others)."""
+    values = {key: value for key, value in asdict(config).items() if key != "api_keys"}
+    path.write_text(yaml.safe_dump(values))
 
 
 class LocalServer:
@@ -189,13 +198,13 @@ class ServerProcess:
 
     def start(self) -> ServerProcess:
         """Spawn the server and wait until it serves; raises RuntimeError if it does not."""
-        from oasis_torchrl.commands.serve import config_to_argv
-
         if self._process is not None:
             return self
         self._workdir = Path(tempfile.mkdtemp(prefix="oasis-server-"))
         port_file = self._workdir / "port"
-        command = [self.python, "-m", "oasis_torchrl", "serve", *config_to_argv(self.config)]
+        settings = self._workdir / "server.yaml"
+        _write_settings(self.config, settings)
+        command = [self.python, "-m", "oasis_torchrl", "serve", "--config", str(settings)]
         command += ["--port-file", str(port_file)]
         environment = {**os.environ, SERVER_API_KEYS_ENV_VAR: ",".join(self.config.api_keys)}
         with open(self.log_path, "wb") as log:

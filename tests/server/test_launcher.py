@@ -11,12 +11,14 @@ import grpc
 import pytest
 from grpc_health.v1 import health_pb2
 
-from oasis_torchrl.cli import build_parser, main
-from oasis_torchrl.commands.serve import config_from_args, config_to_argv
+from oasis_torchrl.cli import build_parser, main, parse_arguments
+from oasis_torchrl.config import to_object
+from oasis_torchrl.config.arguments import load_from_args
+from oasis_torchrl.config.serving import ServeConfig
 from oasis_torchrl.proto import common_pb2
 from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR as API_KEYS_ENV_VAR
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
+from oasis_torchrl.sim.launcher import LocalServer, ServerProcess, _write_settings
 
 if TYPE_CHECKING:
     from conftest import RawStubs
@@ -72,26 +74,46 @@ def test_local_server_generates_a_key_and_frees_its_port(
         assert successor.port == port
 
 
-def test_serve_flags_round_trip_every_setting() -> None:
-    config = ServerConfig(
+def _every_setting() -> ServerConfig:
+    return ServerConfig(
         host="0.0.0.0", width=128, height=96, fps=10.0, api_keys=("k",), allow_any_key=True,
         latency_ms=2.5, failure_rate=0.1, failure_seed=7, idle_timeout_s=9.0, max_sessions=5,
         max_sessions_per_key=3, max_prompt_chars=50, max_message_bytes=4096, workers=4,
         encode_workers=2, formats=(common_pb2.FRAME_FORMAT_JPEG,), vp9_cpu_used=5,
         vp9_bit_rate=500_000, vp9_threads=2, jpeg_quality=70,
     )  # fmt: skip
-    argv = config_to_argv(config)
-    assert "k" not in argv  # keys travel in the environment, never on a command line
-    parsed = config_from_args(build_parser().parse_args(["serve", *argv, "--api-key", "k"]))
-    assert parsed == config
+
+
+def _served(argv: list[str]) -> ServerConfig:
+    return to_object(load_from_args(parse_arguments(build_parser(), ["serve", *argv]), ServeConfig))
+
+
+def test_serve_settings_file_round_trips_every_setting(tmp_path: Path) -> None:
+    config = _every_setting()
+    settings = tmp_path / "server.yaml"
+    _write_settings(config, settings)
+    assert "k" not in settings.read_text().split()  # keys travel in the environment only
+    assert _served(["--config", str(settings), "--api-key", "k"]).server_config() == config
     assert pickle.loads(pickle.dumps(config)) == config
 
 
-def test_cli_rejects_bad_settings(capsys: pytest.CaptureFixture[str]) -> None:
+def test_serve_flags_set_every_setting() -> None:
+    settings = {
+        "host": "0.0.0.0", "width": 128, "height": 96, "fps": 10, "api-key": "k",
+        "latency-ms": 2.5, "failure-rate": 0.1, "failure-seed": 7, "idle-timeout": 9,
+        "max-sessions": 5, "max-sessions-per-key": 3, "max-prompt-chars": 50,
+        "max-message-bytes": 4096, "workers": 4, "encode-workers": 2, "formats": "jpeg",
+        "vp9-cpu-used": 5, "vp9-bit-rate": 500_000, "vp9-threads": 2, "jpeg-quality": 70,
+    }  # fmt: skip
+    argv = ["--allow-any-key"] + [f"--{flag}={value}" for flag, value in settings.items()]
+    assert _served(argv).server_config() == _every_setting()
+    assert _served([*argv, "width=256"]).width == 256  # key=value overrides come last
+
+
+def test_cli_rejects_bad_settings(caplog: pytest.LogCaptureFixture) -> None:
     assert main(["serve", "--width", "7", "--api-key", "k"]) == 2
-    with pytest.raises(SystemExit):
-        main(["serve", "--formats", "h264"])
-    assert "formats must be a comma-separated list" in capsys.readouterr().err
+    assert main(["serve", "--formats", "h264"]) == 2
+    assert "formats must be a comma-separated list" in caplog.text
 
 
 @pytest.mark.parametrize(
