@@ -7,9 +7,6 @@ the machine.
 from __future__ import annotations
 
 import logging
-import os
-import signal
-import threading
 from pathlib import Path
 
 from omegaconf import DictConfig
@@ -24,24 +21,6 @@ HELP = "run the embedded A2V server (procedural driving simulator) until SIGTERM
 CONFIG = ServeConfig
 
 
-def _write_port_file(path: Path, port: int) -> None:
-    """Write the port atomically, so a reader never sees a partial file."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(f"{port}\n")
-    os.replace(partial, path)
-
-
-def _wait_for_signal() -> None:
-    """Block until SIGTERM or SIGINT (handlers can only be set from the main thread)."""
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(signum, lambda received, frame: stop.set())
-    # Short waits keep the main thread responsive to signals on every platform.
-    while not stop.wait(0.5):
-        pass
-
-
 def run(settings: DictConfig) -> int:
     """Start the server, write ``port_file``, serve until a signal, then stop cleanly.
 
@@ -50,23 +29,8 @@ def run(settings: DictConfig) -> int:
         >>> run(load_config("serve", ["tls_cert=/no/cert.pem", "tls_key=/no/key.pem"]))
         2
     """
-    from oasis_torchrl.sim.server import A2VServer
+    from oasis_torchrl.sim.serving import serve
 
-    try:
-        cfg: ServeConfig = to_object(settings)
-        config = cfg.server_config()
-        server = A2VServer(config)
-        logger.info("starting with %s", config.redacted())
-        server.start()
-    except (ValueError, OSError, RuntimeError) as error:
-        logger.error("cannot start the server: %s", error)
-        return 2
-    if cfg.port_file is not None:
-        _write_port_file(Path(cfg.port_file), server.port)
-    logger.info("serving %s; stop with SIGTERM or Ctrl-C", server.endpoint)
-    try:
-        _wait_for_signal()
-    finally:
-        logger.info("shutting down")
-        server.stop(cfg.grace)
-    return 0
+    cfg: ServeConfig = to_object(settings)
+    port_file = None if cfg.port_file is None else Path(cfg.port_file)
+    return serve(cfg.server_config(), port_file=port_file, grace=cfg.grace)

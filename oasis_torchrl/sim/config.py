@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from oasis_torchrl.config.fields import option
@@ -147,6 +148,36 @@ class ServerConfig:
             "vp9_threads": self.vp9_threads,
             "jpeg_quality": self.jpeg_quality,
         }
+
+    def to_json(self) -> str:
+        """The config as JSON, API keys included (hand it to a child through a pipe, never a
+        command line): :meth:`from_json` rebuilds it.
+
+        Example:
+            >>> config = ServerConfig(width=96, height=64, api_keys=("k",))
+            >>> ServerConfig.from_json(config.to_json()) == config
+            True
+        """
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> ServerConfig:
+        """The config :meth:`to_json` wrote; unknown fields are an error naming them.
+
+        Example:
+            >>> ServerConfig.from_json('{"widht": 96}')
+            Traceback (most recent call last):
+            ...
+            ValueError: unknown ServerConfig fields: widht
+        """
+        values = json.loads(text)
+        if not isinstance(values, dict):
+            raise ValueError(f"a ServerConfig is a JSON object, got {type(values).__name__}")
+        unknown = sorted(set(values) - {item.name for item in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown ServerConfig fields: {', '.join(unknown)}")
+        sequences = {key: tuple(value) for key, value in values.items() if isinstance(value, list)}
+        return cls(**{**values, **sequences})
 
     def redacted(self) -> dict[str, Any]:
         """The config as a dict fit for logs: API keys replaced by their count."""
