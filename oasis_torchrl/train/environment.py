@@ -13,7 +13,7 @@ episode), ``image_size`` ``[height, width]`` of the policy images, ``server`` (`
 ``height`` of the embedded server's frames) and ``reward`` (``kind: ground_truth`` with
 ``progress_scale``, ``collision_penalty``, ``lane_penalty`` and the optional
 :class:`~oasis_torchrl.train.shaping.ClearanceShaping` ``clearance_weight`` (0: off) and
-``clearance_horizon``; or ``kind: depth``, the peer's depth-collision reward, for remote
+``clearance_horizon``; or ``kind: depth``, the reference SDK's depth-collision reward, for remote
 endpoints).
 """
 
