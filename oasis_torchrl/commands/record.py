@@ -28,6 +28,8 @@ from oasis_torchrl.config import to_object
 from oasis_torchrl.config.recording import RecordConfig
 
 if TYPE_CHECKING:
+    from tensordict import TensorDictBase
+
     from oasis_torchrl.distributed import RayRecording
     from oasis_torchrl.drivers import DriverSpec
     from oasis_torchrl.envs import OasisEnv
@@ -97,6 +99,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from tqdm import tqdm
 
     from oasis_torchrl.data import LeRobotRecorder
+    from oasis_torchrl.train.driving import drive
 
     driver = driver_spec(cfg)()
     env = _make_env(cfg)
@@ -110,15 +113,14 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     )
     try:
         with recorder, tqdm(total=cfg.episodes, unit="episode", desc="recording") as bar:
-            td = env.reset()
-            while not recorder.full:
-                if stop.is_set():
+
+            def write(td: TensorDictBase) -> None:
+                if stop.is_set():  # a signal whose KeyboardInterrupt a library swallowed
                     raise KeyboardInterrupt
-                td, next_td = env.step_and_maybe_reset(driver(td))
-                completed = recorder.write(td.unsqueeze(-1))
+                bar.update(recorder.write(td.unsqueeze(-1)))
                 bar.set_postfix(rows=recorder.rows_written, refresh=False)
-                bar.update(completed)
-                td = next_td
+
+            drive(env, driver, write, until=lambda: recorder.full)
     finally:
         env.close()
     return recorder.episodes_written

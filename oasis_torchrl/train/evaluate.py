@@ -27,10 +27,10 @@ import torch
 from omegaconf import DictConfig
 from tensordict import NonTensorData, TensorDictBase
 from torchrl.envs import EnvBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from tqdm import tqdm
 
 from oasis_torchrl.models.actor_critic import PIXELS
+from oasis_torchrl.train.driving import drive
 from oasis_torchrl.train.environment import build_env
 
 logger = logging.getLogger(__name__)
@@ -136,22 +136,24 @@ def rollout_episodes(
         (torch.Size([2, 3]), False)
     """
     dropped = () if keep_pixels else (PIXELS, (NEXT, PIXELS))
-    rows = int(env.batch_size[0])
-    ended = torch.zeros(rows, dtype=torch.bool)
-    steps = []
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-        td = env.reset()
-        if on_reset is not None:
-            on_reset(td)
-        for _ in range(max_steps):
-            td = env.step(policy(td))
-            if on_step is not None:
-                on_step(td)
-            steps.append(td.exclude(*dropped))
-            ended |= td.get((NEXT, "done")).reshape(rows).cpu()
-            if ended.all():
-                break
-            td = step_mdp(td)
+    ended = torch.zeros(int(env.batch_size[0]), dtype=torch.bool)
+    steps: list[TensorDictBase] = []
+
+    def keep(td: TensorDictBase) -> None:
+        if on_step is not None:
+            on_step(td)
+        steps.append(td.exclude(*dropped))
+        ended.logical_or_(td.get((NEXT, "done")).reshape(ended.shape).cpu())
+
+    drive(
+        env,
+        policy,
+        keep,
+        until=lambda: bool(ended.all()),
+        max_steps=max_steps,
+        reset_finished=False,
+        on_reset=on_reset,
+    )
     return torch.stack(steps, dim=1)
 
 
