@@ -29,6 +29,7 @@ def _dataset_action(episode: int, frame: int) -> list[float]:
 @pytest.fixture(scope="module")
 def dataset_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A LeRobot dataset of 2 episodes x 6 frames, written by LeRobot itself."""
+    from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     root = tmp_path_factory.mktemp("lerobot") / "drives"
@@ -40,7 +41,12 @@ def dataset_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     features["next.done"] = {"dtype": "bool", "shape": (1,), "names": None}
     features["episode_seed"] = {"dtype": "int64", "shape": (1,), "names": None}
     dataset = LeRobotDataset.create(
-        "local/drives", fps=20, features=features, root=root, video_backend="pyav", vcodec="h264"
+        "local/drives",
+        fps=20,
+        features=features,
+        root=root,
+        video_backend="pyav",
+        rgb_encoder=RGBEncoderConfig(vcodec="h264"),
     )
     try:
         for episode in range(2):
