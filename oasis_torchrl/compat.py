@@ -96,4 +96,3 @@ def dropped_video_frames(dataset: Any) -> dict[str, int]:
     encoder = _streaming_encoder(dataset)
     counts = {} if encoder is None else encoder._dropped_frames
     return {key: count for key, count in counts.items() if count}
-

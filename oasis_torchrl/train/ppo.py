@@ -157,7 +157,6 @@ class PPOTrainer:
         target_kl = cfg.optim.get("target_kl")
         if target_kl is not None and not target_kl > 0:
             raise ValueError(f"optim.target_kl must be positive or null, got {target_kl}")
-        _check_selection_seeds(cfg.eval.get("selection_seeds"))
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
@@ -514,22 +513,6 @@ class PPOTrainer:
             self._evaluator = None
             if not self.env.is_closed:
                 self.env.close()
-
-
-def _check_selection_seeds(seeds: Any) -> None:
-    """Refuse ``eval.selection_seeds`` other than null or a non-empty list of integers, before
-    a run that would only fail at its first evaluation."""
-    if seeds is None:
-        return
-    if (
-        isinstance(seeds, (str, bytes))
-        or not isinstance(seeds, Sequence)
-        or not seeds
-        or not all(isinstance(seed, int) and not isinstance(seed, bool) for seed in seeds)
-    ):
-        raise ValueError(
-            f"eval.selection_seeds must be null or a non-empty list of integers, got {seeds!r}"
-        )
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
