@@ -45,8 +45,6 @@ def test_record_on_two_ray_workers_merges_one_dataset(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("flags", "named"),
     [
-        (["--collectors", "2"], "--collectors"),
-        (["--ray", "--num-envs", "3"], "--num-envs"),
         (["--ray", "--append"], "--append"),
         (["--ray", "--server-address", "http://127.0.0.1:1", "--endpoint", "x:1"], "--endpoint"),
         (["--ray", "--driver", "policy"], "--policy"),
