@@ -58,6 +58,7 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.ground_truth import (
     TRUTH_FIELDS,
     depth_maps,
+    expert_chunk,
     raise_depth_error,
     truth_array,
 )
@@ -72,7 +73,7 @@ from oasis_torchrl.client.types import (
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
-from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, API_KEY_ENV_VAR, CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
 
@@ -95,6 +96,7 @@ class _Outcome:
     error: Exception | None = None
     sequence_num: int = -1
     truth: np.ndarray | None = None
+    expert: np.ndarray | None = None
 
 
 class _Rpc:
@@ -206,6 +208,7 @@ class _PoolSession:
             SessionStatus.OK,
             sequence_num=reply.sequence_num,
             truth=None if reply.truth is None else truth_array(reply.truth),
+            expert=expert_chunk(reply.truth),
         )
 
     async def depth(self) -> dict[str, np.ndarray]:
@@ -727,10 +730,15 @@ def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolSt
         for j, row_truth in enumerate(truths):
             if row_truth is not None:
                 truth[j, : len(row_truth)] = row_truth[:CHUNK]
+    expert = np.full((len(outcomes), CHUNK, ACTION_DIM), np.nan, np.float32)
+    for j, outcome in enumerate(outcomes):
+        if outcome.expert is not None:
+            expert[j] = outcome.expert
     return PoolStep(
         frames=frames,
         truth=truth,
         status=status,
         errors=[o.error for o in outcomes],
         sequence_nums=np.array([o.sequence_num for o in outcomes], np.int64),
+        expert=expert,
     )

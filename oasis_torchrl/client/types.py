@@ -90,7 +90,8 @@ class PoolStep:
 
     >>> import numpy as np
     >>> step = PoolStep(frames={}, truth=None, status=np.zeros(2, np.int8), errors=[None, None],
-    ...                 sequence_nums=np.zeros(2, np.int64))
+    ...                 sequence_nums=np.zeros(2, np.int64),
+    ...                 expert=np.full((2, 4, 2), np.nan, np.float32))
     >>> step.status.tolist()
     [0, 0]
     """
@@ -106,3 +107,6 @@ class PoolStep:
     """Per row, the error behind RESTARTED or LOST (None when OK)."""
     sequence_nums: np.ndarray
     """int64 ``[n]`` sequence number of each row's returned chunk (-1 when LOST)."""
+    expert: np.ndarray
+    """float32 ``[n, 4, 2]``: the embedded server's expert's next chunk from each row's new
+    state (its autopilot's ``[throttle, steering]`` x 4); NaN where the server sends none."""

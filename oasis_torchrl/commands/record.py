@@ -60,7 +60,6 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
         script=cfg.script,
         policy=None if cfg.policy is None else Path(cfg.policy).absolute(),  # Ray: other cwd
         policy_in_keys=in_keys,
-        fps=float(cfg.env.server.fps),
     )
 
 

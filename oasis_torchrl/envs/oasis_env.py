@@ -69,9 +69,11 @@ class OasisEnv(EnvBase):
             default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
             elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
             reference depth reward).
-        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``;
-            default: only for ``endpoint="local"``. Set it for an ``oasis-torchrl serve`` server
-            started elsewhere (a server that sends none yields NaN).
+        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``,
+            and its expert's next chunk as ``"expert_action"`` (what
+            :class:`~oasis_torchrl.drivers.Autopilot` drives with); default: only for
+            ``endpoint="local"``. Set it for an ``oasis-torchrl serve`` server started elsewhere
+            (a server that sends none yields NaN).
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
             server only), e.g. ``("front",)`` for ``GroundTruthDepth``.
         terminate_on_collision: end the episode when the ground truth reports a collision.
@@ -317,6 +319,7 @@ class OasisEnv(EnvBase):
             truth = torch.from_numpy(_truth_or_nan(step, len(rows))).to(torch.float32)
             for k, name in enumerate(self.layout.truth_fields):
                 fresh["truth", name] = truth[..., k]
+            fresh["expert_action"] = torch.from_numpy(step.expert)
         if self.layout.depth_cameras:
             depth = self.pool.depth(rows)
             for camera in self.layout.depth_cameras:

@@ -1,4 +1,4 @@
-"""A privileged driver for the embedded simulator (reads the scene and the car's true state).
+"""The embedded simulator's privileged expert driver (it reads the scene and the car's true state).
 
 Lane keeping is pure pursuit on the centre line of a target lane; speed follows the layout's
 speed cap, slowed for curves ahead. Obstacles in the target lane within braking range make it
@@ -63,9 +63,11 @@ def _stopping_speed(distance: float, gap: float) -> float:
 class Autopilot:
     """Lane following and obstacle avoidance with full knowledge of the simulator's world.
 
+    The embedded server runs one per session (restarted at every Prompt) and sends its next
+    chunk with the ground truth of every Infer.
+
     Args:
         simulator: A reset :class:`~oasis_torchrl.sim.simulator.Simulator`.
-        target_speed: Cruise speed in m/s (default: 85% of the layout's speed cap).
 
     Example:
         >>> simulator = Simulator(64, 48)
@@ -77,11 +79,8 @@ class Autopilot:
         True
     """
 
-    def __init__(self, simulator: Simulator, target_speed: float | None = None) -> None:
-        if target_speed is not None and not target_speed > 0:
-            raise ValueError(f"target_speed must be positive, got {target_speed}")
+    def __init__(self, simulator: Simulator) -> None:
         self._simulator = simulator
-        self._target_speed = target_speed
         self._scene: Scene | None = None
         self._lane = 0
 
@@ -138,7 +137,7 @@ class Autopilot:
     def _cruise_speed(self) -> float:
         """The speed to hold on clear, straight road."""
         scene = self._require_scene()
-        return self._target_speed or CRUISE_FRACTION * scene.style.speed_limit
+        return CRUISE_FRACTION * scene.style.speed_limit
 
     def _curve_speed(self, s: float, speed: float) -> float:
         """The speed that keeps lateral acceleration bounded on the road ahead."""

@@ -27,6 +27,7 @@ import numpy as np
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.auth import key_fingerprint
+from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.encoding import FrameEncoder, make_encoder
 from oasis_torchrl.sim.errors import RequestError, StatusError
@@ -51,7 +52,7 @@ class InferRecord:
 
 
 class Session:
-    """One A2V session: a simulator, one encoder per stream, and the rollout position.
+    """One A2V session: a simulator, its expert, one encoder per stream, the rollout position.
 
     Call the methods while holding :attr:`lock` (the registry's :meth:`SessionRegistry.use`
     does). The simulator and encoders are built at the first Prompt.
@@ -87,6 +88,7 @@ class Session:
         self._config = config
         self._simulator_factory = simulator_factory
         self._simulator: Any = None
+        self._expert: Autopilot | None = None
         self._encoders: dict[str, FrameEncoder] = {}
         self._seed = 0
         self._next_sequence_num = 0
@@ -110,6 +112,7 @@ class Session:
                 for name in CAMERAS
             }
         self._simulator.reset(prompt, seed)
+        self._expert = Autopilot(self._simulator)
         for encoder in self._encoders.values():
             encoder.restart()
         self._seed = seed
@@ -141,6 +144,7 @@ class Session:
             sequence_num=sequence_num,
             seed=self._seed,
             frames=[frame.to_proto() for frame in result.truth],
+            expert_actions=self._expert.act().ravel().tolist(),
         )
         self._last = InferRecord(
             sequence_num=sequence_num,
@@ -179,6 +183,7 @@ class Session:
         if self._simulator is not None:
             self._simulator.close()
         self._simulator = None
+        self._expert = None
         self._encoders = {}
         self._last = None
 
