@@ -29,10 +29,10 @@ from oasis_torchrl.config.recording import RecordConfig
 
 if TYPE_CHECKING:
     from tensordict import TensorDictBase
+    from torchrl.envs import TransformedEnv
 
     from oasis_torchrl.distributed import RayRecording
     from oasis_torchrl.drivers import DriverSpec
-    from oasis_torchrl.envs import OasisEnv
 
 logger = logging.getLogger(__name__)
 
@@ -63,31 +63,16 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
     )
 
 
-def _env_kwargs(cfg: RecordConfig) -> dict[str, Any]:
-    """``OasisEnv`` arguments of every env of the run, whatever its width."""
-    from oasis_torchrl.envs.episodes import episode_prompts
-    from oasis_torchrl.sim.config import ServerConfig
-
-    server = cfg.env.server
-    return {
-        "endpoint": cfg.env.endpoint,
-        "prompts": episode_prompts(cfg.env.prompts),
-        "server": ServerConfig(width=server.width, height=server.height, fps=float(server.fps)),
-        "all_frames": cfg.rows == "frame",
-        "max_steps": cfg.env.max_steps,
-    }
-
-
 def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
     """How the episodes are stored, in one dataset or in shards."""
     size = None if cfg.image_size is None else tuple(cfg.image_size)
     return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec}
 
 
-def _make_env(cfg: RecordConfig) -> OasisEnv:
-    from oasis_torchrl.envs import OasisEnv
+def _make_env(cfg: RecordConfig) -> TransformedEnv:
+    from oasis_torchrl.envs import make_env
 
-    env = OasisEnv(num_envs=cfg.env.num_envs, **_env_kwargs(cfg))
+    env = make_env(cfg.env, all_frames=cfg.rows == "frame")
     env.set_seed(cfg.seed)
     return env
 
@@ -130,7 +115,6 @@ def record_on_ray(cfg: RecordConfig) -> RayRecording:
     from tqdm import tqdm
 
     from oasis_torchrl import distributed
-    from oasis_torchrl.envs import OasisEnv
 
     ray = cfg.ray
     if ray.shard_root is None:  # beside the dataset, so a cluster's nodes share it too
@@ -138,7 +122,7 @@ def record_on_ray(cfg: RecordConfig) -> RayRecording:
         ray = replace(ray, shard_root=str(root.with_name(root.name + ".shards")))
     driver = driver_spec(cfg)
     driver()  # a bad script or policy file fails here, before any worker starts
-    create_env = distributed.oasis_env_factory(OasisEnv, ray, **_env_kwargs(cfg))
+    create_env = distributed.env_factory(cfg.env, ray, all_frames=cfg.rows == "frame")
     logger.info(
         "recording on Ray (%s): %d workers x %d sessions, shards in %s",
         ray.address,

@@ -28,8 +28,8 @@ from tensordict import TensorDictBase
 from tqdm import tqdm
 
 from oasis_torchrl.drivers import Autopilot
+from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.train.driving import drive
-from oasis_torchrl.train.environment import build_env
 
 logger = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def record_demonstrations(
     """
     from oasis_torchrl.data import LeRobotRecorder
 
-    env = build_env(env_cfg)
+    env = make_env(env_cfg)
     env.set_seed(seed)
     rows = int(env.batch_size[0])
     expert = Autopilot()

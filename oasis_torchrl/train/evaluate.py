@@ -29,9 +29,9 @@ from tensordict import NonTensorData, TensorDictBase
 from torchrl.envs import EnvBase
 from tqdm import tqdm
 
+from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import PIXELS
 from oasis_torchrl.train.driving import drive
-from oasis_torchrl.train.environment import build_env
 
 logger = logging.getLogger(__name__)
 
@@ -129,7 +129,7 @@ def rollout_episodes(
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
         >>> from oasis_torchrl.config import load_config
-        >>> env = build_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
+        >>> env = make_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
         >>> rollout = rollout_episodes(env, ScriptedDriver.from_spec("throttle=1"), 3)
         >>> env.close()
         >>> rollout.batch_size, ("next", "pixels") in rollout.keys(True)
@@ -279,7 +279,7 @@ class Evaluator:
         self.cfg = eval_cfg
         self.progress = progress
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
-        self.env = build_env(
+        self.env = make_env(
             env_cfg,
             num_envs=len(row_prompts),
             prompts=row_prompts,
