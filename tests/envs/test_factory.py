@@ -3,6 +3,8 @@ without it)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 import torch
 
@@ -40,7 +42,7 @@ def test_make_env_builds_the_configured_env() -> None:
     assert td["next", "pixels", "front"].shape == (2, 3, 4, 24, 32, 3)
     assert td["next", "step_count"][:, -1].eq(3).all()
     assert set(td[:, 0]["prompt"]) <= {"a", "b"}
-    last_only = make_env(TINY, num_envs=1, all_frames=False, image_size=None)
+    last_only = make_env(replace(TINY, image_size=None), num_envs=1, all_frames=False)
     try:
         assert last_only.reset()["pixels", "front"].shape == (1, 32, 48, 3)  # the server's size
     finally:
