@@ -10,6 +10,8 @@ submits one coroutine per step to the loop and waits for it, so callers stay syn
 Decoding never runs on the loop: every (row, stream) chunk of 4 packets is decoded on a thread
 pool sized to the cores (PyAV releases the GIL while decoding and converting), in order, by that
 stream's own stateful decoder, straight into its slot of the step's preallocated output array.
+Raw frames (from a server on this machine) are only copied into their slots, on the loop: a hop
+to a thread would cost more than the copy.
 A row's next step only starts after its previous step returned, so each decoder sees its
 stream's packets in order.
 
@@ -66,8 +68,6 @@ from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
 from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
-    JPEG,
-    VP9,
     PoolStep,
     ServerHandle,
     SessionStatus,
@@ -187,29 +187,28 @@ class _PoolSession:
         """One Infer; decodes every selected stream into ``slots`` concurrently, off the loop."""
         response, call = await self._send(self.state.infer(actions))
         reply = self.state.on_infer(response, await call.trailing_metadata())
-        loop = asyncio.get_running_loop()
-        decoders = self.state.decoders
-        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
-        # or rewrite a slot that a still-running decode job is using.
-        decoded = await _gather(
-            [
-                loop.run_in_executor(
-                    self.executor,
-                    decode_chunk,
-                    decoders[name],
-                    reply.packets.get(name, ()),
-                    out,
-                    CHUNK,
-                )
-                for name, out in slots.items()
-            ]
-        )
-        _raise_any(decoded)
+        await self._decode(reply.packets, slots)
         return _Outcome(
             SessionStatus.OK,
             sequence_num=reply.sequence_num,
             truth=None if reply.truth is None else truth_array(reply.truth),
             expert=expert_chunk(reply.truth),
+        )
+
+    async def _decode(self, packets: dict[str, Sequence[bytes]], slots: RowSlots) -> None:
+        """Decode every selected stream into its slot: on the decode threads, concurrently,
+        or right here when decoding is a mere copy (raw frames)."""
+        decoders = self.state.decoders
+        jobs = [(decoders[name], packets.get(name, ()), out, CHUNK) for name, out in slots.items()]
+        if not any(decoder.threaded for decoder, *_ in jobs):
+            for job in jobs:
+                decode_chunk(*job)
+            return
+        loop = asyncio.get_running_loop()
+        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
+        # or rewrite a slot that a still-running decode job is using.
+        _raise_any(
+            await _gather([loop.run_in_executor(self.executor, decode_chunk, *job) for job in jobs])
         )
 
     async def depth(self) -> dict[str, np.ndarray]:
@@ -294,7 +293,7 @@ class SessionPool:
         tls: TlsSetting = None,
         timeout: float | None = 120.0,
         retry: RetryPolicy | None = None,
-        accepted_formats: Sequence[int] = (VP9, JPEG),
+        accepted_formats: Sequence[int] | None = None,
         resize: tuple[int, int] | None = None,
         required_streams: Sequence[str] = CAMERAS,
         decode_threads: int | None = None,
@@ -315,7 +314,7 @@ class SessionPool:
         self.tls = tls
         self.timeout = timeout
         self.retry = RetryPolicy() if retry is None else retry
-        self.accepted_formats = wire.accepted_format_list(accepted_formats)
+        self.accepted_formats = wire.accepted_format_list(accepted_formats, self.endpoint)
         self.resize = validate_resize(resize)
         self.required_streams = tuple(required_streams)
         self.decode_threads = decode_threads

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -43,10 +43,10 @@ from oasis_torchrl.envs.specs import (
     build_observation_spec,
     build_reward_spec,
 )
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS, HOSTED_FRAME_SIZE
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.sim.launcher import LocalServer
+from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
 logger = logging.getLogger(__name__)
 
@@ -336,10 +336,16 @@ class OasisEnv(OasisWrapper):
         api_key: key for a remote endpoint (defaults to ``DECART_API_KEY``); ignored for local.
         tls: force TLS on or off (default: from the endpoint's scheme).
         server: embedded-server settings for ``endpoint="local"`` (resolution, latency, ...).
+            Its ``processes`` (default: one per core) is capped at ``num_envs``;
+            ``processes=0`` runs the server and the worlds inside the stepping process
+            instead, which is slower but easier to debug.
         frame_size: ``(height, width)`` to resize frames to while decoding; default: the
             embedded server's size, or the hosted model's (another server's size: pass it here
             or as ``streams``).
         streams: the layout a remote server streams, when it is not the hosted model's.
+        frame_format: how frames travel: ``"raw"`` (uncompressed RGB, for a server on this
+            machine), ``"vp9"`` (what the hosted model sends: train on its compression
+            artefacts) or ``"jpeg"``; default: raw on this machine, else VP9.
         all_frames: return all 4 frames of each chunk instead of the last one.
         ground_truth: see :class:`OasisWrapper`; default: only for ``endpoint="local"`` (set it
             for an ``oasis-torchrl serve`` server started elsewhere).
@@ -370,19 +376,26 @@ class OasisEnv(OasisWrapper):
         server: ServerConfig | None = None,
         frame_size: tuple[int, int] | None = None,
         streams: StreamLayout | None = None,
+        frame_format: str | None = None,
         all_frames: bool = False,
         ground_truth: bool | None = None,
         retry: RetryPolicy | None = None,
         timeout: float = 120.0,
         **kwargs: Any,
     ) -> None:
+        if frame_format is not None and frame_format not in FORMAT_NAMES:
+            raise ValueError(
+                f"frame_format must be None or one of {sorted(FORMAT_NAMES)}, got {frame_format!r}"
+            )
         self.endpoint = endpoint
+        self.frame_format = frame_format
         local = endpoint == LOCAL
         if local:
             config = server if server is not None else ServerConfig()
             streams = StreamLayout(CAMERAS, frame_size or (config.height, config.width))
+        formats = {} if frame_format is None else {"accepted_formats": [FORMAT_NAMES[frame_format]]}
         pool = SessionPool(
-            LocalServer(config) if local else endpoint,
+            embedded_server(config, num_envs) if local else endpoint,
             num_envs,
             api_key=api_key,
             tls=tls,
@@ -390,6 +403,7 @@ class OasisEnv(OasisWrapper):
             retry=retry,
             resize=frame_size,
             frames="all" if all_frames else "last",
+            **formats,
         )
         super().__init__(
             pool,
@@ -404,6 +418,27 @@ class OasisEnv(OasisWrapper):
     def is_local(self) -> bool:
         """Whether this env runs on its own embedded simulator server."""
         return self.endpoint == LOCAL
+
+    @property
+    def server(self) -> LocalServer | ServerProcess | None:
+        """The embedded server of ``endpoint="local"`` (started with the env's sessions)."""
+        return self._env.server
+
+
+def embedded_server(config: ServerConfig, num_envs: int) -> LocalServer | ServerProcess:
+    """The embedded server of a local env: a process of its own (its workers at most one per
+    row), or, with ``processes=0``, inside the stepping process. Unstarted: the env's pool
+    starts it.
+
+    Example:
+        >>> type(embedded_server(ServerConfig(processes=0), 2)).__name__
+        'LocalServer'
+        >>> embedded_server(ServerConfig(), 1).config.processes
+        1
+    """
+    if config.resolved_processes == 0:
+        return LocalServer(config)
+    return ServerProcess(replace(config, processes=min(config.resolved_processes, num_envs)))
 
 
 def _truth_or_nan(step: PoolStep, n: int) -> np.ndarray:

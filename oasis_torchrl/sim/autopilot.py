@@ -21,7 +21,7 @@ import numpy as np
 from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.sim.scene import Scene
 from oasis_torchrl.sim.simulator import Simulator
-from oasis_torchrl.sim.vehicle import VehicleState, step_vehicle
+from oasis_torchrl.sim.vehicle import VehicleState, clamp, step_vehicle
 
 #: Fraction of the layout's speed cap the autopilot cruises at.
 CRUISE_FRACTION = 0.85
@@ -118,21 +118,21 @@ class Autopilot:
         if ahead is not None:
             floor = CRAWL_SPEED if blocked is None else 0.0
             limits.append(max(_stopping_speed(ahead, MIN_GAP), floor))
-        throttle = float(np.clip(SPEED_GAIN * (min(limits) - state.speed), -1.0, 1.0))
+        throttle = clamp(SPEED_GAIN * (min(limits) - state.speed), -1.0, 1.0)
         return throttle, self._steering(state, s)
 
     def _steering(self, state: VehicleState, s: float) -> float:
         """Pure pursuit towards the target lane's centre line."""
         scene = self._require_scene()
         params = self._simulator.world.params
-        look_ahead = float(np.clip(PURSUIT_TIME * abs(state.speed) + 5.0, 6.0, 25.0))
+        look_ahead = clamp(PURSUIT_TIME * abs(state.speed) + 5.0, 6.0, 25.0)
         goal_x, goal_y, _ = scene.road.pose_at(s + look_ahead, scene.style.lane_offset(self._lane))
         dx, dy = float(goal_x) - state.x, float(goal_y) - state.y
         cos, sin = math.cos(state.heading), math.sin(state.heading)
         forward, left = dx * cos + dy * sin, -dx * sin + dy * cos
         curvature = 2.0 * left / max(forward * forward + left * left, 1e-6)
         steer_angle = math.atan(params.wheelbase * curvature)
-        return float(np.clip(-steer_angle / params.max_steer, -1.0, 1.0))
+        return clamp(-steer_angle / params.max_steer, -1.0, 1.0)
 
     def _cruise_speed(self) -> float:
         """The speed to hold on clear, straight road."""

@@ -88,6 +88,13 @@ class LocalServer:
         return self.config.client_address(self.port)
 
     @property
+    def worker_pids(self) -> list[int]:
+        """Process ids of the server's worker processes (empty without workers)."""
+        if self._server is None:
+            raise RuntimeError("LocalServer is not started; call start() first")
+        return self._server.worker_pids
+
+    @property
     def endpoint(self) -> str:
         """Endpoint URL for clients, e.g. ``http://127.0.0.1:50051``."""
         return self.config.endpoint(self.port)

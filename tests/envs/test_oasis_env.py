@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import pickle
+import signal
+from pathlib import Path
 
 import pytest
 import torch
@@ -140,3 +143,27 @@ def test_a_server_streaming_another_layout_is_named_at_the_first_reset() -> None
             assert sized.reset()["pixels", "front"].shape == (1, 24, 32, 3)
         finally:
             sized.close()
+
+
+def test_local_world_runs_out_of_process_and_a_dead_worker_restarts_only_its_rows() -> None:
+    server = ServerConfig(width=96, height=64, processes=2)
+    env = OasisEnv("local", num_envs=4, prompts="urban street", server=server)
+    try:
+        env.set_seed(0)
+        td = env.reset()
+        assert env.server is not None and env.server.pid != os.getpid()  # the world runs apart
+        children = Path(f"/proc/{env.server.pid}/task/{env.server.pid}/children").read_text()
+        workers = [int(pid) for pid in children.split()]
+        assert len(workers) == 2
+        zero = torch.zeros(4, 4, 2)
+        td = env.step(td.set("action", zero))["next"]
+        os.kill(workers[0], signal.SIGKILL)  # during the rollout
+        td = env.step(td.set("action", zero))["next"]
+        restarts = td["info", "session_restarts"].flatten()
+        assert sorted(restarts.tolist()) == [0, 0, 1, 1]  # only the dead worker's two rows
+        assert torch.equal(td["truncated"].flatten(), restarts.bool())
+        for _ in range(3):  # every row keeps stepping
+            td = env.step(td.set("action", zero))["next"]
+        assert torch.equal(td["info", "session_restarts"].flatten(), restarts)
+    finally:
+        env.close()
