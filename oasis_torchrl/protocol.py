@@ -29,6 +29,9 @@ ACTION_NAMES: tuple[str, ...] = ("throttle", "steering")
 CAMERAS: tuple[str, ...] = ("left_forward", "front", "right_forward")
 """The streams the hosted model advertises, left to right."""
 
+HOSTED_FRAME_SIZE = (512, 768)
+"""``(height, width)`` of the hosted model's frames (it advertises 768 wide, 512 high)."""
+
 FPS = 20.0
 """Frames per second: the protocol has no field for it; the SDK's live preview treats 20 as
 real speed (one Infer = 0.2 s of world time)."""

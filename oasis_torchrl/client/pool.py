@@ -69,6 +69,7 @@ from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
     PoolStep,
+    ServerHandle,
     SessionStatus,
     StreamInfo,
 )
@@ -270,6 +271,11 @@ class SessionPool:
     sessions. ``frames="last"`` returns only the last frame of each chunk (``[n, 1, H, W, 3]``):
     the other three are still decoded, so the streams stay in sync, but never converted to RGB.
 
+    ``endpoint`` is an A2V endpoint URL, or a :class:`ServerHandle` (such as the embedded
+    server's launcher): the pool starts that server when it starts, takes its endpoint and key,
+    and stops it when it closes. A pickled pool arrives unstarted (sessions, channels and a
+    started server never cross processes): the receiving process opens its own.
+
     >>> pool = SessionPool("http://127.0.0.1:1", num_sessions=4, api_key="secret")
     >>> import pickle
     >>> pickle.loads(pickle.dumps(pool)).num_sessions
@@ -280,7 +286,7 @@ class SessionPool:
 
     def __init__(
         self,
-        endpoint: str,
+        endpoint: str | ServerHandle,
         num_sessions: int,
         *,
         api_key: str | None = None,
@@ -302,19 +308,20 @@ class SessionPool:
             raise ValueError(
                 f"decode_threads must be a positive int or None, got {decode_threads!r}"
             )
-        self.endpoint = endpoint
+        self.server = None if isinstance(endpoint, str) else endpoint
+        self.endpoint = endpoint if isinstance(endpoint, str) else None
         self.api_key = api_key if api_key is not None else os.getenv(API_KEY_ENV_VAR)
         self.tls = tls
         self.timeout = timeout
         self.retry = RetryPolicy() if retry is None else retry
-        self.accepted_formats = wire.accepted_format_list(accepted_formats, endpoint)
+        self.accepted_formats = wire.accepted_format_list(accepted_formats, self.endpoint)
         self.resize = validate_resize(resize)
         self.required_streams = tuple(required_streams)
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
         self.frames = frames
         self._num_sessions = num_sessions
-        self._target = parse_endpoint(endpoint, tls).address
+        self._target = None if self.endpoint is None else parse_endpoint(self.endpoint, tls).address
         self._streams: tuple[StreamInfo, ...] = ()
         self._runtime: _Runtime | None = None
         self._finalizer: weakref.finalize | None = None
@@ -360,12 +367,10 @@ class SessionPool:
         )
 
     def __getstate__(self) -> dict[str, Any]:
-        if self._runtime is not None:
-            raise TypeError(
-                "a started SessionPool cannot be pickled; pickle it before start() and let the "
-                "receiving process start it"
-            )
-        return dict(self.__dict__)
+        state = dict(self.__dict__, _runtime=None, _finalizer=None, _streams=())
+        if self.server is not None:  # the receiving process starts a server of its own
+            state.update(endpoint=None, _target=None)
+        return state
 
     def __enter__(self) -> SessionPool:
         try:
@@ -389,10 +394,8 @@ class SessionPool:
         """Connect and Initialize all sessions concurrently; idempotent. Returns the streams."""
         if self._streams:
             return self._streams
-        if not self.api_key:
-            raise wire.missing_api_key_error()
-        runtime = self._ensure_runtime()
         try:
+            runtime = self._ensure_runtime()
             infos = runtime.loop.run(self._start(runtime))
         except BaseException:
             self.close()
@@ -411,14 +414,18 @@ class SessionPool:
         """Finish all sessions (best effort, concurrently), close the channel, stop threads."""
         runtime, self._runtime = self._runtime, None
         self._streams = ()
-        if runtime is None:
-            return
-        if self._finalizer is not None:
-            self._finalizer.detach()
         try:
-            runtime.loop.run(self._finish_all(runtime.sessions))
+            if runtime is not None:
+                if self._finalizer is not None:
+                    self._finalizer.detach()
+                try:
+                    runtime.loop.run(self._finish_all(runtime.sessions))
+                finally:
+                    runtime.shutdown()
         finally:
-            runtime.shutdown()
+            if self.server is not None and self.endpoint is not None:
+                self.server.stop()
+                self.endpoint = self._target = None
 
     def ping(self) -> bool:
         """Whether the server's gRPC health service reports SERVING (False if unreachable)."""
@@ -619,6 +626,9 @@ class SessionPool:
 
     def _ensure_runtime(self) -> _Runtime:
         if self._runtime is None:
+            self._connect_server()
+            if not self.api_key:
+                raise wire.missing_api_key_error()
             loop = EventLoopThread(f"oasis-pool-{self._target}")
             channel = loop.run(_open_channel(self.endpoint, self.tls))
             rpc = _Rpc(channel, self.retry, self.timeout, self._target, self.api_key)
@@ -633,6 +643,14 @@ class SessionPool:
             self._runtime = runtime
             self._finalizer = weakref.finalize(self, runtime.shutdown)
         return self._runtime
+
+    def _connect_server(self) -> None:
+        """Start the pool's own server, if it has one, and take its endpoint and key."""
+        if self.server is None or self.endpoint is not None:
+            return
+        self.server.start()
+        self.endpoint, self.api_key = self.server.endpoint, self.server.api_key
+        self._target = parse_endpoint(self.endpoint, self.tls).address
 
     def _session_state(self) -> SessionState:
         return SessionState(

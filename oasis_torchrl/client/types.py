@@ -68,6 +68,26 @@ class FrameConsumer(Protocol):
         ...
 
 
+class ServerHandle(Protocol):
+    """A server a :class:`~oasis_torchrl.client.SessionPool` starts with itself and stops when it
+    closes (the embedded server's launchers are such handles). ``endpoint`` and ``api_key`` are
+    read after :meth:`start`; pickling a handle must drop any running server."""
+
+    @property
+    def endpoint(self) -> str:
+        """The endpoint URL clients dial."""
+
+    @property
+    def api_key(self) -> str:
+        """A key the server accepts."""
+
+    def start(self) -> object:
+        """Start serving (idempotent)."""
+
+    def stop(self) -> None:
+        """Stop serving (idempotent)."""
+
+
 class SessionStatus(enum.IntEnum):
     """What happened to one pool row during a step.
 

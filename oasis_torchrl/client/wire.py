@@ -109,11 +109,12 @@ def session_target_from(initial_metadata: Iterable[tuple[str, str | bytes]]) -> 
 
 
 def accepted_format_list(
-    accepted_formats: Sequence[int] | None, endpoint: str
+    accepted_formats: Sequence[int] | None, endpoint: str | None
 ) -> tuple[FrameFormat, ...]:
     """Validate the formats a client offers: non-empty, decodable, no duplicates. None offers
     raw RGB first to a server on this machine (no codec for frames that never leave it), then
-    VP9 and JPEG (only those to any other server).
+    VP9 and JPEG (only those to any other server). ``endpoint`` None is a server the client
+    starts itself, on this machine.
 
     >>> accepted_format_list([3, 1], "https://oasis-grpc.decart.ai")
     (<FrameFormat.VP9: 3>, <FrameFormat.JPEG: 1>)
@@ -121,7 +122,7 @@ def accepted_format_list(
     'RAW_RGB24'
     """
     if accepted_formats is None:
-        nearby = bool(endpoint) and is_on_this_machine(endpoint)
+        nearby = endpoint is None or is_on_this_machine(endpoint)
         local = (FrameFormat.RAW_RGB24,) if nearby else ()
         accepted_formats = (*local, FrameFormat.VP9, FrameFormat.JPEG)
     formats = tuple(FrameFormat(value) for value in accepted_formats)

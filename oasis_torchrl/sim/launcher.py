@@ -99,6 +99,9 @@ class LocalServer:
         """Endpoint URL for clients, e.g. ``http://127.0.0.1:50051``."""
         return self.config.endpoint(self.port)
 
+    def __getstate__(self) -> dict[str, Any]:
+        return dict(self.__dict__, _server=None)  # a running server stays in its process
+
     def start(self) -> LocalServer:
         """Start serving (idempotent); returns ``self``."""
         from oasis_torchrl.sim.server import A2VServer
@@ -161,6 +164,10 @@ class ServerProcess:
         self.port: int | None = None
         self._process: subprocess.Popen[bytes] | None = None
         self._workdir: Path | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A running child stays with the process that started it.
+        return dict(self.__dict__, _process=None, port=None, _workdir=None)
 
     @property
     def api_key(self) -> str:

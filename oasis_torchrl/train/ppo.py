@@ -9,7 +9,7 @@ periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot d
 configured; on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early
 stopping that never looks at the seeds reported at the end), a warm start from a
 behaviour-cloning policy, and the kept policy exported as a LeRobot policy folder. Config:
-``configs/ppo.yaml``.
+:class:`~oasis_torchrl.config.PPOConfig`.
 """
 
 from __future__ import annotations
@@ -29,6 +29,9 @@ from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
+from oasis_torchrl.config import save_config, section
+from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.train.checkpoint import (
     BEST,
@@ -39,8 +42,6 @@ from oasis_torchrl.train.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
-from oasis_torchrl.train.config import save_config
-from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
@@ -78,7 +79,7 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> net = build_net(load_config("ppo"), ("left_forward", "front", "right_forward"))
         >>> net.config.image_size
         (64, 96)
@@ -108,7 +109,7 @@ def uses_ground_truth(cfg: DictConfig) -> bool:
     targets), which only the embedded server sends.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> uses_ground_truth(load_config("ppo", ["privileged_critic=false", "loss.aux_coeff=0"]))
         False
     """
@@ -145,10 +146,10 @@ class PPOTrainer:
     """One PPO run; :meth:`run` trains, evaluates, checkpoints and exports.
 
     Args:
-        cfg: the resolved ``configs/ppo.yaml`` (with overrides).
+        cfg: the resolved :class:`~oasis_torchrl.config.PPOConfig` (with overrides).
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> cfg = load_config("ppo", ["collector.total_frames=0"])  # doctest: +SKIP
         >>> PPOTrainer(cfg).run()  # doctest: +SKIP
     """
@@ -157,7 +158,6 @@ class PPOTrainer:
         target_kl = cfg.optim.get("target_kl")
         if target_kl is not None and not target_kl > 0:
             raise ValueError(f"optim.target_kl must be positive or null, got {target_kl}")
-        _check_selection_seeds(cfg.eval.get("selection_seeds"))
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
@@ -167,7 +167,7 @@ class PPOTrainer:
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
         self.best_selection: float | None = resumed.get("best_selection")
-        self.env = build_env(cfg.env, privileged=uses_ground_truth(cfg))
+        self.env = make_env(cfg.env, privileged=uses_ground_truth(cfg))
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
@@ -301,16 +301,13 @@ class PPOTrainer:
         """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
         cfg = self.cfg
         if cfg.ray.enabled:
-            from oasis_torchrl.distributed import (
-                RayCollection,
-                RayCollectionConfig,
-                training_env_factory,
-            )
+            from oasis_torchrl.config.ray import RayCollectionConfig
+            from oasis_torchrl.distributed import RayCollection, env_factory
 
-            ray_cfg = RayCollectionConfig.from_config(cfg.ray)
+            ray_cfg = section(cfg.ray, RayCollectionConfig)
             return RayCollection(
                 ray_cfg,
-                training_env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
+                env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
                 self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
@@ -519,22 +516,6 @@ class PPOTrainer:
                 self.env.close()
 
 
-def _check_selection_seeds(seeds: Any) -> None:
-    """Refuse ``eval.selection_seeds`` other than null or a non-empty list of integers, before
-    a run that would only fail at its first evaluation."""
-    if seeds is None:
-        return
-    if (
-        isinstance(seeds, (str, bytes))
-        or not isinstance(seeds, Sequence)
-        or not seeds
-        or not all(isinstance(seed, int) and not isinstance(seed, bool) for seed in seeds)
-    ):
-        raise ValueError(
-            f"eval.selection_seeds must be null or a non-empty list of integers, got {seeds!r}"
-        )
-
-
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
     return {f"{prefix}/{key}": value for key, value in values.items()}
 
@@ -549,10 +530,10 @@ def _postfix(metrics: dict[str, float]) -> dict[str, str]:
 
 
 def train_ppo(cfg: DictConfig) -> PPOResult:
-    """Run PPO as configured (``configs/ppo.yaml``); see :class:`PPOTrainer`.
+    """Run PPO as configured (:class:`~oasis_torchrl.config.PPOConfig`); see :class:`PPOTrainer`.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> result = train_ppo(load_config("ppo", ["env.num_envs=2"]))  # doctest: +SKIP
     """
     return PPOTrainer(cfg).run()

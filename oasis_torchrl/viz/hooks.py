@@ -43,7 +43,7 @@ class RerunTransform(Transform):
         >>> from oasis_torchrl.viz import RolloutLogger
         >>> rerun_logger = RolloutLogger(os.path.join(tempfile.mkdtemp(), "run.rrd"))
         >>> env = OasisEnv("local", 2, server=ServerConfig(width=96, height=64))
-        >>> env = env.append_transform(rerun_logger.transform())
+        >>> env = env.append_transform(RerunTransform(rerun_logger))
         >>> _ = env.rollout(2)
         >>> env.close(); rerun_logger.close()
     """
@@ -75,7 +75,7 @@ class RerunFrameConsumer:
         >>> import tempfile, os
         >>> from oasis_torchrl.viz import RolloutLogger
         >>> rerun_logger = RolloutLogger(os.path.join(tempfile.mkdtemp(), "client.rrd"))
-        >>> consumer = rerun_logger.frame_consumer(row=0)
+        >>> consumer = RerunFrameConsumer(rerun_logger, row=0)
         >>> consumer.new_clip()
         >>> consumer.submit({"front": [np.zeros((64, 96, 3), np.uint8)] * 4})
         >>> rerun_logger.close()
