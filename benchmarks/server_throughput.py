@@ -5,7 +5,9 @@ the official client gets them) at 768x512 and 192x128, with 1 session and with 4
 driven concurrently from threads, against a server process with ``--processes`` worker
 processes (default 2). Prints one JSON document with the ratio 4 sessions / 1 session.
 
-    .venv/bin/python benchmarks/server_throughput.py --seconds 5 --processes 2
+    .venv/bin/python benchmarks/server_throughput.py --seconds 5 --processes 2 --repeats 3
+
+With ``--repeats`` the two session counts alternate and the ratio is of their medians.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import grpc
+import numpy as np
 
 from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2, sim_pb2
 from oasis_torchrl.protocol import (
@@ -127,18 +130,28 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring time per case")
     parser.add_argument("--processes", type=int, default=2, help="server worker processes")
+    parser.add_argument(
+        "--repeats", type=int, default=1, help="measurements per case, alternating 1 and 4"
+    )
     args = parser.parse_args()
     load_before = os.getloadavg()[0]  # other work on the machine skews every number
     results = {}
     for width, height in RESOLUTIONS:
-        cases = {
-            f"{count}_session{'s' if count > 1 else ''}": measure(
-                width, height, count, args.seconds, args.processes
-            )
-            for count in SESSION_COUNTS
+        runs: dict[int, list[dict[str, float | int]]] = {count: [] for count in SESSION_COUNTS}
+        for repeat in range(args.repeats):  # alternating: both counts see the same load
+            counts = SESSION_COUNTS if repeat % 2 == 0 else SESSION_COUNTS[::-1]
+            for count in counts:
+                runs[count].append(measure(width, height, count, args.seconds, args.processes))
+        rates = {count: [run["infer_calls_per_s"] for run in runs[count]] for count in runs}
+        single, many = (float(np.median(rates[count])) for count in SESSION_COUNTS)
+        results[f"{width}x{height}"] = {
+            **{
+                f"{count}_session{'s' if count > 1 else ''}": measured[-1]
+                for count, measured in runs.items()
+            },
+            **{f"infer_calls_per_s_{count}": rates[count] for count in SESSION_COUNTS},
+            "ratio_4_over_1": round(many / single, 2),
         }
-        rates = [case["infer_calls_per_s"] for case in cases.values()]
-        results[f"{width}x{height}"] = {**cases, "ratio_4_over_1": round(rates[1] / rates[0], 2)}
     report = {
         "benchmark": "server_throughput",
         "cpus": os.cpu_count(),
