@@ -7,14 +7,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from oasis_torchrl.protocol import CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
-"""The world model's cameras, in the conventional order."""
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 """Default ``(height, width)`` the network sees."""
-"""Actions per world-model call."""
-ACTION_DIM = 2
-"""``[throttle, steering]``."""
 MAX_INIT_ACTION = 0.99
 """Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
 

@@ -9,7 +9,7 @@ periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot d
 configured; on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early
 stopping that never looks at the seeds reported at the end), a warm start from a
 behaviour-cloning policy, and the kept policy exported as a LeRobot policy folder. Config:
-``configs/ppo.yaml``.
+:class:`~oasis_torchrl.config.PPOConfig`.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
+from oasis_torchrl.config import save_config, section
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.train.checkpoint import (
     BEST,
@@ -39,7 +40,6 @@ from oasis_torchrl.train.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
-from oasis_torchrl.train.config import save_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
@@ -78,7 +78,7 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> net = build_net(load_config("ppo"), ("left_forward", "front", "right_forward"))
         >>> net.config.image_size
         (64, 96)
@@ -108,7 +108,7 @@ def uses_ground_truth(cfg: DictConfig) -> bool:
     targets), which only the embedded server sends.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> uses_ground_truth(load_config("ppo", ["privileged_critic=false", "loss.aux_coeff=0"]))
         False
     """
@@ -145,10 +145,10 @@ class PPOTrainer:
     """One PPO run; :meth:`run` trains, evaluates, checkpoints and exports.
 
     Args:
-        cfg: the resolved ``configs/ppo.yaml`` (with overrides).
+        cfg: the resolved :class:`~oasis_torchrl.config.PPOConfig` (with overrides).
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> cfg = load_config("ppo", ["collector.total_frames=0"])  # doctest: +SKIP
         >>> PPOTrainer(cfg).run()  # doctest: +SKIP
     """
@@ -301,13 +301,10 @@ class PPOTrainer:
         """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
         cfg = self.cfg
         if cfg.ray.enabled:
-            from oasis_torchrl.distributed import (
-                RayCollection,
-                RayCollectionConfig,
-                training_env_factory,
-            )
+            from oasis_torchrl.config.ray import RayCollectionConfig
+            from oasis_torchrl.distributed import RayCollection, training_env_factory
 
-            ray_cfg = RayCollectionConfig.from_config(cfg.ray)
+            ray_cfg = section(cfg.ray, RayCollectionConfig)
             return RayCollection(
                 ray_cfg,
                 training_env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
@@ -549,10 +546,10 @@ def _postfix(metrics: dict[str, float]) -> dict[str, str]:
 
 
 def train_ppo(cfg: DictConfig) -> PPOResult:
-    """Run PPO as configured (``configs/ppo.yaml``); see :class:`PPOTrainer`.
+    """Run PPO as configured (:class:`~oasis_torchrl.config.PPOConfig`); see :class:`PPOTrainer`.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> result = train_ppo(load_config("ppo", ["env.num_envs=2"]))  # doctest: +SKIP
     """
     return PPOTrainer(cfg).run()
