@@ -9,10 +9,14 @@ misbehaving on a layout it does not know). What is used, and why no public API d
   :func:`dropped_video_frames`): it was built for live cameras and drops a frame when a camera's
   queue stays full for 0.1 s. Frames replayed from a rollout must all land, so the writer waits
   for queue room before each frame and refuses to save an episode that lost one anyway.
+- TorchRL's ``RayCollector`` (:func:`drop_ray_collectors`): it can add remote collectors but not
+  remove one, so after a worker died the survivors are kept by rewriting its actor list and
+  those of its weight senders.
 
 Example:
     >>> SUPPORTED["lerobot"]
     ((0, 6), (0, 7))
+    >>> require("lerobot")
 """
 
 from __future__ import annotations
@@ -20,10 +24,12 @@ from __future__ import annotations
 import importlib.metadata
 import re
 import time
+from collections.abc import Sequence
 from typing import Any
 
 SUPPORTED: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
     "lerobot": ((0, 6), (0, 7)),
+    "torchrl": ((0, 14), (0, 15)),
 }
 """Distribution -> ``(lowest, first unsupported)`` ``(major, minor)`` whose internals are used."""
 
@@ -55,7 +61,7 @@ def require(package: str) -> None:
         UnsupportedVersionError: naming the installed and the supported versions.
 
     Example:
-        >>> require("lerobot")
+        >>> require("torchrl")
     """
     installed = importlib.metadata.version(package)
     low, high = SUPPORTED[package]
@@ -96,3 +102,22 @@ def dropped_video_frames(dataset: Any) -> dict[str, int]:
     encoder = _streaming_encoder(dataset)
     counts = {} if encoder is None else encoder._dropped_frames
     return {key: count for key, count in counts.items() if count}
+
+
+# -- TorchRL: removing remote collectors from a RayCollector ------------------------------------
+
+
+def drop_ray_collectors(collector: Any, keep: Sequence[int]) -> None:
+    """Keep only the remote collectors at indices ``keep`` of a TorchRL ``RayCollector``.
+
+    The collector and its weight-sync schemes then address the kept actors only (TorchRL has no
+    public way to shrink a ``RayCollector``).
+    """
+    require("torchrl")
+    actors = [collector.remote_collectors[index] for index in keep]
+    collector._remote_collectors = actors
+    collector.num_collectors = len(actors)
+    collector._batches_since_weight_update = [0] * len(actors)
+    for scheme in (collector._weight_sync_schemes or {}).values():
+        scheme._remote_collectors = list(actors)
+        scheme._num_workers = len(actors)

@@ -55,12 +55,7 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
     in_keys = None
     if cfg.policy_in_keys:
         in_keys = tuple(tuple(key.split(".")) for key in cfg.policy_in_keys.split(","))
-    return DriverSpec(
-        cfg.driver,
-        script=cfg.script,
-        policy=None if cfg.policy is None else Path(cfg.policy).absolute(),  # Ray: other cwd
-        policy_in_keys=in_keys,
-    )
+    return DriverSpec(cfg.driver_spec, in_keys=in_keys)
 
 
 def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:

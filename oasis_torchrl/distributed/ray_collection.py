@@ -33,6 +33,7 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
+from oasis_torchrl.compat import drop_ray_collectors
 from oasis_torchrl.config.env import EnvConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.distributed.sharded_recording import ShardRecorder
@@ -331,16 +332,9 @@ class RayCollection:
         return dead
 
     def _drop(self, lost: list[int]) -> None:
-        """Remove lost actors from the collector and its weight senders (TorchRL 0.13 layout:
-        RayCollector has no public way to shrink)."""
+        """Remove lost actors from the collector and its weight senders."""
         keep = [i for i, worker in enumerate(self._workers) if worker not in lost]
-        actors = [self.collector.remote_collectors[i] for i in keep]
-        self.collector._remote_collectors = actors
-        self.collector.num_collectors = len(actors)
-        self.collector._batches_since_weight_update = [0] * len(actors)
-        for scheme in (self.collector._weight_sync_schemes or {}).values():
-            scheme._remote_collectors = list(actors)
-            scheme._num_workers = len(actors)
+        drop_ray_collectors(self.collector, keep)
         self._workers = [self._workers[i] for i in keep]
 
     # -- closing -------------------------------------------------------------------------

@@ -33,9 +33,9 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
+from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
-from oasis_torchrl.train.policy_source import load_policy
 
 logger = logging.getLogger(__name__)
 
@@ -202,7 +202,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
                 episodes=cfg.dagger.episodes,
                 seed=cfg.record.seed + 1000 * round_,
                 noise=ActionNoise(**cfg.dagger.noise),
-                learner=load_policy(bc_cfg.init_from).policy,
+                learner=load_driver(bc_cfg.init_from),
                 progress=cfg.progress,
             )
         train_bc(bc_cfg)
@@ -222,12 +222,12 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     results = {}
     names = list(policies)
     for name in names:
-        source = load_policy(policies[name])
+        driver = load_driver(policies[name])
         eval_cfg = cfg.eval if name == names[-1] else plain
         with Evaluator(
-            cfg.env, eval_cfg, image_size=source.image_size, progress=cfg.progress
+            cfg.env, eval_cfg, image_size=driver.image_size, progress=cfg.progress
         ) as evaluator:
-            results[name] = evaluator.evaluate(source.policy).summary()
+            results[name] = evaluator.evaluate(driver).summary()
         logger.info("%s: %s", name, results[name])
     return results
 
@@ -251,7 +251,7 @@ def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
     Example:
         >>> stage = run_ppo(ppo_config(load_config("demo"), None))  # doctest: +SKIP
     """
-    from oasis_torchrl.train.checkpoint import LATEST, load_checkpoint
+    from oasis_torchrl.models.checkpoint import LATEST, load_checkpoint
     from oasis_torchrl.train.ppo import train_ppo
 
     out = Path(ppo_cfg.output_dir)

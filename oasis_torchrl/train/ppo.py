@@ -33,7 +33,7 @@ from oasis_torchrl.config import save_config, section
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
-from oasis_torchrl.train.checkpoint import (
+from oasis_torchrl.models.checkpoint import (
     BEST,
     LATEST,
     export_lerobot,

@@ -10,8 +10,11 @@ import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver
+from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, load_driver
 from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig
+from oasis_torchrl.models.checkpoint import export_lerobot, save_checkpoint
+from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.config import ServerConfig
 
 
@@ -83,8 +86,27 @@ def test_saved_policies_drive(tmp_path: Path) -> None:
         PolicyDriver.load(tmp_path / "missing.pt")
 
 
-def test_record_command_offers_every_driver_kind() -> None:
-    from oasis_torchrl.config.recording import DRIVERS
-    from oasis_torchrl.drivers import DRIVER_KINDS
-
-    assert DRIVERS == DRIVER_KINDS
+def test_one_grammar_names_every_driver(tmp_path: Path) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+    checkpoint = save_checkpoint(tmp_path / "ppo.pt", net)
+    folder = export_lerobot(net, tmp_path / "bc_policy")
+    scripted = tmp_path / "linear.pt"
+    torch.jit.save(torch.jit.script(torch.nn.Linear(2, 8)), scripted)
+    assert type(load_driver("autopilot")).__name__ == "Autopilot"
+    assert load_driver("constant:throttle=1").image_size is None
+    assert (
+        load_driver("scripted:steering=0.2")(TensorDict(batch_size=[1]))["action"][0, 0, 1] == 0.2
+    )
+    for saved in (checkpoint, folder):  # the driving network: deterministic, at its size
+        driver = load_driver(saved)
+        assert driver.image_size == (32, 48)
+        frames = torch.randint(0, 255, (2, 4, 32, 48, 3), dtype=torch.uint8)
+        pixels = {camera: frames for camera in CAMERAS}
+        observation = TensorDict(pixels=pixels, state=torch.zeros(2, 2), batch_size=[2])
+        first, second = (driver(observation.clone())["action"] for _ in range(2))
+        assert torch.equal(first, second)
+    assert isinstance(load_driver(scripted, in_keys=["state"]), PolicyDriver)
+    with pytest.raises(ValueError, match="is none of 'autopilot', 'scripted:<script>'"):
+        load_driver("autopilt")
+    with pytest.raises(ValueError, match="bad driver spec item"):
+        load_driver("scripted:speed=1")

@@ -66,9 +66,7 @@ def test_bad_ray_flags_are_refused_before_ray_runs(
 def test_a_torchscript_policy_driver_travels_as_its_spec(tmp_path: Path) -> None:
     path = tmp_path / "policy.pt"
     torch.jit.save(torch.jit.script(torch.nn.Linear(2, 8)), path)
-    spec = pickle.loads(
-        pickle.dumps(DriverSpec("policy", policy=path, policy_in_keys=(("state",),)))
-    )
+    spec = pickle.loads(pickle.dumps(DriverSpec(str(path), in_keys=(("state",),))))
     driver = spec()
     assert isinstance(driver, PolicyDriver)
     action = driver(TensorDict(state=torch.ones(3, 2), batch_size=[3]))["action"]
@@ -127,7 +125,7 @@ def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
         result = record_on_ray(
             config,
             create_env,
-            DriverSpec("scripted", script="throttle=0.5"),
+            DriverSpec("scripted:throttle=0.5"),
             tmp_path / "drives",
             episodes=4 * SESSIONS,
             batch_steps=STEPS,

@@ -10,7 +10,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from viz._readback import Readback
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.train.checkpoint import load_checkpoint
+from oasis_torchrl.models.checkpoint import load_checkpoint
 
 from .conftest import TINY_ENV
 

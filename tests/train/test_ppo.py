@@ -15,7 +15,7 @@ from tensordict import TensorDict
 from oasis_torchrl.config import load_config
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
-from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
+from oasis_torchrl.models.checkpoint import export_lerobot, load_checkpoint, load_net
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 
 from .conftest import TINY_ENV

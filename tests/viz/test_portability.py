@@ -138,7 +138,9 @@ print(rerun.__version__)
 @pytest.mark.skipif(NEWEST is None, reason="set OASIS_RERUN_NEWEST_PATH to another rerun-sdk")
 def test_logging_runs_on_a_newer_rerun(tmp_path: Path) -> None:
     out = tmp_path / "newest.rrd"
-    env = {**os.environ, "PYTHONPATH": str(NEWEST)}
+    # rerun-sdk's wheel keeps the package under rerun_sdk/ (a .pth file adds it to the path).
+    paths = [str(Path(NEWEST) / "rerun_sdk"), NEWEST, os.environ.get("PYTHONPATH", "")]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path for path in paths if path)}
     script = textwrap.dedent(_SCRIPT).format(
         tests=str(Path(__file__).parents[1]), out=str(out), installed=rr.__version__
     )
