@@ -1,5 +1,6 @@
 """Start the embedded A2V server in this process (:class:`LocalServer`) or as a subprocess
-(:class:`ServerProcess`), e.g. for tests, examples and offline training.
+(:class:`ServerProcess`), e.g. for tests, examples and offline training; either way with the
+worker processes its config asks for.
 
 Both accept a :class:`ServerConfig` plus field overrides. When the config names no API key,
 the launcher generates a random one, configures the server with it and exposes it as
@@ -45,7 +46,9 @@ def _with_api_key(config: ServerConfig | None, overrides: dict[str, Any]) -> Ser
 
 
 class LocalServer:
-    """The embedded A2V server running in this process, on a free loopback port by default.
+    """The embedded A2V server running in this process, on a free loopback port by default
+    (with ``config.processes`` worker processes for the sessions' worlds, which stop with it;
+    ``processes=0`` keeps everything in this process).
 
     Args:
         config: Server settings (defaults to :class:`ServerConfig`).
