@@ -1,10 +1,8 @@
 """Drivers for recording: TorchRL-policy-like callables ``td -> td`` that set ``"action"``.
 
-- :class:`Autopilot`: the embedded simulator's privileged expert
-  (:mod:`oasis_torchrl.sim.autopilot`), working from the TensorDict alone: the row's
-  ``"prompt"`` and ``"episode_seed"`` rebuild the (deterministic) world with
-  :func:`~oasis_torchrl.sim.scene.build_scene`, and the row's ground truth ``("truth", field)``
-  places the car in it.
+- :class:`Autopilot`: the embedded server's privileged expert; the server runs it next to each
+  session's world and sends its next chunk with the ground truth, which the env exposes as
+  ``"expert_action"``.
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a saved policy (TorchScript or ``torch.save``d module).
 - :class:`DriverSpec`: any of them as plain picklable values, built where it drives (e.g. in a
@@ -21,23 +19,15 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import torch
-from tensordict import NonTensorData, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from oasis_torchrl.client import TRUTH_FIELDS
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
-from oasis_torchrl.sim.autopilot import Autopilot as SimAutopilot
-from oasis_torchrl.sim.scene import Scene, cached_scene
-from oasis_torchrl.sim.vehicle import VehicleState
-from oasis_torchrl.sim.world import FrameTruth, World
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
-
-TRUTH = "truth"
 
 
 class Driver(ABC):
@@ -71,96 +61,38 @@ class Driver(ABC):
 
 # -- autopilot ----------------------------------------------------------------------------
 
-
-def _row_strings(td: TensorDictBase, key: str) -> list[str]:
-    value = td.get(key, None)
-    if value is None:
-        raise KeyError(f"the observation has no {key!r}")
-    if isinstance(value, NonTensorData):
-        value = value.data
-    if isinstance(value, str):
-        return [value] * td.batch_size[0]
-    return list(value.tolist())
-
-
-class _RowPilot:
-    """The simulator's :class:`~oasis_torchrl.sim.autopilot.Autopilot` for one env row.
-
-    That autopilot reads a live simulator's ``world``; here the world is rebuilt from the row:
-    the scene from prompt and seed, the car's state and truth from the row's ground truth.
-    """
-
-    def __init__(self, scene: Scene, fps: float, target_speed: float | None) -> None:
-        self.scene = scene
-        self.world = World(scene, dt=1.0 / fps)
-        self.pilot = SimAutopilot(SimpleNamespace(world=self.world), target_speed)
-
-    def act(self, truth: FrameTruth) -> np.ndarray:
-        """The next chunk ``(4, 2)`` from the car's current ground truth."""
-        world = self.world
-        world.state = VehicleState(truth.x, truth.y, truth.heading, truth.speed)
-        world.truth = truth
-        # A fresh episode has not moved yet (its reset chunk stands still).
-        world.steps = 0 if truth.distance == 0.0 else world.steps + CHUNK
-        return self.pilot.act()
+EXPERT_ACTION = "expert_action"
 
 
 class Autopilot(Driver):
-    """The privileged expert (:mod:`oasis_torchrl.sim.autopilot`), driven from the TensorDict.
+    """The embedded server's privileged expert: drives with each row's ``"expert_action"``.
 
-    Each row's ``"prompt"`` and ``"episode_seed"`` rebuild its world (cached per pair) and its
-    ground truth ``("truth", field)`` (last frame of the chunk) places the car; only the
-    embedded server sends ground truth. Rows whose truth is missing (NaN) get zeros.
+    The embedded server runs an autopilot beside every session's world (it knows the scene and
+    the car's exact state) and sends the chunk it would take next with the ground truth; the env
+    exposes it as ``"expert_action"`` whenever ground truth is on. Rows without one (NaN: the
+    row's session was lost) get zeros.
 
     Args:
-        fps: world-model frame rate (the simulator's time step is ``1 / fps``).
-        target_speed: cruise speed in m/s (default: the autopilot's, from the speed limit).
         chunk_actions: see :class:`Driver`.
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv  # doctest: +SKIP
-        >>> env = OasisEnv("local", num_envs=2)  # doctest: +SKIP
-        >>> rollout = env.rollout(20, Autopilot())  # doctest: +SKIP
+        >>> from tensordict import TensorDict
+        >>> expert = torch.tensor([[[0.6, 0.1]] * 4, [[float("nan")] * 2] * 4])
+        >>> Autopilot()(TensorDict(expert_action=expert, batch_size=[2]))["action"][:, 0]
+        tensor([[0.6000, 0.1000],
+                [0.0000, 0.0000]])
     """
-
-    def __init__(
-        self,
-        fps: float = FPS,
-        target_speed: float | None = None,
-        *,
-        chunk_actions: bool = True,
-    ) -> None:
-        super().__init__(chunk_actions=chunk_actions)
-        self.fps = fps
-        self.target_speed = target_speed
-        self._rows: dict[int, _RowPilot] = {}
-
-    def _pilot(self, row: int, prompt: str, seed: int) -> _RowPilot:
-        scene = cached_scene(prompt, seed)
-        pilot = self._rows.get(row)
-        if pilot is None or pilot.scene is not scene:
-            pilot = self._rows[row] = _RowPilot(scene, self.fps, self.target_speed)
-        return pilot
 
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """The expert's next chunk for every row."""
-        missing = [name for name in TRUTH_FIELDS if (TRUTH, name) not in td.keys(True)]
-        if missing:
+        expert = td.get(EXPERT_ACTION, None)
+        if expert is None:
             raise KeyError(
-                f"the autopilot needs ground truth {[(TRUTH, m) for m in missing]}, which only "
-                "the embedded server (endpoint 'local') sends"
+                f"the autopilot drives with {EXPERT_ACTION!r}, which only the embedded server "
+                "sends (endpoint 'local', or an 'oasis-torchrl serve' server with "
+                "ground_truth=True)"
             )
-        truth = torch.stack([td.get((TRUTH, name))[:, -1] for name in TRUTH_FIELDS], dim=-1)
-        truth = truth.double().cpu().numpy()
-        prompts = _row_strings(td, "prompt")
-        seeds = td.get("episode_seed").reshape(-1).tolist()
-        chunks = np.zeros((len(prompts), CHUNK, 2), np.float32)
-        for row, (prompt, seed) in enumerate(zip(prompts, seeds, strict=True)):
-            if not np.isnan(truth[row]).any():  # NaN: no truth (inf is a valid distance)
-                fields = dict(zip(TRUTH_FIELDS, truth[row].tolist(), strict=True))
-                fields.update(collided=fields["collided"] > 0.5, off_road=fields["off_road"] > 0.5)
-                chunks[row] = self._pilot(row, prompt, int(seed)).act(FrameTruth(**fields))
-        return torch.from_numpy(chunks)
+        return torch.nan_to_num(expert, nan=0.0)
 
 
 # -- scripted driver ----------------------------------------------------------------------
@@ -342,7 +274,6 @@ class DriverSpec:
         script: the scripted driver's spec (see :meth:`ScriptedDriver.from_spec`).
         policy: the saved policy file (``kind="policy"``; read where the driver is built).
         policy_in_keys: inputs of a plain policy module (see :class:`PolicyDriver`).
-        fps: world-model frame rate (the autopilot's time step is ``1 / fps``).
 
     Example:
         >>> import pickle
@@ -355,7 +286,6 @@ class DriverSpec:
     script: str = "throttle=0.5"
     policy: Path | None = None
     policy_in_keys: tuple[tuple[str, ...], ...] | None = None
-    fps: float = FPS
 
     def __post_init__(self) -> None:
         if self.kind not in DRIVER_KINDS:
@@ -366,7 +296,7 @@ class DriverSpec:
     def __call__(self) -> Driver:
         """Build the driver."""
         if self.kind == "autopilot":
-            return Autopilot(self.fps)
+            return Autopilot()
         if self.kind == "scripted":
             return ScriptedDriver.from_spec(self.script)
         return PolicyDriver.load(self.policy, in_keys=self.policy_in_keys)

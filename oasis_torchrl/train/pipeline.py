@@ -147,7 +147,7 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     if round_:
         values["init_from"] = str(out / f"round_{round_ - 1}" / "policy")
         values["train"] = {"steps": cfg.dagger.steps}
-    return OmegaConf.merge(load_config("bc"), cfg.bc, values)
+    return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)
 
 
 def ppo_config(
@@ -170,7 +170,13 @@ def ppo_config(
         "env": cfg.env,
         "eval": {key: cfg.eval[key] for key in SHARED_EVAL_KEYS},
     }
-    return OmegaConf.merge(load_config("ppo"), cfg.ppo if fine_tune else {}, values)
+    return OmegaConf.merge(load_config("ppo"), _plain(cfg.ppo) if fine_tune else {}, values)
+
+
+def _plain(stage: DictConfig) -> dict[str, Any]:
+    """A stage's settings as plain values, to merge into the stand-alone config that holds them
+    (a typed section only merges into a config of its own type)."""
+    return OmegaConf.to_container(stage, resolve=True)
 
 
 def clone(cfg: DictConfig, dataset: Path) -> Path:

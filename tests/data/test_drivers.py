@@ -1,4 +1,4 @@
-"""Drivers of ``oasis-torchrl record``: autopilot from TensorDicts, scripts, saved policies."""
+"""Drivers of ``oasis-torchrl record``: the server's expert, scripts, saved policies."""
 
 from __future__ import annotations
 
@@ -7,54 +7,35 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from tensordict import NonTensorStack, TensorDict
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from oasis_torchrl.client import TRUTH_FIELDS
-from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, cached_scene
-from oasis_torchrl.sim.world import World
-
-WORLDS = [("urban street", 4), ("highway", 1), ("rural road", 2), ("city at night", 0)]
+from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
 
 
-def _observation(worlds: list[World], chunks: list[list]) -> TensorDict:
-    """The env's observation keys for these worlds: truth of each chunk, prompt, seed."""
-    truth = {
-        name: torch.tensor([[float(getattr(t, name)) for t in chunk] for chunk in chunks])
-        for name in TRUTH_FIELDS
-    }
-    return TensorDict(
-        truth=truth,
-        prompt=NonTensorStack(*(prompt for prompt, _ in WORLDS)),
-        episode_seed=torch.tensor([[seed] for _, seed in WORLDS]),
-        batch_size=[len(worlds)],
-    )
+def test_autopilot_drives_with_the_servers_expert() -> None:
+    prompts = ["urban street", "highway", "rural road"]
+    env = OasisEnv("local", 3, prompts, server=ServerConfig(width=64, height=48), max_steps=60)
+    env.set_seed(4)
+    try:
+        rollout = env.rollout(60, Autopilot())
+    finally:
+        env.close()
+    assert torch.equal(rollout["action"], rollout["expert_action"])
+    truth = rollout["next", "truth"]
+    assert not truth["collided"].any()
+    assert (truth["progress"][:, -1, -1] > 60.0).all()  # 12 s of driving in every scene
 
 
-def test_autopilot_drives_from_the_tensordict_alone() -> None:
-    worlds = [World(cached_scene(prompt, seed), dt=0.05) for prompt, seed in WORLDS]
-    chunks = [[world.advance(0.0, 0.0) for _ in range(4)] for world in worlds]  # the reset
-    autopilot = Autopilot()
-    for _ in range(100):  # 20 s of driving
-        actions = autopilot(_observation(worlds, chunks))["action"]
-        assert actions.shape == (len(worlds), 4, 2)
-        chunks = [
-            [world.advance(*actions[row, k].tolist()) for k in range(4)]
-            for row, world in enumerate(worlds)
-        ]
-    for world in worlds:
-        assert not world.truth.collided and world.truth.progress > 120.0, world.truth
-
-
-def test_autopilot_needs_ground_truth_and_skips_rows_without_it() -> None:
-    worlds = [World(cached_scene(prompt, seed), dt=0.05) for prompt, seed in WORLDS]
-    td = _observation(worlds, [[world.truth] * 4 for world in worlds])
-    td["truth", "speed"][1] = float("nan")  # a row whose session was lost
-    actions = Autopilot(chunk_actions=False)(td)["action"]
-    assert actions.shape == (4, 2) and actions[1].tolist() == [0.0, 0.0] and actions[0, 0] > 0
-    del td["truth"]
-    with pytest.raises(KeyError, match="embedded server"):
-        Autopilot()(td)
+def test_autopilot_needs_the_expert_and_stops_rows_without_one() -> None:
+    expert = torch.full((3, 4, 2), 0.5)
+    expert[1] = float("nan")  # a row whose session was lost
+    actions = Autopilot(chunk_actions=False)(TensorDict(expert_action=expert, batch_size=[3]))
+    assert actions["action"].tolist() == [[0.5, 0.5], [0.0, 0.0], [0.5, 0.5]]
+    with pytest.raises(KeyError, match="only the embedded server"):
+        Autopilot()(TensorDict(truth=TensorDict(speed=torch.zeros(3, 4)), batch_size=[3]))
 
 
 def test_scripted_driver_follows_its_spec() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -12,9 +13,9 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
-from oasis_torchrl.train.environment import PRIVILEGED_FIELDS
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 
 from .conftest import TINY_ENV
@@ -122,9 +123,11 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
     latest = load_checkpoint(tmp_path / "checkpoints" / "latest.pt")  # the training state
     assert (latest["frames"], latest["best_selection"]) == (48, max(distances))
 
-    for bad in ("[]", "2000", "[a]"):
-        with pytest.raises(ValueError, match=r"eval\.selection_seeds must be null or a non-empty"):
-            PPOTrainer(_ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}"))
+    with pytest.raises(ValueError, match=r"eval\.selection_seeds must be null or a non-empty"):
+        _ppo_config(tmp_path, 48, "eval.selection_seeds=[]")
+    for bad in ("2000", "[a]"):  # a typed setting: refused where it is set, naming it
+        with pytest.raises(ValueError, match=rf"eval\.selection_seeds={re.escape(bad)}: "):
+            _ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}")
 
 
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
