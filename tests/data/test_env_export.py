@@ -85,7 +85,7 @@ def test_rollout_round_trip_on_the_embedded_server(tmp_path: Path, small_server)
         sample = dataset[episode.start + 2]  # row 2 shows f1 of the first chunk
         original = steps["next", "pixels", "front"][0, 1].numpy()
         scores.append(psnr(sample["observation.images.front"], original))
-    assert min(scores) > 25.0, scores
+    assert min(scores) > 24.0, scores  # h264 at crf 30 of raw 64x48 frames (VP9 ones are smoother)
     _assert_no_secrets(root)
 
 
