@@ -33,9 +33,12 @@ from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import (
     API_KEY_METADATA,
     CAMERAS,
+    FRAMES_METADATA,
+    LAST_FRAME_ONLY,
     SEED_METADATA,
     SESSION_TARGET_METADATA,
     TRUTH_METADATA,
+    FrameFormat,
 )
 from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.config import ServerConfig
@@ -203,8 +206,13 @@ class A2VServicer:
         key_digest = self._gate.admit("Initialize", self._initialize_key(request, context))
         check_sdk_version(request.client_sdk_version)
         output_format = negotiate_format(request.accepted_output_formats, self._config.formats)
-        session = self._registry.open(key_digest, output_format)
-        context.send_initial_metadata(((SESSION_TARGET_METADATA, session.target),))
+        last_frame_only = (
+            _text_metadata(context, FRAMES_METADATA) == LAST_FRAME_ONLY
+            and output_format == FrameFormat.RAW_RGB24
+        )
+        session = self._registry.open(key_digest, output_format, last_frame_only=last_frame_only)
+        granted = ((FRAMES_METADATA, LAST_FRAME_ONLY),) if last_frame_only else ()
+        context.send_initial_metadata(((SESSION_TARGET_METADATA, session.target), *granted))
         return a2v_pb2.InitializeResponse(
             session_id=session.session_id, output_format=output_format, streams=self.stream_infos
         )

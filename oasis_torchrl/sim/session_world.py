@@ -69,7 +69,9 @@ class WorldHost(Protocol):
         """Get ready to open worlds."""
         ...
 
-    def open(self, session_id: str, output_format: int) -> WorldHandle:
+    def open(
+        self, session_id: str, output_format: int, *, last_frame_only: bool = False
+    ) -> WorldHandle:
         """A new session's world (built at its first Prompt)."""
         ...
 
@@ -84,6 +86,8 @@ class SessionWorld:
 
     The simulator and encoders are built at the first Prompt. Streams are encoded on
     ``encode_pool`` when encoding is slow (VP9, JPEG) and there is a pool, else one by one.
+    With ``last_frame_only`` (granted for raw frames only: a codec's stream needs every frame)
+    each answer holds the last frame of each stream, and only that one is drawn.
 
     Example:
         >>> from concurrent.futures import ThreadPoolExecutor
@@ -102,8 +106,11 @@ class SessionWorld:
         config: ServerConfig,
         encode_pool: Executor | None,
         simulator_factory: SimulatorFactory = Simulator,
+        *,
+        last_frame_only: bool = False,
     ) -> None:
         self.output_format = output_format
+        self.last_frame_only = last_frame_only
         self._config = config
         self._encode_pool = encode_pool
         self._simulator_factory = simulator_factory
@@ -158,7 +165,8 @@ class SessionWorld:
                 " (it restarts at 0 after every Prompt)",
                 {"expected": str(self._next_sequence_num), "got": str(sequence_num)},
             )
-        result = self._simulator.step(actions)
+        options = {"last_only": True} if self.last_frame_only else {}
+        result = self._simulator.step(actions, **options)
         encode = lambda name: self._encode(name, result.rgb[name])  # noqa: E731
         pool = self._encode_pool if self._encoders[CAMERAS[0]].threaded else None
         streams = map(encode, CAMERAS) if pool is None else pool.map(encode, CAMERAS)
@@ -242,9 +250,17 @@ class LocalWorlds:
     def start(self) -> None:
         """Nothing to start: worlds are built in this process when sessions open."""
 
-    def open(self, session_id: str, output_format: int) -> SessionWorld:
+    def open(
+        self, session_id: str, output_format: int, *, last_frame_only: bool = False
+    ) -> SessionWorld:
         """A new world for session ``session_id``."""
-        return SessionWorld(output_format, self._config, self._encode_pool, self._simulator_factory)
+        return SessionWorld(
+            output_format,
+            self._config,
+            self._encode_pool,
+            self._simulator_factory,
+            last_frame_only=last_frame_only,
+        )
 
     def close(self) -> None:
         """Stop the encoder threads."""
