@@ -53,6 +53,12 @@ SEED_METADATA = "x-oasis-seed"
 """Decimal seed of a Prompt call's scene on the embedded server (no seed means seed 0)."""
 TRUTH_METADATA = "x-oasis-truth-bin"
 """Binary trailing metadata of an Infer answer: ``oasis_torchrl.sim.v1.InferTruth``."""
+EXPERT_METADATA = "x-oasis-expert"
+"""Prompt metadata: ``on`` runs the embedded server's expert (its privileged autopilot) beside the
+rollout that Prompt starts, and every Infer's ground truth then carries the expert's next chunk
+(``expert_actions``); without it the server spends nothing on the expert and sends none."""
+EXPERT_ON = "on"
+"""The value of :data:`EXPERT_METADATA` asking for the expert."""
 FRAMES_METADATA = "x-oasis-frames"
 """Initialize metadata: ``last`` asks for only the last frame of each chunk (a client that looks
 at nothing else). The embedded server grants it for raw frames, which stand alone (a codec's

@@ -272,7 +272,9 @@ class SessionPool:
     sessions. ``frames="last"`` returns only the last frame of each chunk (``[n, 1, H, W, 3]``):
     the pool asks the server for it alone (``x-oasis-frames``, granted by the embedded server for
     raw frames, so the others are never drawn nor sent); from other servers the other three are
-    still decoded, so the streams stay in sync, but never converted to RGB.
+    still decoded, so the streams stay in sync, but never converted to RGB. ``expert=True``
+    asks every Prompt for the embedded server's expert, whose next chunk each step returns
+    (``PoolStep.expert``, NaN without it).
 
     ``endpoint`` is an A2V endpoint URL, or a :class:`ServerHandle` (such as the embedded
     server's launcher): the pool starts that server when it starts, takes its endpoint and key,
@@ -302,6 +304,7 @@ class SessionPool:
         decode_threads: int | None = None,
         client_sdk_version: str = DEFAULT_SDK_VERSION,
         frames: str = "all",
+        expert: bool = False,
     ) -> None:
         if frames not in FRAME_SELECTIONS:
             raise ValueError(f"frames must be one of {sorted(FRAME_SELECTIONS)}, got {frames!r}")
@@ -323,6 +326,7 @@ class SessionPool:
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
         self.frames = frames
+        self.expert = expert
         self._num_sessions = num_sessions
         self._target = None if self.endpoint is None else parse_endpoint(self.endpoint, tls).address
         self._streams: tuple[StreamInfo, ...] = ()
@@ -663,6 +667,7 @@ class SessionPool:
             required_streams=self.required_streams,
             decoder_threads=1,  # the pool decodes many streams in parallel
             last_frame_only=self.frames == "last",
+            expert=self.expert,
         )
 
     def _require_started(self) -> _Runtime:

@@ -20,6 +20,8 @@ from oasis_torchrl.protocol import (
     API_KEY_ENV_VAR,
     API_KEY_METADATA,
     CHUNK,
+    EXPERT_METADATA,
+    EXPERT_ON,
     FRAMES_METADATA,
     LAST_FRAME_ONLY,
     MAX_SEED,
@@ -72,15 +74,18 @@ def call_metadata(api_key: str | None, session_target: str | None = None) -> Met
     return tuple(metadata)
 
 
-def prompt_metadata(metadata: Metadata, seed: int | None) -> Metadata:
-    """Session metadata plus the ``x-oasis-seed`` of a Prompt (omitted when ``seed`` is None).
+def prompt_metadata(metadata: Metadata, seed: int | None, expert: bool = False) -> Metadata:
+    """Session metadata plus the ``x-oasis-seed`` of a Prompt (omitted when ``seed`` is None)
+    and, if ``expert``, the ``x-oasis-expert`` request for the embedded server's expert.
 
     >>> prompt_metadata((), 7)
     (('x-oasis-seed', '7'),)
+    >>> prompt_metadata((), None, expert=True)
+    (('x-oasis-expert', 'on'),)
     """
-    if seed is None:
-        return metadata
-    return (*metadata, (SEED_METADATA, str(validate_seed(seed))))
+    seeded = () if seed is None else ((SEED_METADATA, str(validate_seed(seed))),)
+    asked = ((EXPERT_METADATA, EXPERT_ON),) if expert else ()
+    return (*metadata, *seeded, *asked)
 
 
 def validate_seed(seed: int) -> int:

@@ -33,6 +33,8 @@ from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import (
     API_KEY_METADATA,
     CAMERAS,
+    EXPERT_METADATA,
+    EXPERT_ON,
     FRAMES_METADATA,
     LAST_FRAME_ONLY,
     SEED_METADATA,
@@ -171,7 +173,8 @@ class A2VServicer:
     def Prompt(
         self, request: a2v_pb2.PromptRequest, context: grpc.ServicerContext
     ) -> a2v_pb2.PromptResponse:
-        """Set the session's scene from the prompt and the ``x-oasis-seed`` metadata."""
+        """Set the session's scene from the prompt and the ``x-oasis-seed`` metadata (and run
+        the expert beside it if ``x-oasis-expert`` asks)."""
         return _run_rpc(
             context,
             lambda: self._prompt(request, context),
@@ -236,7 +239,8 @@ class A2VServicer:
         with self._gate.use("Prompt", request.session_id, context) as session:
             check_prompt(request.prompt, self._config.max_prompt_chars)
             seed = parse_seed(_metadata(context, SEED_METADATA))
-            session.world.prompt(request.prompt, seed)
+            expert = _text_metadata(context, EXPERT_METADATA) == EXPERT_ON
+            session.world.prompt(request.prompt, seed, expert=expert)
         return a2v_pb2.PromptResponse()
 
     def _infer(

@@ -41,8 +41,9 @@ class InferRecord:
 class WorldHandle(Protocol):
     """A session's world as the server drives it, wherever it runs."""
 
-    def prompt(self, prompt: str, seed: int) -> None:
-        """Set a new scene (the rollout restarts at sequence number 0)."""
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
+        """Set a new scene (the rollout restarts at sequence number 0), with the expert beside
+        it if ``expert``."""
         ...
 
     def infer(self, sequence_num: int, actions: np.ndarray) -> InferRecord:
@@ -81,8 +82,8 @@ class WorldHost(Protocol):
 
 
 class SessionWorld:
-    """One session's simulator, its expert (the autopilot, restarted at every Prompt), one
-    encoder per stream, and the rollout position with the last answer for retries.
+    """One session's simulator, its expert (the autopilot, restarted at every Prompt that asks
+    for it), one encoder per stream, and the rollout position with the last answer for retries.
 
     The simulator and encoders are built at the first Prompt. Streams are encoded on
     ``encode_pool`` when encoding is slow (VP9, JPEG) and there is a pool, else one by one.
@@ -94,10 +95,12 @@ class SessionWorld:
         >>> config = ServerConfig(width=64, height=48, api_keys=("k",))
         >>> with ThreadPoolExecutor(3) as pool:
         ...     world = SessionWorld(common_pb2.FRAME_FORMAT_JPEG, config, pool)
-        ...     world.prompt("a quiet road", seed=3)
+        ...     world.prompt("a quiet road", seed=3, expert=True)
         ...     record = world.infer(0, np.zeros((4, 2), np.float32))
         >>> [len(s.frames) for s in a2v_pb2.InferResponse.FromString(record.response).streams]
         [4, 4, 4]
+        >>> len(sim_pb2.InferTruth.FromString(record.truth).expert_actions)
+        8
     """
 
     def __init__(
@@ -121,9 +124,9 @@ class SessionWorld:
         self._next_sequence_num = 0
         self._last: tuple[int, np.ndarray, InferRecord] | None = None
 
-    def prompt(self, prompt: str, seed: int) -> None:
-        """Set a new scene: reset the world and the expert, restart every stream with a key
-        frame."""
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
+        """Set a new scene: reset the world and (if ``expert``) start the expert, restart every
+        stream with a key frame."""
         if self._simulator is None:
             config = self._config
             self._simulator = self._simulator_factory(
@@ -140,7 +143,7 @@ class SessionWorld:
                 for name in CAMERAS
             }
         self._simulator.reset(prompt, seed)
-        self._expert = Autopilot(self._simulator)
+        self._expert = Autopilot(self._simulator) if expert else None
         for encoder in self._encoders.values():
             encoder.restart()
         self._seed = seed
@@ -174,7 +177,7 @@ class SessionWorld:
             sequence_num=sequence_num,
             seed=self._seed,
             frames=[frame.to_proto() for frame in result.truth],
-            expert_actions=self._expert.act().ravel().tolist(),
+            expert_actions=() if self._expert is None else self._expert.act().ravel().tolist(),
         )
         response = a2v_pb2.InferResponse(sequence_num=sequence_num, streams=list(streams))
         record = InferRecord(response.SerializeToString(), truth.SerializeToString())

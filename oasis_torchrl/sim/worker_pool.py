@@ -218,9 +218,9 @@ class RemoteWorld:
         self._session_id = session_id
         self._delivery = (output_format, last_frame_only)
 
-    def prompt(self, prompt: str, seed: int) -> None:
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
         """Set a new scene (the worker builds the world at the first Prompt)."""
-        self._worker.call("prompt", self._session_id, self._delivery, prompt, seed)
+        self._worker.call("prompt", self._session_id, self._delivery, prompt, seed, expert)
 
     def infer(self, sequence_num: int, actions: np.ndarray) -> InferRecord:
         """Advance the world by 4 actions."""
