@@ -58,7 +58,13 @@ def record_rollout(num_envs: int, steps: int, width: int, height: int) -> Tensor
     server = ServerConfig(width=width, height=height)
     prompts = ["urban street", "rural road at sunset", "highway in fog", "city at night"]
     env = OasisEnv(
-        "local", num_envs, prompts[:num_envs], server=server, all_frames=True, max_steps=steps
+        "local",
+        num_envs,
+        prompts[:num_envs],
+        server=server,
+        all_frames=True,
+        max_steps=steps,
+        expert=True,
     )
     try:
         return env.rollout(steps, Autopilot(), break_when_any_done=False)

@@ -12,7 +12,9 @@ as in training), in the same run, alternating:
 The same run measures the render-only ceiling of this machine: one process per core stepping
 the simulator (physics and rendering of 4 frames x 3 cameras, nothing else) as fast as it can;
 every configuration's figure is also given as a fraction of it. Env steps count rows: one
-step of N rows is N env steps. Prints JSON.
+step of N rows is N env steps. Each case also reports the CPU milliseconds each process spent
+per env step (the stepping process, the server's front and its workers): unlike the rates,
+these hardly move with the machine's load. Prints JSON.
 
 Run: ``python benchmarks/local_world.py [--seconds 10] [--sizes 1 8 16] [--repeats 1]``
 """
@@ -29,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from process_cpu import CpuMeter
 
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
@@ -51,8 +54,11 @@ def configurations() -> dict[str, dict[str, Any]]:
     }
 
 
-def env_steps_per_second(rows: int, seconds: float, **env_kwargs: Any) -> float:
-    """Rows x steps per second of one env, crashed rows reset as they end."""
+def env_steps_per_second(
+    rows: int, seconds: float, **env_kwargs: Any
+) -> tuple[float, dict[str, float | None]]:
+    """Rows x steps per second of one env, crashed rows reset as they end, and the CPU
+    milliseconds per env step of each process."""
     env = OasisEnv("local", rows, PROMPT, max_steps=10**6, **env_kwargs)
     try:
         env.set_seed(0)
@@ -60,11 +66,12 @@ def env_steps_per_second(rows: int, seconds: float, **env_kwargs: Any) -> float:
         action = torch.tensor([THROTTLE, 0.0]).expand(rows, 4, 2).clone()
         for _ in range(WARMUP_STEPS):
             _, td = env.step_and_maybe_reset(td.set("action", action))
+        meter = CpuMeter(getattr(env.server, "pid", None))
         steps, started = 0, time.perf_counter()
         while time.perf_counter() - started < seconds:
             _, td = env.step_and_maybe_reset(td.set("action", action))
             steps += 1
-        return rows * steps / (time.perf_counter() - started)
+        return rows * steps / (time.perf_counter() - started), meter.ms_per(rows * steps)
     finally:
         env.close()
 
@@ -100,12 +107,14 @@ def main() -> None:
     ceilings = [render_ceiling(args.seconds)]
     names = list(configurations())
     rates: dict[str, dict[int, list[float]]] = {name: {n: [] for n in args.sizes} for name in names}
+    cpu: dict[str, dict[int, list[dict]]] = {name: {n: [] for n in args.sizes} for name in names}
     for repeat in range(args.repeats):
         for rows in args.sizes:
             order = names if repeat % 2 == 0 else names[::-1]  # alternate: same load for both
             for name in order:
-                rate = env_steps_per_second(rows, args.seconds, **configurations()[name])
+                rate, cpu_ms = env_steps_per_second(rows, args.seconds, **configurations()[name])
                 rates[name][rows].append(rate)
+                cpu[name][rows].append(cpu_ms)
     ceilings.append(render_ceiling(args.seconds))
     ceiling = float(np.mean(ceilings))
     results: dict[str, Any] = {}
@@ -116,6 +125,7 @@ def main() -> None:
             **{f"{name}_all": [round(rate, 1) for rate in rates[name][rows]] for name in names},
             "default_over_in_process_vp9": round(medians["default"] / medians["in_process_vp9"], 2),
             **{f"{name}_fraction_of_ceiling": round(medians[name] / ceiling, 3) for name in names},
+            **{f"{name}_cpu_ms_per_env_step": cpu[name][rows] for name in names},
         }
     default = {rows: results[f"N={rows}"]["default_env_steps_per_s"] for rows in args.sizes}
     report = {

@@ -15,28 +15,14 @@ import argparse
 import json
 import os
 import time
-from pathlib import Path
 
 import numpy as np
+from process_cpu import CpuMeter
 
 from oasis_torchrl.client import SessionPool
 from oasis_torchrl.sim.launcher import ServerProcess
 
 PROMPT = "a quiet suburban road"
-
-
-def process_cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds of process ``pid`` and its children (the server's worker
-    processes), from Linux /proc; None elsewhere."""
-    stat = Path(f"/proc/{pid}/stat")
-    if not stat.exists():
-        return None
-    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-    total = 0.0
-    for process in (pid, *map(int, children)):
-        fields = Path(f"/proc/{process}/stat").read_text().rsplit(")", 1)[1].split()
-        total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    return total
 
 
 def session_steps_per_second(server: ServerProcess, sessions: int, seconds: float) -> dict:
@@ -46,8 +32,7 @@ def session_steps_per_second(server: ServerProcess, sessions: int, seconds: floa
         pool.reset(None, [PROMPT] * sessions, seeds=list(range(sessions)))
         pool.infer(np.zeros((sessions, 4, 2), np.float32))  # warm-up
         steps = 0
-        started, cpu_started = time.perf_counter(), time.process_time()
-        server_cpu_started = process_cpu_seconds(server.pid)
+        started, meter = time.perf_counter(), CpuMeter(server.pid)
         while time.perf_counter() - started < seconds:
             actions = rng.uniform(-1, 1, size=(sessions, 4, 2)).astype(np.float32)
             step = pool.infer(actions)
@@ -55,19 +40,18 @@ def session_steps_per_second(server: ServerProcess, sessions: int, seconds: floa
                 raise RuntimeError(f"a session failed during the benchmark: {step.errors}")
             steps += 1
         elapsed = time.perf_counter() - started
-        cpu = time.process_time() - cpu_started
-        server_cpu = process_cpu_seconds(server.pid)
-    session_steps = steps * sessions
-    if server_cpu is not None and server_cpu_started is not None:
-        server_cpu = round(1000 * (server_cpu - server_cpu_started) / session_steps, 2)
+        session_steps = steps * sessions
+        cpu_ms = meter.ms_per(session_steps)
     return {
         "pool_steps_per_s": round(steps / elapsed, 2),
         "session_steps_per_s": round(session_steps / elapsed, 2),
         "mean_step_ms": round(1000 * elapsed / steps, 1),
-        # CPU per session-step of the client (all its threads) and of the server process:
-        # shows which side's work bounds the rate on this machine.
-        "client_cpu_ms_per_session_step": round(1000 * cpu / session_steps, 2),
-        "server_cpu_ms_per_session_step": server_cpu,
+        # CPU per session-step of the client (all its threads), the server's front and its
+        # workers: shows which side's work bounds the rate on this machine.
+        "client_cpu_ms_per_session_step": cpu_ms["this_process"],
+        "server_front_cpu_ms_per_session_step": cpu_ms["front"],
+        "server_workers_cpu_ms_per_session_step": cpu_ms["workers"],
+        "total_cpu_ms_per_session_step": cpu_ms["total"],
     }
 
 

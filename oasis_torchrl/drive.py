@@ -59,7 +59,7 @@ def drive_route(
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
     server = ServerConfig(width=width, height=height)
-    env = OasisEnv("local", 1, prompt, server=server, all_frames=True, max_steps=steps)
+    env = OasisEnv("local", 1, prompt, server=server, all_frames=True, max_steps=steps, expert=True)
     pilot = Autopilot()
     started = time.perf_counter()
     taken = 0

@@ -2,8 +2,8 @@
 grammar that names them (:func:`load_driver`).
 
 - :class:`Autopilot`: the embedded server's privileged expert; the server runs it next to each
-  session's world and sends its next chunk with the ground truth, which the env exposes as
-  ``"expert_action"``.
+  session's world and sends its next chunk with the ground truth, which an env built with
+  ``expert=True`` exposes as ``"expert_action"`` (a driver's :attr:`~Driver.needs_expert`).
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
   checkpoint, or any TorchScript / ``torch.save``d module.
@@ -52,6 +52,9 @@ class Driver(ABC):
 
     image_size: tuple[int, int] | None = None
     """``(height, width)`` of the frames the driver looks at (None: it does not look)."""
+    needs_expert: bool = False
+    """Whether the driver drives with the embedded server's expert: build its env with
+    ``expert=True``."""
 
     def __init__(self, *, chunk_actions: bool = True) -> None:
         self.chunk_actions = chunk_actions
@@ -76,8 +79,8 @@ class Autopilot(Driver):
     """The embedded server's privileged expert: drives with each row's ``"expert_action"``.
 
     The embedded server runs an autopilot beside every session's world (it knows the scene and
-    the car's exact state) and sends the chunk it would take next with the ground truth; the env
-    exposes it as ``"expert_action"`` whenever ground truth is on. Rows without one (NaN: the
+    the car's exact state) and sends the chunk it would take next with the ground truth; an env
+    built with ``expert=True`` exposes it as ``"expert_action"``. Rows without one (NaN: the
     row's session was lost) get zeros.
 
     Args:
@@ -91,14 +94,16 @@ class Autopilot(Driver):
                 [0.0000, 0.0000]])
     """
 
+    needs_expert = True
+
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """The expert's next chunk for every row."""
         expert = td.get(EXPERT_ACTION, None)
         if expert is None:
             raise KeyError(
                 f"the autopilot drives with {EXPERT_ACTION!r}, which only the embedded server "
-                "sends (endpoint 'local', or an 'oasis-torchrl serve' server with "
-                "ground_truth=True)"
+                "sends, to an env built with expert=True (endpoint 'local', or an "
+                "'oasis-torchrl serve' server)"
             )
         return torch.nan_to_num(expert, nan=0.0)
 

@@ -53,6 +53,19 @@ SEED_METADATA = "x-oasis-seed"
 """Decimal seed of a Prompt call's scene on the embedded server (no seed means seed 0)."""
 TRUTH_METADATA = "x-oasis-truth-bin"
 """Binary trailing metadata of an Infer answer: ``oasis_torchrl.sim.v1.InferTruth``."""
+EXPERT_METADATA = "x-oasis-expert"
+"""Prompt metadata: ``on`` runs the embedded server's expert (its privileged autopilot) beside the
+rollout that Prompt starts, and every Infer's ground truth then carries the expert's next chunk
+(``expert_actions``); without it the server spends nothing on the expert and sends none."""
+EXPERT_ON = "on"
+"""The value of :data:`EXPERT_METADATA` asking for the expert."""
+FRAMES_METADATA = "x-oasis-frames"
+"""Initialize metadata: ``last`` asks for only the last frame of each chunk (a client that looks
+at nothing else). The embedded server grants it for raw frames, which stand alone (a codec's
+stream needs every frame), by sending it back in Initialize's initial metadata; every Infer of
+the session then carries one frame per stream (its ground truth still covers all 4)."""
+LAST_FRAME_ONLY = "last"
+"""The value of :data:`FRAMES_METADATA` asking for, and granting, the last frame alone."""
 MAX_SEED = 2**64 - 1
 SERVER_API_KEYS_ENV_VAR = "OASIS_SERVER_API_KEYS"
 """Comma-separated API keys the embedded server accepts."""

@@ -82,8 +82,9 @@ logger = logging.getLogger(__name__)
 FINISH_TIMEOUT_S = 5.0
 ZERO_CHUNK = np.zeros((CHUNK, 2), np.float32)
 FRAME_SELECTIONS = {"all": CHUNK, "last": 1}
-"""``frames=`` of :class:`SessionPool`: frames kept per chunk (``"last"`` skips the RGB
-conversion of the first three, which an env observing only the last frame never reads)."""
+"""``frames=`` of :class:`SessionPool`: frames kept per chunk (``"last"`` asks the server for
+the last frame alone, and otherwise skips the RGB conversion of the first three, which an env
+observing only the last frame never reads)."""
 RECOVERABLE_STEP_ERRORS = (TransportError, SessionLostError, SequenceError, DecodeError)
 
 RowSlots = dict[str, np.ndarray]
@@ -198,8 +199,8 @@ class _PoolSession:
     async def _decode(self, packets: dict[str, Sequence[bytes]], slots: RowSlots) -> None:
         """Decode every selected stream into its slot: on the decode threads, concurrently,
         or right here when decoding is a mere copy (raw frames)."""
-        decoders = self.state.decoders
-        jobs = [(decoders[name], packets.get(name, ()), out, CHUNK) for name, out in slots.items()]
+        decoders, chunk = self.state.decoders, self.state.info.frames_per_chunk
+        jobs = [(decoders[name], packets.get(name, ()), out, chunk) for name, out in slots.items()]
         if not any(decoder.threaded for decoder, *_ in jobs):
             for job in jobs:
                 decode_chunk(*job)
@@ -269,7 +270,11 @@ class SessionPool:
     Constructing a pool opens nothing (it pickles, so a worker process can open it);
     :meth:`start` (or the first call that needs it, or ``with``) connects and Initializes all
     sessions. ``frames="last"`` returns only the last frame of each chunk (``[n, 1, H, W, 3]``):
-    the other three are still decoded, so the streams stay in sync, but never converted to RGB.
+    the pool asks the server for it alone (``x-oasis-frames``, granted by the embedded server for
+    raw frames, so the others are never drawn nor sent); from other servers the other three are
+    still decoded, so the streams stay in sync, but never converted to RGB. ``expert=True``
+    asks every Prompt for the embedded server's expert, whose next chunk each step returns
+    (``PoolStep.expert``, NaN without it).
 
     ``endpoint`` is an A2V endpoint URL, or a :class:`ServerHandle` (such as the embedded
     server's launcher): the pool starts that server when it starts, takes its endpoint and key,
@@ -299,6 +304,7 @@ class SessionPool:
         decode_threads: int | None = None,
         client_sdk_version: str = DEFAULT_SDK_VERSION,
         frames: str = "all",
+        expert: bool = False,
     ) -> None:
         if frames not in FRAME_SELECTIONS:
             raise ValueError(f"frames must be one of {sorted(FRAME_SELECTIONS)}, got {frames!r}")
@@ -320,6 +326,7 @@ class SessionPool:
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
         self.frames = frames
+        self.expert = expert
         self._num_sessions = num_sessions
         self._target = None if self.endpoint is None else parse_endpoint(self.endpoint, tls).address
         self._streams: tuple[StreamInfo, ...] = ()
@@ -659,6 +666,8 @@ class SessionPool:
             accepted_formats=self.accepted_formats,
             required_streams=self.required_streams,
             decoder_threads=1,  # the pool decodes many streams in parallel
+            last_frame_only=self.frames == "last",
+            expert=self.expert,
         )
 
     def _require_started(self) -> _Runtime:

@@ -60,6 +60,10 @@ class SessionState:
         accepted_formats: Frame formats offered, in preference order.
         required_streams: Streams the server must advertise.
         decoder_threads: Threads of each stream's decoder (0: the codec's choice).
+        last_frame_only: Ask for the last frame of each chunk alone (``x-oasis-frames``); a
+            server that does not grant it sends all 4.
+        expert: Ask every Prompt for the embedded server's expert (``x-oasis-expert``), whose
+            next chunk then comes with the ground truth of every Infer.
 
     >>> state = SessionState("k", sdk_version="0.0.2", accepted_formats=[FrameFormat.VP9],
     ...                      required_streams=["front"])
@@ -80,8 +84,12 @@ class SessionState:
         accepted_formats: Sequence[FrameFormat],
         required_streams: Sequence[str],
         decoder_threads: int = 0,
+        last_frame_only: bool = False,
+        expert: bool = False,
     ) -> None:
         self.api_key = api_key
+        self.last_frame_only = last_frame_only
+        self.expert = expert
         self.sdk_version = sdk_version
         self.accepted_formats = tuple(accepted_formats)
         self.required_streams = tuple(required_streams)
@@ -104,7 +112,9 @@ class SessionState:
         if not self.api_key:
             raise wire.missing_api_key_error()
         request = wire.initialize_request(self.sdk_version, self.api_key, self.accepted_formats)
-        return Call("Initialize", request, wire.call_metadata(self.api_key))
+        return Call(
+            "Initialize", request, wire.initialize_metadata(self.api_key, self.last_frame_only)
+        )
 
     def on_initialize(
         self, response: a2v_pb2.InitializeResponse, initial_metadata: MetadataItems
@@ -133,7 +143,7 @@ class SessionState:
     def prompt(self, prompt: str, seed: int | None) -> Call:
         """The Prompt call (``seed`` travels as ``x-oasis-seed``; None: the server's default)."""
         request = a2v_pb2.PromptRequest(session_id=self._require_id(), prompt=prompt)
-        call = Call("Prompt", request, wire.prompt_metadata(self.metadata, seed))
+        call = Call("Prompt", request, wire.prompt_metadata(self.metadata, seed, self.expert))
         self._asked = (prompt, seed)
         return call
 

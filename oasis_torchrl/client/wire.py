@@ -20,6 +20,10 @@ from oasis_torchrl.protocol import (
     API_KEY_ENV_VAR,
     API_KEY_METADATA,
     CHUNK,
+    EXPERT_METADATA,
+    EXPERT_ON,
+    FRAMES_METADATA,
+    LAST_FRAME_ONLY,
     MAX_SEED,
     SEED_METADATA,
     SESSION_TARGET_METADATA,
@@ -30,7 +34,8 @@ Metadata = tuple[tuple[str, str], ...]
 
 @dataclass(frozen=True)
 class SessionInfo:
-    """What Initialize established: session id, negotiated format, streams, pinning target.
+    """What Initialize established: session id, negotiated format, streams, pinning target, and
+    the frames each Infer carries per stream (4, or 1 when the server granted the last alone).
 
     >>> SessionInfo("s1", FrameFormat.VP9, (), None).output_format.name
     'VP9'
@@ -40,6 +45,7 @@ class SessionInfo:
     output_format: int
     streams: tuple[StreamInfo, ...]
     session_target: str | None
+    frames_per_chunk: int = CHUNK
 
 
 def missing_api_key_error() -> DecartRoboticsError:
@@ -68,15 +74,18 @@ def call_metadata(api_key: str | None, session_target: str | None = None) -> Met
     return tuple(metadata)
 
 
-def prompt_metadata(metadata: Metadata, seed: int | None) -> Metadata:
-    """Session metadata plus the ``x-oasis-seed`` of a Prompt (omitted when ``seed`` is None).
+def prompt_metadata(metadata: Metadata, seed: int | None, expert: bool = False) -> Metadata:
+    """Session metadata plus the ``x-oasis-seed`` of a Prompt (omitted when ``seed`` is None)
+    and, if ``expert``, the ``x-oasis-expert`` request for the embedded server's expert.
 
     >>> prompt_metadata((), 7)
     (('x-oasis-seed', '7'),)
+    >>> prompt_metadata((), None, expert=True)
+    (('x-oasis-expert', 'on'),)
     """
-    if seed is None:
-        return metadata
-    return (*metadata, (SEED_METADATA, str(validate_seed(seed))))
+    seeded = () if seed is None else ((SEED_METADATA, str(validate_seed(seed))),)
+    asked = ((EXPERT_METADATA, EXPERT_ON),) if expert else ()
+    return (*metadata, *seeded, *asked)
 
 
 def validate_seed(seed: int) -> int:
@@ -102,8 +111,24 @@ def session_target_from(initial_metadata: Iterable[tuple[str, str | bytes]]) -> 
     >>> session_target_from([("x-session-target", b"node-3")])
     'node-3'
     """
-    for key, value in initial_metadata:
-        if key == SESSION_TARGET_METADATA:
+    return _metadata_value(initial_metadata, SESSION_TARGET_METADATA)
+
+
+def initialize_metadata(api_key: str, last_frame_only: bool) -> Metadata:
+    """Metadata of an Initialize call: the API key, and the ``x-oasis-frames`` request for the
+    last frame of each chunk alone when ``last_frame_only``.
+
+    >>> initialize_metadata("k", True)
+    (('x-api-key', 'k'), ('x-oasis-frames', 'last'))
+    """
+    asked = ((FRAMES_METADATA, LAST_FRAME_ONLY),) if last_frame_only else ()
+    return (*call_metadata(api_key), *asked)
+
+
+def _metadata_value(metadata: Iterable[tuple[str, str | bytes]], key: str) -> str | None:
+    """The first value of ``key`` in ``metadata`` as text (it may arrive as bytes)."""
+    for item_key, value in metadata:
+        if item_key == key:
             return value.decode() if isinstance(value, bytes) else value
     return None
 
@@ -181,7 +206,11 @@ def parse_session(
     >>> response = a2v_pb2.InitializeResponse(session_id="s", output_format=3)
     >>> parse_session(response, [("x-session-target", "n1")]).session_target
     'n1'
+    >>> parse_session(response, [("x-oasis-frames", "last")]).frames_per_chunk
+    1
     """
+    initial_metadata = tuple(initial_metadata)
+    last_only = _metadata_value(initial_metadata, FRAMES_METADATA) == LAST_FRAME_ONLY
     return SessionInfo(
         session_id=response.session_id,
         output_format=_as_format(response.output_format),
@@ -190,6 +219,7 @@ def parse_session(
             for s in response.streams
         ),
         session_target=session_target_from(initial_metadata),
+        frames_per_chunk=1 if last_only else CHUNK,
     )
 
 

@@ -38,7 +38,9 @@ def run(cfg: DictConfig) -> int:
 
     try:
         driver = load_driver(cfg.policy)
-        with Evaluator(cfg.env, cfg, image_size=driver.image_size) as evaluator:
+        with Evaluator(
+            cfg.env, cfg, image_size=driver.image_size, expert=driver.needs_expert
+        ) as evaluator:
             report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError) as error:
         logger.error("cannot evaluate: %s", error)

@@ -64,10 +64,10 @@ def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
     return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec}
 
 
-def _make_env(cfg: RecordConfig) -> TransformedEnv:
+def _make_env(cfg: RecordConfig, expert: bool) -> TransformedEnv:
     from oasis_torchrl.envs import make_env
 
-    env = make_env(cfg.env, all_frames=cfg.rows == "frame")
+    env = make_env(cfg.env, all_frames=cfg.rows == "frame", expert=expert)
     env.set_seed(cfg.seed)
     return env
 
@@ -81,7 +81,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from oasis_torchrl.train.driving import drive
 
     driver = driver_spec(cfg)()
-    env = _make_env(cfg)
+    env = _make_env(cfg, driver.needs_expert)
     recorder = LeRobotRecorder(
         cfg.root,
         repo_id=cfg.repo_id,
@@ -116,8 +116,10 @@ def record_on_ray(cfg: RecordConfig) -> RayRecording:
         root = Path(cfg.root)
         ray = replace(ray, shard_root=str(root.with_name(root.name + ".shards")))
     driver = driver_spec(cfg)
-    driver()  # a bad script or policy file fails here, before any worker starts
-    create_env = distributed.env_factory(cfg.env, ray, all_frames=cfg.rows == "frame")
+    expert = driver().needs_expert  # a bad script or policy file fails here, before any worker
+    create_env = distributed.env_factory(
+        cfg.env, ray, all_frames=cfg.rows == "frame", expert=expert
+    )
     logger.info(
         "recording on Ray (%s): %d workers x %d sessions, shards in %s",
         ray.address,

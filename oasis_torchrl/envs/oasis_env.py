@@ -88,7 +88,9 @@ class OasisWrapper(_EnvWrapper):
 
     Args:
         env: the pool (its ``resize`` and ``frames`` set the frame size and whether all 4
-            frames of a chunk are returned).
+            frames of a chunk are returned; with its ``expert`` the env exposes the embedded
+            server's expert's next chunk as ``"expert_action"``, what
+            :class:`~oasis_torchrl.drivers.Autopilot` drives with).
         streams: the layout the server streams; default: the pool's ``required_streams`` at its
             ``resize`` or, without one, the hosted model's size (checked at the first reset).
         prompts: one prompt, one per row, or a sampler ``sampler(row, rng) -> str`` called at
@@ -99,10 +101,8 @@ class OasisWrapper(_EnvWrapper):
             default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
             elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
             reference depth reward).
-        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)`` and
-            its expert's next chunk as ``"expert_action"`` (what
-            :class:`~oasis_torchrl.drivers.Autopilot` drives with); a server that sends none
-            yields NaN.
+        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``; a
+            server that sends none yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
             server only), e.g. ``("front",)`` for ``GroundTruthDepth``.
         terminate_on_collision: end the episode when the ground truth reports a collision.
@@ -184,6 +184,7 @@ class OasisWrapper(_EnvWrapper):
             all_frames=self.all_frames,
             chunk_actions=self.chunk_actions,
             truth_fields=TRUTH_FIELDS if self.ground_truth else (),
+            expert=env.expert,
             depth_cameras=self._depth_cameras,
             reward_terms=tuple(getattr(self._reward, "terms", ())),
             device=self.device,
@@ -309,6 +310,7 @@ class OasisWrapper(_EnvWrapper):
             truth = torch.from_numpy(_truth_or_nan(step, len(rows))).to(torch.float32)
             for k, name in enumerate(self.layout.truth_fields):
                 fresh["truth", name] = truth[..., k]
+        if self.layout.expert:
             fresh["expert_action"] = torch.from_numpy(step.expert)
         if self.layout.depth_cameras:
             depth = self.pool.depth(rows)
@@ -349,6 +351,9 @@ class OasisEnv(OasisWrapper):
         all_frames: return all 4 frames of each chunk instead of the last one.
         ground_truth: see :class:`OasisWrapper`; default: only for ``endpoint="local"`` (set it
             for an ``oasis-torchrl serve`` server started elsewhere).
+        expert: run the embedded server's expert beside every episode and expose its next
+            chunk as ``"expert_action"`` (what :class:`~oasis_torchrl.drivers.Autopilot` drives
+            with, and demonstrations label with); off, the server spends nothing on it.
         retry: transient-failure policy of the session pool.
         timeout: per-call deadline in seconds.
         **kwargs: the other :class:`OasisWrapper` arguments (``chunk_actions``, ``max_steps``,
@@ -379,6 +384,7 @@ class OasisEnv(OasisWrapper):
         frame_format: str | None = None,
         all_frames: bool = False,
         ground_truth: bool | None = None,
+        expert: bool = False,
         retry: RetryPolicy | None = None,
         timeout: float = 120.0,
         **kwargs: Any,
@@ -403,6 +409,7 @@ class OasisEnv(OasisWrapper):
             retry=retry,
             resize=frame_size,
             frames="all" if all_frames else "last",
+            expert=expert,
             **formats,
         )
         super().__init__(

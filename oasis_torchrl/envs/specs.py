@@ -14,7 +14,7 @@ key                           dtype / shape              meaning
 ``"episode_seed"``            int64 ``[N, 1]``           the seed of the row's episode
 ``("truth", <field>)``        float32 ``[N, 4]``         embedded-server ground truth per frame
                                                          of the chunk (see ``TRUTH_FIELDS``)
-``"expert_action"``           float32 ``[N, 4, 2]``      with ground truth: the embedded
+``"expert_action"``           float32 ``[N, 4, 2]``      with ``expert=True``: the embedded
                                                          server's expert's next chunk from the
                                                          row's state (NaN where none was sent)
 ``("depth", <camera>)``       float32 ``[N, H, W]``      metric depth of the last frame (opt-in)
@@ -56,6 +56,7 @@ class EnvLayout:
     all_frames: bool = False
     chunk_actions: bool = True
     truth_fields: tuple[str, ...] = ()
+    expert: bool = False
     depth_cameras: tuple[str, ...] = ()
     reward_terms: tuple[str, ...] = ()
     device: torch.device | str = "cpu"
@@ -91,6 +92,7 @@ def build_observation_spec(layout: EnvLayout) -> Composite:
         spec["truth"] = _group(
             layout, layout.truth_fields, lambda: Unbounded((n, CHUNK), device=device)
         )
+    if layout.expert:
         spec["expert_action"] = Unbounded((n, CHUNK, ACTION_DIM), device=device)
     if layout.depth_cameras:
         height, width = layout.frame_size

@@ -33,9 +33,14 @@ from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import (
     API_KEY_METADATA,
     CAMERAS,
+    EXPERT_METADATA,
+    EXPERT_ON,
+    FRAMES_METADATA,
+    LAST_FRAME_ONLY,
     SEED_METADATA,
     SESSION_TARGET_METADATA,
     TRUTH_METADATA,
+    FrameFormat,
 )
 from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.config import ServerConfig
@@ -168,7 +173,8 @@ class A2VServicer:
     def Prompt(
         self, request: a2v_pb2.PromptRequest, context: grpc.ServicerContext
     ) -> a2v_pb2.PromptResponse:
-        """Set the session's scene from the prompt and the ``x-oasis-seed`` metadata."""
+        """Set the session's scene from the prompt and the ``x-oasis-seed`` metadata (and run
+        the expert beside it if ``x-oasis-expert`` asks)."""
         return _run_rpc(
             context,
             lambda: self._prompt(request, context),
@@ -203,8 +209,13 @@ class A2VServicer:
         key_digest = self._gate.admit("Initialize", self._initialize_key(request, context))
         check_sdk_version(request.client_sdk_version)
         output_format = negotiate_format(request.accepted_output_formats, self._config.formats)
-        session = self._registry.open(key_digest, output_format)
-        context.send_initial_metadata(((SESSION_TARGET_METADATA, session.target),))
+        last_frame_only = (
+            _text_metadata(context, FRAMES_METADATA) == LAST_FRAME_ONLY
+            and output_format == FrameFormat.RAW_RGB24
+        )
+        session = self._registry.open(key_digest, output_format, last_frame_only=last_frame_only)
+        granted = ((FRAMES_METADATA, LAST_FRAME_ONLY),) if last_frame_only else ()
+        context.send_initial_metadata(((SESSION_TARGET_METADATA, session.target), *granted))
         return a2v_pb2.InitializeResponse(
             session_id=session.session_id, output_format=output_format, streams=self.stream_infos
         )
@@ -228,7 +239,8 @@ class A2VServicer:
         with self._gate.use("Prompt", request.session_id, context) as session:
             check_prompt(request.prompt, self._config.max_prompt_chars)
             seed = parse_seed(_metadata(context, SEED_METADATA))
-            session.world.prompt(request.prompt, seed)
+            expert = _text_metadata(context, EXPERT_METADATA) == EXPERT_ON
+            session.world.prompt(request.prompt, seed, expert=expert)
         return a2v_pb2.PromptResponse()
 
     def _infer(

@@ -41,8 +41,9 @@ class InferRecord:
 class WorldHandle(Protocol):
     """A session's world as the server drives it, wherever it runs."""
 
-    def prompt(self, prompt: str, seed: int) -> None:
-        """Set a new scene (the rollout restarts at sequence number 0)."""
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
+        """Set a new scene (the rollout restarts at sequence number 0), with the expert beside
+        it if ``expert``."""
         ...
 
     def infer(self, sequence_num: int, actions: np.ndarray) -> InferRecord:
@@ -69,7 +70,9 @@ class WorldHost(Protocol):
         """Get ready to open worlds."""
         ...
 
-    def open(self, session_id: str, output_format: int) -> WorldHandle:
+    def open(
+        self, session_id: str, output_format: int, *, last_frame_only: bool = False
+    ) -> WorldHandle:
         """A new session's world (built at its first Prompt)."""
         ...
 
@@ -79,21 +82,25 @@ class WorldHost(Protocol):
 
 
 class SessionWorld:
-    """One session's simulator, its expert (the autopilot, restarted at every Prompt), one
-    encoder per stream, and the rollout position with the last answer for retries.
+    """One session's simulator, its expert (the autopilot, restarted at every Prompt that asks
+    for it), one encoder per stream, and the rollout position with the last answer for retries.
 
     The simulator and encoders are built at the first Prompt. Streams are encoded on
     ``encode_pool`` when encoding is slow (VP9, JPEG) and there is a pool, else one by one.
+    With ``last_frame_only`` (granted for raw frames only: a codec's stream needs every frame)
+    each answer holds the last frame of each stream, and only that one is drawn.
 
     Example:
         >>> from concurrent.futures import ThreadPoolExecutor
         >>> config = ServerConfig(width=64, height=48, api_keys=("k",))
         >>> with ThreadPoolExecutor(3) as pool:
         ...     world = SessionWorld(common_pb2.FRAME_FORMAT_JPEG, config, pool)
-        ...     world.prompt("a quiet road", seed=3)
+        ...     world.prompt("a quiet road", seed=3, expert=True)
         ...     record = world.infer(0, np.zeros((4, 2), np.float32))
         >>> [len(s.frames) for s in a2v_pb2.InferResponse.FromString(record.response).streams]
         [4, 4, 4]
+        >>> len(sim_pb2.InferTruth.FromString(record.truth).expert_actions)
+        8
     """
 
     def __init__(
@@ -102,8 +109,11 @@ class SessionWorld:
         config: ServerConfig,
         encode_pool: Executor | None,
         simulator_factory: SimulatorFactory = Simulator,
+        *,
+        last_frame_only: bool = False,
     ) -> None:
         self.output_format = output_format
+        self.last_frame_only = last_frame_only
         self._config = config
         self._encode_pool = encode_pool
         self._simulator_factory = simulator_factory
@@ -114,9 +124,9 @@ class SessionWorld:
         self._next_sequence_num = 0
         self._last: tuple[int, np.ndarray, InferRecord] | None = None
 
-    def prompt(self, prompt: str, seed: int) -> None:
-        """Set a new scene: reset the world and the expert, restart every stream with a key
-        frame."""
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
+        """Set a new scene: reset the world and (if ``expert``) start the expert, restart every
+        stream with a key frame."""
         if self._simulator is None:
             config = self._config
             self._simulator = self._simulator_factory(
@@ -133,7 +143,7 @@ class SessionWorld:
                 for name in CAMERAS
             }
         self._simulator.reset(prompt, seed)
-        self._expert = Autopilot(self._simulator)
+        self._expert = Autopilot(self._simulator) if expert else None
         for encoder in self._encoders.values():
             encoder.restart()
         self._seed = seed
@@ -158,7 +168,8 @@ class SessionWorld:
                 " (it restarts at 0 after every Prompt)",
                 {"expected": str(self._next_sequence_num), "got": str(sequence_num)},
             )
-        result = self._simulator.step(actions)
+        options = {"last_only": True} if self.last_frame_only else {}
+        result = self._simulator.step(actions, **options)
         encode = lambda name: self._encode(name, result.rgb[name])  # noqa: E731
         pool = self._encode_pool if self._encoders[CAMERAS[0]].threaded else None
         streams = map(encode, CAMERAS) if pool is None else pool.map(encode, CAMERAS)
@@ -166,7 +177,7 @@ class SessionWorld:
             sequence_num=sequence_num,
             seed=self._seed,
             frames=[frame.to_proto() for frame in result.truth],
-            expert_actions=self._expert.act().ravel().tolist(),
+            expert_actions=() if self._expert is None else self._expert.act().ravel().tolist(),
         )
         response = a2v_pb2.InferResponse(sequence_num=sequence_num, streams=list(streams))
         record = InferRecord(response.SerializeToString(), truth.SerializeToString())
@@ -242,9 +253,17 @@ class LocalWorlds:
     def start(self) -> None:
         """Nothing to start: worlds are built in this process when sessions open."""
 
-    def open(self, session_id: str, output_format: int) -> SessionWorld:
+    def open(
+        self, session_id: str, output_format: int, *, last_frame_only: bool = False
+    ) -> SessionWorld:
         """A new world for session ``session_id``."""
-        return SessionWorld(output_format, self._config, self._encode_pool, self._simulator_factory)
+        return SessionWorld(
+            output_format,
+            self._config,
+            self._encode_pool,
+            self._simulator_factory,
+            last_frame_only=last_frame_only,
+        )
 
     def close(self) -> None:
         """Stop the encoder threads."""

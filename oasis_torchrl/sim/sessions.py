@@ -95,7 +95,9 @@ class SessionRegistry:
         self._stop_reaper = threading.Event()
         self._reaper: threading.Thread | None = None
 
-    def open(self, key_digest: bytes, output_format: int) -> Session:
+    def open(
+        self, key_digest: bytes, output_format: int, *, last_frame_only: bool = False
+    ) -> Session:
         """Create a session for a key, or raise RESOURCE_EXHAUSTED at the session limits."""
         session_id = secrets.token_urlsafe(24)
         with self._lock:
@@ -104,7 +106,7 @@ class SessionRegistry:
                 session_id,
                 key_digest,
                 f"oasis-sim-{self._node}-{secrets.token_hex(4)}",
-                self._worlds.open(session_id, output_format),
+                self._worlds.open(session_id, output_format, last_frame_only=last_frame_only),
             )
             self._open[session_id] = session
             self._last_used[session_id] = time.monotonic()

@@ -6,7 +6,8 @@ cameras ``left_forward``, ``front``, ``right_forward``; actions ``float32 (4, 2)
 ``k``; same prompt and seed give the same frames and truth, frame for frame.
 
 ``step(actions, render=False)`` advances the physics without drawing (``rgb`` is then empty), for
-fast tests and privileged data collection.
+fast tests and privileged data collection; ``step(actions, last_only=True)`` draws only the last
+frame, for a client that looks at nothing else.
 """
 
 from __future__ import annotations
@@ -38,8 +39,9 @@ _MIN_SIZE = 8
 class StepResult:
     """Frames and truth of one step.
 
-    ``rgb[camera]`` is ``uint8 [4, H, W, 3]`` (C-contiguous; empty ``[0, H, W, 3]`` when the
-    step was not rendered); ``truth[k]`` is the world after action ``k``.
+    ``rgb[camera]`` is ``uint8 [4, H, W, 3]`` (C-contiguous; ``[1, H, W, 3]`` when only the last
+    frame was rendered, empty ``[0, H, W, 3]`` when none was); ``truth[k]`` is the world after
+    action ``k``.
 
     Example:
         >>> simulator = Simulator(64, 48)
@@ -211,14 +213,21 @@ class Simulator:
         self._depth = None
         logger.debug("scene %r seed %d (%s)", scene.prompt, scene.seed, scene.style.layout)
 
-    def step(self, actions: np.ndarray, render: bool = True) -> StepResult:
-        """Apply 4 actions; return the frames after each (unless ``render`` is false) and truth.
+    def step(self, actions: np.ndarray, render: bool = True, last_only: bool = False) -> StepResult:
+        """Apply 4 actions; return the frames after each (unless ``render`` is false; only the
+        last one with ``last_only``) and the truth of every frame.
 
         After a collision the car stays stopped (``collided`` stays true) until :meth:`reset`.
+
+        Example:
+            >>> simulator = Simulator(64, 48)
+            >>> simulator.reset("rural", seed=1)
+            >>> simulator.step(np.zeros((4, 2), np.float32), last_only=True).rgb["front"].shape
+            (1, 48, 64, 3)
         """
         world = self._require_world()
         actions = validate_actions(actions)
-        count = CHUNK if render else 0
+        count = (1 if last_only else CHUNK) if render else 0
         rgb = {
             name: np.empty((count, self._height, self._width, 3), dtype=np.uint8)
             for name in CAMERAS
@@ -229,7 +238,7 @@ class Simulator:
             states.append(world.state)
             frames.append(world.steps)
         if render:  # all poses in one pass: the renderer's per-call overhead is shared
-            self._renderer.render_many(states, frames, rgb)
+            self._renderer.render_many(states[-count:], frames[-count:], rgb)
             self._rendered_state = world.state
             self._depth = None
         return StepResult(rgb=rgb, truth=tuple(truth))

@@ -38,11 +38,13 @@ class _Worlds:
     def run(self, operation: str, session_id: str, arguments: tuple[Any, ...]) -> Any:
         """Run one request on a session's world."""
         if operation == "prompt":
-            output_format, prompt, seed = arguments
+            (output_format, last_frame_only), prompt, seed, expert = arguments
             world = self._worlds.get(session_id)
             if world is None:
-                world = self._worlds[session_id] = self._host.open(session_id, output_format)
-            return world.prompt(prompt, seed)
+                world = self._worlds[session_id] = self._host.open(
+                    session_id, output_format, last_frame_only=last_frame_only
+                )
+            return world.prompt(prompt, seed, expert=expert)
         if operation == "release":
             world = self._worlds.pop(session_id, None)
             return None if world is None else world.release()

@@ -211,14 +211,16 @@ def _error(kind: str, payload: Any) -> Exception:
 class RemoteWorld:
     """A session's world in a worker process (see :class:`~.session_world.WorldHandle`)."""
 
-    def __init__(self, worker: _Worker, session_id: str, output_format: int) -> None:
+    def __init__(
+        self, worker: _Worker, session_id: str, output_format: int, last_frame_only: bool
+    ) -> None:
         self._worker = worker
         self._session_id = session_id
-        self._output_format = output_format
+        self._delivery = (output_format, last_frame_only)
 
-    def prompt(self, prompt: str, seed: int) -> None:
+    def prompt(self, prompt: str, seed: int, *, expert: bool = False) -> None:
         """Set a new scene (the worker builds the world at the first Prompt)."""
-        self._worker.call("prompt", self._session_id, self._output_format, prompt, seed)
+        self._worker.call("prompt", self._session_id, self._delivery, prompt, seed, expert)
 
     def infer(self, sequence_num: int, actions: np.ndarray) -> InferRecord:
         """Advance the world by 4 actions."""
@@ -294,7 +296,9 @@ class WorkerPool:
             raise
         logger.info("%d server worker processes ready: pids %s", self._processes, self.pids)
 
-    def open(self, session_id: str, output_format: int) -> RemoteWorld:
+    def open(
+        self, session_id: str, output_format: int, *, last_frame_only: bool = False
+    ) -> RemoteWorld:
         """Pin a new session to the live worker with the fewest sessions."""
         with self._lock:
             live = [worker for worker in self._workers if worker.alive]
@@ -304,7 +308,7 @@ class WorkerPool:
                 )
             worker = min(live, key=lambda candidate: len(candidate.sessions))
             worker.sessions.add(session_id)
-        return RemoteWorld(worker, session_id, output_format)
+        return RemoteWorld(worker, session_id, output_format, last_frame_only)
 
     def close(self) -> None:
         """Stop every worker."""

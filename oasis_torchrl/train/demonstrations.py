@@ -121,7 +121,7 @@ def record_demonstrations(
     """
     from oasis_torchrl.data import LeRobotRecorder
 
-    env = make_env(env_cfg)
+    env = make_env(env_cfg, expert=True)
     env.set_seed(seed)
     rows = int(env.batch_size[0])
     expert = Autopilot()

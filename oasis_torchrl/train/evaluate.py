@@ -254,6 +254,8 @@ class Evaluator:
         env_cfg: the ``env`` config section (endpoint, image size, server, reward).
         eval_cfg: the ``eval`` section (prompts, episodes, seeds, max_steps, rerun, lerobot).
         image_size: policy image size (default: ``env_cfg.image_size``).
+        expert: run the embedded server's expert (for a policy that drives with it, see
+            :attr:`~oasis_torchrl.drivers.Driver.needs_expert`).
         progress: show a progress bar per evaluation.
 
     Example:
@@ -272,6 +274,7 @@ class Evaluator:
         eval_cfg: DictConfig,
         *,
         image_size: tuple[int, int] | None = None,
+        expert: bool = False,
         progress: bool = True,
     ) -> None:
         if eval_cfg.episodes < 1 or not eval_cfg.seeds or not eval_cfg.prompts:
@@ -285,6 +288,7 @@ class Evaluator:
             prompts=row_prompts,
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
+            expert=expert,
         )
         self.recorders = EpisodeRecorders(eval_cfg.get("rerun"), eval_cfg.get("lerobot"))
 

@@ -225,7 +225,11 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
         driver = load_driver(policies[name])
         eval_cfg = cfg.eval if name == names[-1] else plain
         with Evaluator(
-            cfg.env, eval_cfg, image_size=driver.image_size, progress=cfg.progress
+            cfg.env,
+            eval_cfg,
+            image_size=driver.image_size,
+            expert=driver.needs_expert,
+            progress=cfg.progress,
         ) as evaluator:
             results[name] = evaluator.evaluate(driver).summary()
         logger.info("%s: %s", name, results[name])

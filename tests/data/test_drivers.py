@@ -20,7 +20,9 @@ from oasis_torchrl.sim.config import ServerConfig
 
 def test_autopilot_drives_with_the_servers_expert() -> None:
     prompts = ["urban street", "highway", "rural road"]
-    env = OasisEnv("local", 3, prompts, server=ServerConfig(width=64, height=48), max_steps=60)
+    env = OasisEnv(
+        "local", 3, prompts, server=ServerConfig(width=64, height=48), max_steps=60, expert=True
+    )
     env.set_seed(4)
     try:
         rollout = env.rollout(60, Autopilot())
@@ -37,7 +39,7 @@ def test_autopilot_needs_the_expert_and_stops_rows_without_one() -> None:
     expert[1] = float("nan")  # a row whose session was lost
     actions = Autopilot(chunk_actions=False)(TensorDict(expert_action=expert, batch_size=[3]))
     assert actions["action"].tolist() == [[0.5, 0.5], [0.0, 0.0], [0.5, 0.5]]
-    with pytest.raises(KeyError, match="only the embedded server"):
+    with pytest.raises(KeyError, match="built with expert=True"):
         Autopilot()(TensorDict(truth=TensorDict(speed=torch.zeros(3, 4)), batch_size=[3]))
 
 

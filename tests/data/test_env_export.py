@@ -56,7 +56,9 @@ def _assert_no_secrets(root: Path) -> None:
 
 
 def test_rollout_round_trip_on_the_embedded_server(tmp_path: Path, small_server) -> None:
-    env = OasisEnv("local", 3, PROMPTS, server=small_server, all_frames=True, max_steps=3)
+    env = OasisEnv(
+        "local", 3, PROMPTS, server=small_server, all_frames=True, max_steps=3, expert=True
+    )
     try:
         rollout = env.rollout(8, Autopilot(), break_when_any_done=False)
     finally:
@@ -92,7 +94,7 @@ def test_rollout_round_trip_on_the_embedded_server(tmp_path: Path, small_server)
 
 
 def test_collector_hook_records_as_training_goes(tmp_path: Path, small_server) -> None:
-    env = OasisEnv("local", 2, server=small_server, max_steps=3)
+    env = OasisEnv("local", 2, server=small_server, max_steps=3, expert=True)
     recorder = LeRobotRecorder(tmp_path / "collected", keep_unfinished=False)
     collector = Collector(
         env, Autopilot(), frames_per_batch=8, total_frames=24, post_collect_hook=recorder

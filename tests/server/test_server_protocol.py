@@ -15,6 +15,13 @@ from grpc_health.v1 import health_pb2
 
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import CAMERAS as CAMERA_NAMES
+from oasis_torchrl.protocol import (
+    EXPERT_METADATA,
+    EXPERT_ON,
+    FRAMES_METADATA,
+    LAST_FRAME_ONLY,
+    FrameFormat,
+)
 from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.encoding import Vp9Encoder
 from oasis_torchrl.sim.launcher import LocalServer
@@ -121,6 +128,41 @@ def test_format_negotiation_follows_the_client_order(
         assert "FRAME_FORMAT_VP9" in response.error.message
     else:
         assert response.output_format == chosen
+
+
+@pytest.mark.parametrize(
+    ("offered", "granted"),
+    [(FrameFormat.RAW_RGB24, True), (common_pb2.FRAME_FORMAT_VP9, False)],
+)
+def test_the_last_frame_alone_is_granted_for_raw_frames(
+    stubs: RawStubs, server_keys: tuple[str, str], offered: int, granted: bool
+) -> None:
+    key = server_keys[0]
+    request = a2v_pb2.InitializeRequest(
+        client_sdk_version="0.0.2", api_key=key, accepted_output_formats=[offered]
+    )
+    asked = (("x-api-key", key), (FRAMES_METADATA, LAST_FRAME_ONLY))
+    response, call = stubs.a2v.Initialize.with_call(request, metadata=asked, timeout=10)
+    answered = dict(call.initial_metadata())
+    assert (answered.get(FRAMES_METADATA) == LAST_FRAME_ONLY) is granted
+    metadata = (("x-api-key", key), ("x-session-target", answered["x-session-target"]))
+    prompt = a2v_pb2.PromptRequest(session_id=response.session_id, prompt="urban street")
+    stubs.a2v.Prompt(prompt, metadata=(*metadata, ("x-oasis-seed", "4")), timeout=10)
+    infer = a2v_pb2.InferRequest(
+        session_id=response.session_id,
+        actions=[a2v_pb2.Action(throttle=t, steering=s) for t, s in STRAIGHT],
+    )
+    answer, call = stubs.a2v.Infer.with_call(infer, metadata=metadata, timeout=30)
+    stubs.a2v.Finish(a2v_pb2.FinishRequest(session_id=response.session_id), metadata=metadata)
+    truth = sim_pb2.InferTruth.FromString(dict(call.trailing_metadata())["x-oasis-truth-bin"])
+    assert len(truth.frames) == 4  # the truth of every frame, drawn or not
+    assert [len(stream.frames) for stream in answer.streams] == [1 if granted else 4] * 3
+    if granted:  # the last frame exactly as the simulator draws it
+        simulator = Simulator(96, 64)
+        simulator.reset("urban street", 4)
+        rendered = simulator.step(np.array(STRAIGHT, np.float32)).rgb
+        for stream in answer.streams:
+            assert stream.frames[0] == rendered[stream.name][-1].tobytes()
 
 
 def test_jpeg_session_returns_jpeg_frames(stubs: RawStubs) -> None:
@@ -259,14 +301,18 @@ def test_infer_returns_decodable_frames_and_ground_truth(stubs: RawStubs) -> Non
         assert len(frames) == 12 and frames[0].shape == (64, 96, 3)
 
 
-def test_ground_truth_carries_the_experts_next_chunk(stubs: RawStubs) -> None:
-    # The server's expert is the simulator's autopilot, one per session, restarted at a Prompt.
-    def expert_of(call: object) -> np.ndarray:
+def test_ground_truth_carries_the_experts_next_chunk_when_asked(stubs: RawStubs) -> None:
+    # The server's expert is the simulator's autopilot, one per session, restarted at a Prompt
+    # that asks for it (x-oasis-expert); a Prompt that does not gets no expert.
+    def expert_of(call: object) -> list[float]:
         truth = sim_pb2.InferTruth.FromString(dict(call.trailing_metadata())["x-oasis-truth-bin"])
-        return np.array(truth.expert_actions, np.float32).reshape(4, 2)
+        return list(truth.expert_actions)
 
     for prompt, seed in (("urban street", 5), ("highway", 2)):
-        session = stubs.open_session(prompt=prompt, seed=seed)
+        session = stubs.open_session(prompt=None)
+        asked = session.with_metadata(("x-oasis-seed", str(seed)), (EXPERT_METADATA, EXPERT_ON))
+        request = a2v_pb2.PromptRequest(session_id=session.session_id, prompt=prompt)
+        stubs.a2v.Prompt(request, metadata=asked, timeout=10)
         simulator = Simulator(96, 64)
         simulator.reset(prompt, seed)
         chunk, pilot = np.zeros((4, 2), np.float32), None
@@ -275,8 +321,10 @@ def test_ground_truth_carries_the_experts_next_chunk(stubs: RawStubs) -> None:
             simulator.step(chunk, render=False)
             pilot = pilot or Autopilot(simulator)
             chunk = pilot.act()
-            np.testing.assert_array_equal(expert_of(call), chunk)
+            np.testing.assert_array_equal(np.reshape(expert_of(call), (4, 2)), chunk)
         assert chunk[:, 0].mean() > 0.1  # it drives
+        stubs.prompt(session, prompt, seed=seed)  # not asked this time
+        assert expert_of(stubs.infer(session, 0)[1]) == []
 
 
 def test_sequence_numbers_replay_and_restart_after_prompt(stubs: RawStubs) -> None:

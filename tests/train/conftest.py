@@ -30,6 +30,7 @@ def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
         server=ServerConfig(width=48, height=32),
         all_frames=True,
         max_steps=4,
+        expert=True,
     )
     try:
         with LeRobotRecorder(root) as recorder:
