@@ -30,6 +30,7 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.protocol import ACTION_NAMES
 from oasis_torchrl.train.checkpoint import (
     BEST,
     LATEST,
@@ -73,7 +74,8 @@ class PPOResult:
 
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
-    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale;
+    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with its scale reset
+    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's);
     with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
@@ -86,8 +88,9 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     image_size = tuple(int(size) for size in cfg.env.image_size)
     if cfg.init_from:
         net = load_net(cfg.init_from)
-        net.set_scale(cfg.warm_start_scale)
-        logger.info("warm start from %s (scale %.2f)", cfg.init_from, cfg.warm_start_scale)
+        if cfg.warm_start_scale is not None:
+            net.set_scale(OmegaConf.to_object(cfg.warm_start_scale))
+        logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
         net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
@@ -208,26 +211,38 @@ class PPOTrainer:
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
 
     def _param_groups(self) -> list[dict[str, Any]]:
-        """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
+        """Three groups: the acting parts (encoder, actor) at ``optim.lr``; the fresh heads
+        (critic, auxiliary) at ``optim.critic_lr``; the action scale at ``optim.scale_lr``
         (``null``: ``optim.lr``).
 
-        Why: a fresh critic on a warm-started encoder (whose features are small, ~0.08) moves
-        too slowly at the actor's fine-tuning rate: measured on 1536 steps of the cloned
-        policy, a critic fitted for 320 minibatches explains 31% of the returns' variance at
-        1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+        Why the heads: a fresh critic on a warm-started encoder (whose features are small,
+        ~0.08) moves too slowly at the actor's fine-tuning rate: measured on 1536 steps of the
+        cloned policy, a critic fitted for 320 minibatches explains 31% of the returns' variance
+        at 1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+
+        Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
+        the mean did worse), so at the actor's rate Adam moves it by little more than a random
+        walk: measured, PPO's scale stayed at its initial 0.5 through 184k env steps, and the
+        policy drove 260 m deterministically but 224 m with that noise.
         """
         heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
         head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
+        scale_id = id(self.net.log_scale)
         parameters = list(self.loss.parameters())
         return [
-            {"params": [p for p in parameters if id(p) not in head_ids]},
+            {"params": [p for p in parameters if id(p) not in head_ids and id(p) != scale_id]},
             {"params": [p for p in parameters if id(p) in head_ids]},
+            {"params": [self.net.log_scale]},
         ]
 
-    def _base_lrs(self) -> tuple[float, float]:
-        """The un-annealed learning rates of the two parameter groups (acting parts, heads)."""
-        critic_lr = self.cfg.optim.get("critic_lr")
-        return self.cfg.optim.lr, self.cfg.optim.lr if critic_lr is None else critic_lr
+    def _base_lrs(self) -> tuple[float, float, float]:
+        """The un-annealed learning rates of the parameter groups (acting parts, heads,
+        scale)."""
+        optim = self.cfg.optim
+        return tuple(
+            optim.lr if optim.get(key) is None else optim.get(key)
+            for key in ("lr", "critic_lr", "scale_lr")
+        )
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -362,8 +377,14 @@ class PPOTrainer:
         metrics["optim/skipped_minibatches"] = float(skipped)
         metrics["optim/updates"] = float(updates)
         metrics["optim/lr"] = cfg.optim.lr * factor
-        metrics["policy/scale"] = self.net.log_scale.exp().mean().item()
+        metrics.update(self._scale_metrics())
         return metrics
+
+    def _scale_metrics(self) -> dict[str, float]:
+        """The action scale's mean per action number (over chunk and components)."""
+        scale = self.net.log_scale.detach().exp().reshape(-1, self.net.config.action_dim)
+        means = zip(ACTION_NAMES, scale.mean(0).tolist(), strict=True)
+        return {f"policy/scale_{name}": value for name, value in means}
 
     def _anneal(self) -> float:
         """Set this iteration's learning rates (linear decay to 5%); the decay factor."""
