@@ -2,17 +2,16 @@
 
 Records autopilot demonstrations as a LeRobot dataset, behaviour-clones a policy on them,
 fine-tunes it with TorchRL PPO in the world model, evaluates the references, the clone and the
-fine-tuned policy on fixed seeds, and prints where everything is (config:
-``configs/demo.yaml``; :func:`oasis_torchrl.train.pipeline.run_pipeline`). Any config value can
-be overridden as ``key=value``, e.g. ``oasis-torchrl demo output_dir=outputs/demo2
-ppo.collector.total_frames=8192``. Finished stages are reused, so running the same command
-again after an interruption continues where it stopped.
+fine-tuned policy on fixed seeds, and prints their comparison as a table and where everything
+is (config: ``configs/demo.yaml``; :func:`oasis_torchrl.train.pipeline.run_pipeline`). Any
+config value can be overridden as ``key=value``, e.g. ``oasis-torchrl demo
+output_dir=outputs/demo2 ppo.collector.total_frames=8192``. Finished stages are reused, so
+running the same command again after an interruption continues where it stopped.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from pathlib import Path
@@ -38,8 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the pipeline and print its summary (paths, evaluations, timings) as JSON; exit code
-    2 on bad settings, 130 when interrupted.
+    """Run the pipeline and print its comparison table (the summary with paths, evaluations and
+    timings is its ``summary.json``); exit code 2 on bad settings, 130 when interrupted.
 
     Example:
         >>> run(argparse.Namespace(config=None, overrides=["record.episode=3"]))
@@ -56,5 +55,5 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         logger.warning("interrupted: run the same command again to continue where it stopped")
         return 130
-    sys.stdout.write(json.dumps(result.to_dict(), indent=2) + "\n")
+    sys.stdout.write(result.table() + "\n")
     return 0

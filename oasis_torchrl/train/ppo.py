@@ -435,9 +435,20 @@ class PPOTrainer:
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the best policy so far as
-        ``checkpoints/best.pt``; otherwise on ``eval.seeds``."""
+        ``checkpoints/best.pt``; otherwise on ``eval.seeds``. With
+        ``checkpoint.keep_evaluated``, the evaluated policy is also saved as
+        ``checkpoints/frames_<env steps>.pt`` (to choose among them later, e.g. the best within
+        a smaller budget)."""
         selection_seeds = self.cfg.eval.get("selection_seeds")
         report = self._evaluate(self.net, selection_seeds)
+        if self.cfg.checkpoint.get("keep_evaluated"):
+            save_checkpoint(
+                self.checkpoint_dir / evaluated_checkpoint_name(self.frames),
+                self.net,
+                iteration=self.iteration,
+                frames=self.frames,
+                evaluation=report.summary(),
+            )
         if selection_seeds and (
             self.best_selection is None or report.mean_distance > self.best_selection
         ):
@@ -482,7 +493,8 @@ class PPOTrainer:
         policy_frames: int | None = None,
     ) -> EvalReport:
         """Evaluate ``net`` (trained for ``policy_frames`` env steps, default: all of this run's)
-        on ``seeds`` (default ``eval.seeds``) and add the summary to the history."""
+        on ``seeds`` (default ``eval.seeds``) and add its report (aggregates and episodes) to
+        the history."""
         if self._evaluator is None:
             self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
@@ -493,17 +505,17 @@ class PPOTrainer:
         finally:
             net.train()
         self._last_eval = (self.frames, seeds, report)
-        summary = report.summary()
         self.history.append(
-            {
-                "iteration": self.iteration,
-                "frames": self.frames,
-                "policy_frames": self.frames if policy_frames is None else policy_frames,
-                "seeds": list(seeds),
-                **summary,
-            }
+            report.to_dict(
+                iteration=self.iteration,
+                frames=self.frames,
+                policy_frames=self.frames if policy_frames is None else policy_frames,
+                seeds=list(seeds),
+            )
         )
-        logger.info("evaluation at %d env steps on seeds %s: %s", self.frames, seeds, summary)
+        logger.info(
+            "evaluation at %d env steps on seeds %s: %s", self.frames, seeds, report.summary()
+        )
         return report
 
     def _log(self, metrics: dict[str, float]) -> None:
@@ -538,6 +550,17 @@ class PPOTrainer:
             self._evaluator = None
             if not self.env.is_closed:
                 self.env.close()
+
+
+def evaluated_checkpoint_name(frames: int) -> str:
+    """The checkpoint file of the policy evaluated at ``frames`` env steps
+    (``checkpoint.keep_evaluated``).
+
+    Example:
+        >>> evaluated_checkpoint_name(10240)
+        'frames_10240.pt'
+    """
+    return f"frames_{frames}.pt"
 
 
 def _check_selection_seeds(seeds: Any) -> None:
