@@ -46,7 +46,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from oasis_torchrl.train.config import load_config
+from oasis_torchrl.config import load_config
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,
@@ -140,8 +140,9 @@ class StageCache:
 
 
 def benchmark_config(args: argparse.Namespace) -> DictConfig:
-    """The pipeline config of the benchmark: ``configs/demo.yaml`` (its resolution, reward and
-    settings) with the benchmark's budgets, episode length and evaluation seeds."""
+    """The pipeline config of the benchmark: the demo's (:class:`~oasis_torchrl.config.DemoConfig`:
+    its resolution, reward and settings) with the benchmark's budgets, episode length and
+    evaluation seeds."""
     seeds = ",".join(str(seed) for seed in args.eval_seeds)
     return load_config(
         "demo",
@@ -182,7 +183,8 @@ def ppo_stage(
     """A PPO stage of the benchmark: its own folder, budget and evaluations on the selection
     seeds every ``EVAL_EVERY`` batches, each evaluated policy kept (to choose within a smaller
     budget); fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from
-    scratch the ``configs/ppo.yaml`` defaults; ``args.ppo_overrides`` (``KEY=VALUE``) last."""
+    scratch the :class:`~oasis_torchrl.config.PPOConfig` defaults; ``args.ppo_overrides``
+    (``KEY=VALUE``) last."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
     evaluations = {
         "every": EVAL_EVERY,

@@ -27,7 +27,7 @@ from torchrl.envs import EnvBase
 
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.viz import LogOptions, RolloutLogger
+from oasis_torchrl.viz import LogOptions, RerunTransform, RolloutLogger
 
 PROMPTS = ["urban street", "rural road", "highway at sunset", "city at night"]
 TARGET_MAX_SLOWDOWN = 0.10
@@ -55,7 +55,7 @@ def measure(args: argparse.Namespace, rrd: Path) -> dict[str, list[float]]:
         server=ServerConfig(width=args.width, height=args.height),
     )
     rerun_logger = RolloutLogger(rrd, LogOptions())
-    logged_env = env.append_transform(rerun_logger.transform())
+    logged_env = env.append_transform(RerunTransform(rerun_logger))
     generator = torch.Generator().manual_seed(0)
     seconds: dict[str, list[float]] = {"bare": [], "logged": []}
     try:

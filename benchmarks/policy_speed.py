@@ -1,6 +1,6 @@
-"""Per-sample speed of our driving network vs the peer's SB3 CNN policy, same run, same threads.
+"""Per-sample speed of our driving network vs the reference SDK's SB3 CNN policy, same run, same threads.
 
-The peer (decart-robotics' RL extras): one shared CNN per camera at 128x192 (conv 16 k5 s2,
+The reference SDK (decart-robotics' RL extras): one shared CNN per camera at 128x192 (conv 16 k5 s2,
 conv 32 k3 s2, global average pool), the three concatenated and projected to 384, then
 Stable-Baselines3's default PPO heads (two 64-unit MLPs for the policy and the value). Ours:
 :class:`~oasis_torchrl.models.DrivingNet` (three convolutions over the last two frames of each
@@ -12,9 +12,9 @@ Cases, each the action (chunk) and the value for a batch, best of several repeat
 - ``batch``: batch 64, inference mode (collector throughput);
 - ``train``: batch 64, forward and backward (PPO update throughput).
 
-Sizes: the peer at its 128x192, ours at its default 64x96 and at the peer's 128x192 (the same
+Sizes: the reference SDK at its 128x192, ours at its default 64x96 and at the reference SDK's 128x192 (the same
 input), with shared and separate camera weights. Reported as microseconds per sample and the
-peer's time over ours (``speedup``; > 1 means ours is faster).
+reference SDK's time over ours (``speedup``; > 1 means ours is faster).
 
 Usage: ``python benchmarks/policy_speed.py [--threads 1 --repeats 5]``; prints JSON.
 """
@@ -36,7 +36,7 @@ CASES = {"act": (1, False), "batch": (64, False), "train": (64, True)}
 
 
 class PeerPolicy(nn.Module):
-    """The peer's feature extractor plus SB3's default actor-critic MLP heads."""
+    """The reference SDK's feature extractor plus SB3's default actor-critic MLP heads."""
 
     def __init__(self, cameras: int = len(CAMERAS)) -> None:
         super().__init__()

@@ -3,9 +3,10 @@ actor and critic operators (TorchRL's recipe for an ActorValueOperator), same ru
 
 Both compute the same loss and gradients (``tests/train/test_ppo_loss.py``); the baseline
 runs the shared encoder once for the actor and once more for the critic. The network is the
-PPO trainer's: ``configs/ppo.yaml``'s network at 64x96 with the privileged critic (4 inputs)
-and the auxiliary head; a minibatch holds the env's uint8 frames ``[B, 4, 64, 96, 3]`` per
-camera. A step is loss, backward and an Adam step; best of several repeats.
+PPO trainer's: the default network of :class:`~oasis_torchrl.config.PPOConfig` at 64x96 with
+the privileged critic (4 inputs) and the auxiliary head; a minibatch holds the env's uint8
+frames ``[B, 4, 64, 96, 3]`` per camera. A step is loss, backward and an Adam step; best of
+several repeats.
 
 Usage: ``python benchmarks/ppo_update.py [--batch 128 --repeats 5]``; prints JSON with
 milliseconds per step and ``speedup`` (the baseline's time over ours; > 1: ours is faster).
@@ -23,13 +24,13 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict, TensorDictBase
 from torchrl.objectives import ClipPPOLoss
 
+from oasis_torchrl.config import load_config
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
-from oasis_torchrl.train.config import load_config
 from oasis_torchrl.train.ppo_loss import PPO_TERMS, DrivingPPOLoss
 
 
 def trainer_network() -> DrivingNet:
-    """The network a PPO run from scratch trains (``configs/ppo.yaml``)."""
+    """The network a PPO run from scratch trains (:class:`~oasis_torchrl.config.PPOConfig`)."""
     cfg = load_config("ppo")
     network = OmegaConf.to_container(cfg.network)
     size = tuple(cfg.env.image_size)

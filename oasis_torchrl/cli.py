@@ -1,5 +1,5 @@
-"""The ``oasis-torchrl`` console script: argparse with one sub-command per module of
-:mod:`oasis_torchrl.commands`."""
+"""The ``oasis-torchrl`` console script: one sub-command per module of
+:mod:`oasis_torchrl.commands`, its arguments generated from the command's config dataclass."""
 
 from __future__ import annotations
 
@@ -11,10 +11,16 @@ from collections.abc import Sequence
 from types import ModuleType
 
 from oasis_torchrl import __version__, commands
+from oasis_torchrl.config.arguments import (
+    OVERRIDES,
+    add_config_arguments,
+    load_from_args,
+    split_overrides,
+)
 
 logger = logging.getLogger(__name__)
 
-_COMMAND_ATTRIBUTES = ("NAME", "HELP", "add_arguments", "run")
+_COMMAND_ATTRIBUTES = ("NAME", "HELP", "CONFIG", "run")
 
 
 def discover_commands() -> list[ModuleType]:
@@ -37,10 +43,10 @@ def discover_commands() -> list[ModuleType]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser, one sub-parser per discovered command.
+    """The full argument parser: one sub-parser per command (per algorithm for ``train``).
 
     Example:
-        >>> build_parser().parse_args(["serve", "--port", "0"]).command
+        >>> build_parser().parse_args(["serve", "--port", "0"]).command.NAME
         'serve'
     """
     parser = argparse.ArgumentParser(
@@ -54,47 +60,59 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("DEBUG", "INFO", "WARNING", "ERROR"),
         help="logging threshold (default INFO)",
     )
-    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    subparsers = parser.add_subparsers(dest="command_name", required=True, metavar="COMMAND")
     for command in discover_commands():
         subparser = subparsers.add_parser(command.NAME, help=command.HELP, description=command.HELP)
-        command.add_arguments(subparser)
-        subparser.set_defaults(run=command.run)
+        subparser.set_defaults(command=command)
+        if isinstance(command.CONFIG, dict):
+            choices = subparser.add_subparsers(dest="choice", required=True, metavar="CHOICE")
+            for name, schema in command.CONFIG.items():
+                described = (schema.__doc__ or "").strip()
+                choice = choices.add_parser(name, help=described.splitlines()[0])
+                choice.description = described
+                add_config_arguments(choice, schema)
+                choice.set_defaults(schema=schema)
+        else:
+            add_config_arguments(subparser, command.CONFIG)
+            subparser.set_defaults(schema=command.CONFIG, choice=None)
     return parser
 
 
 def parse_arguments(
     parser: argparse.ArgumentParser, argv: Sequence[str] | None = None
 ) -> argparse.Namespace:
-    """``parser.parse_args``, but ``KEY=VALUE`` overrides may also follow the options.
-
-    Why: argparse fills a ``nargs="*"`` positional once, at its first position, so in
-    ``train ppo --config c.yaml optim.lr=1e-4`` the override after the option is rejected;
-    subcommands rule out ``parse_intermixed_args``.
+    """``parser.parse_args``, but ``KEY=VALUE`` overrides may stand anywhere after the command.
 
     Example:
-        >>> args = parse_arguments(build_parser(), ["train", "ppo", "--config", "c.yaml", "a=1"])
-        >>> str(args.config), args.overrides
-        ('c.yaml', ['a=1'])
+        >>> args = parse_arguments(build_parser(), ["train", "ppo", "optim.lr=1e-4", "--seed", "3"])
+        >>> args.overrides, args.choice
+        (['optim.lr=1e-4'], 'ppo')
     """
     args, extra = parser.parse_known_args(argv)
-    overrides = [item for item in extra if "=" in item and not item.startswith("-")]
-    if overrides and hasattr(args, "overrides"):
-        args.overrides = [*args.overrides, *overrides]
-        extra = [item for item in extra if item not in overrides]
-    if extra:
-        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    overrides, unknown = split_overrides(extra)
+    if unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    setattr(args, OVERRIDES, overrides)
     return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default: the process arguments), set up logging, run the command.
 
+    Exit codes: 0 done, 2 bad settings (named in the log), others as the command says.
+
     Example:
-        >>> main(["serve", "--width", "7"])  # invalid settings give exit code 2
+        >>> main(["eval", "episodes=-1"])
         2
     """
     args = parse_arguments(build_parser(), argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
-    return int(args.run(args))
+    command = args.command
+    try:
+        cfg = load_from_args(args, args.schema)
+    except (ValueError, FileNotFoundError) as error:
+        logger.error("%s: bad settings: %s", command.NAME, error)
+        return 2
+    return int(command.run(cfg) if args.choice is None else command.run(cfg, args.choice))

@@ -23,7 +23,7 @@ from oasis_torchrl.client.errors import (
     TransportError,
     UnsupportedFeatureError,
 )
-from oasis_torchrl.client.extras import TRUTH_FIELDS
+from oasis_torchrl.client.ground_truth import TRUTH_FIELDS
 from oasis_torchrl.client.pool import SessionPool
 from oasis_torchrl.client.retry import RetryPolicy
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION, A2VClient

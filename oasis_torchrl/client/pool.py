@@ -36,7 +36,7 @@ import os
 import weakref
 from collections.abc import Awaitable, Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
@@ -44,10 +44,10 @@ import grpc
 import numpy as np
 from grpc_health.v1 import health_pb2_grpc
 
-from oasis_torchrl.client import extras, wire
+from oasis_torchrl.client import health, wire
 from oasis_torchrl.client.background import EventLoopThread
 from oasis_torchrl.client.channel import TlsSetting, create_aio_channel, parse_endpoint
-from oasis_torchrl.client.decoding import FrameDecoder, decode_chunk, make_decoder, validate_resize
+from oasis_torchrl.client.decoding import decode_chunk, validate_resize
 from oasis_torchrl.client.errors import (
     DecartRoboticsError,
     DecodeError,
@@ -55,17 +55,23 @@ from oasis_torchrl.client.errors import (
     SessionLostError,
     TransportError,
 )
+from oasis_torchrl.client.ground_truth import (
+    TRUTH_FIELDS,
+    depth_maps,
+    raise_depth_error,
+    truth_array,
+)
 from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
+from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
     JPEG,
     VP9,
-    FrameFormat,
     PoolStep,
     SessionStatus,
     StreamInfo,
 )
-from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
 from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
@@ -137,29 +143,13 @@ class _Rpc:
 
 
 @dataclass
-class _Settings:
-    """Per-session settings shared by all rows."""
-
-    api_key: str
-    sdk_version: str
-    accepted_formats: tuple[FrameFormat, ...]
-    required_streams: tuple[str, ...]
-
-
-@dataclass
 class _PoolSession:
-    """One row's A2V session: id, pinning metadata, rollout position, decoders, prompt."""
+    """One row: its session's state, its transport, and why it was lost (if it was)."""
 
     row: int
     rpc: _Rpc
-    settings: _Settings
+    state: SessionState
     executor: ThreadPoolExecutor
-    info: wire.SessionInfo | None = None
-    metadata: wire.Metadata = ()
-    sequence_num: int = 0
-    prompt_text: str | None = None
-    seed: int | None = None
-    decoders: dict[str, FrameDecoder] = field(default_factory=dict)
     lost_error: Exception | None = None
 
     @property
@@ -170,52 +160,32 @@ class _PoolSession:
     async def open(self) -> wire.SessionInfo:
         """Initialize a new session (finishing any previous one, best effort)."""
         await self.finish_quietly()
-        settings = self.settings
-        request = wire.initialize_request(
-            settings.sdk_version, settings.api_key, settings.accepted_formats
-        )
-        metadata = wire.call_metadata(settings.api_key)
-        response, call = await self.rpc.call(
-            self.rpc.a2v.Initialize, "Initialize", request, metadata
-        )
-        wire.raise_if_error(response, settings.api_key)
-        info = wire.parse_session(response, await call.initial_metadata())
-        self.info, self.lost_error = info, None
-        self.metadata = wire.call_metadata(settings.api_key, info.session_target)
+        response, call = await self._send(self.state.initialize())
         try:
-            wire.check_session(
-                info,
-                accepted_formats=settings.accepted_formats,
-                required_streams=settings.required_streams,
-            )
+            info = self.state.on_initialize(response, await call.initial_metadata())
         except DecartRoboticsError:
             await self.finish_quietly()
             raise
-        self.decoders = {
-            s.name: make_decoder(info.output_format, s.name, threads=1) for s in info.streams
-        }
-        self.sequence_num = 0
+        self.lost_error = None
         logger.debug("row %d: session %s opened", self.row, info.session_id[:6])
         return info
 
     async def prompt(self, prompt: str, seed: int | None) -> None:
         """Set the scene; restarts the rollout (sequence 0, fresh decoders)."""
-        request = a2v_pb2.PromptRequest(session_id=self._session_id(), prompt=prompt)
-        metadata = wire.prompt_metadata(self.metadata, seed)
-        response, _ = await self.rpc.call(self.rpc.a2v.Prompt, "Prompt", request, metadata)
-        wire.raise_if_error(response, self.settings.api_key)
-        self.prompt_text, self.seed, self.sequence_num = prompt, seed, 0
-        for decoder in self.decoders.values():
-            decoder.reset()
+        response, _ = await self._send(self.state.prompt(prompt, seed))
+        self.state.on_prompt(response)
+
+    async def reprompt(self) -> None:
+        """Prompt again with the stored prompt and seed (a new clip of the same world)."""
+        response, _ = await self._send(self.state.replay_prompt())
+        self.state.on_prompt(response)
 
     async def infer_into(self, actions: np.ndarray, slots: RowSlots) -> _Outcome:
         """One Infer; decodes every selected stream into ``slots`` concurrently, off the loop."""
-        request = wire.infer_request(self._session_id(), self.sequence_num, actions)
-        response, call = await self.rpc.call(self.rpc.a2v.Infer, "Infer", request, self.metadata)
-        wire.raise_if_error(response, self.settings.api_key)
-        self.sequence_num += 1
-        packets = {stream.name: stream.frames for stream in response.streams}
+        response, call = await self._send(self.state.infer(actions))
+        reply = self.state.on_infer(response, await call.trailing_metadata())
         loop = asyncio.get_running_loop()
+        decoders = self.state.decoders
         # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
         # or rewrite a slot that a still-running decode job is using.
         decoded = await _gather(
@@ -223,8 +193,8 @@ class _PoolSession:
                 loop.run_in_executor(
                     self.executor,
                     decode_chunk,
-                    self.decoders[name],
-                    packets.get(name, ()),
+                    decoders[name],
+                    reply.packets.get(name, ()),
                     out,
                     CHUNK,
                 )
@@ -232,51 +202,38 @@ class _PoolSession:
             ]
         )
         _raise_any(decoded)
-        truth = extras.parse_truth(await call.trailing_metadata())
         return _Outcome(
             SessionStatus.OK,
-            sequence_num=response.sequence_num,
-            truth=None if truth is None else extras.truth_array(truth),
+            sequence_num=reply.sequence_num,
+            truth=None if reply.truth is None else truth_array(reply.truth),
         )
-
-    async def reprompt(self) -> None:
-        """Prompt again with the stored prompt and seed (a new clip of the same world)."""
-        if self.prompt_text is None:
-            raise DecartRoboticsError(f"session row {self.row} was never prompted")
-        await self.prompt(self.prompt_text, self.seed)
 
     async def depth(self) -> dict[str, np.ndarray]:
         """Depth maps of the last frame of each stream (SimService)."""
-        request = sim_pb2.DepthRequest(session_id=self._session_id())
         try:
-            response, _ = await self.rpc.call(
-                self.rpc.sim.GetDepth, "GetDepth", request, self.metadata
-            )
+            response, _ = await self._send(self.state.depth())
         except TransportError as error:
-            extras.raise_depth_error(error)
-        return extras.depth_maps(response)
+            raise_depth_error(error)
+        return depth_maps(response)
 
     async def finish_quietly(self) -> None:
         """Finish the current session if any, ignoring failures (short timeout per attempt)."""
-        if self.info is None:
+        call = self.state.finish()
+        if call is None:
             return
-        request = a2v_pb2.FinishRequest(session_id=self.info.session_id)
-        self.info = None
         try:
-            await self.rpc.call(
-                self.rpc.a2v.Finish,
-                "Finish",
-                request,
-                self.metadata,
-                timeout=min(self.rpc.timeout or FINISH_TIMEOUT_S, FINISH_TIMEOUT_S),
+            await self._send(
+                call, timeout=min(self.rpc.timeout or FINISH_TIMEOUT_S, FINISH_TIMEOUT_S)
             )
         except (DecartRoboticsError, grpc.RpcError) as error:
             logger.debug("row %d: Finish failed (ignored): %s", self.row, error)
 
-    def _session_id(self) -> str:
-        if self.info is None:
-            raise DecartRoboticsError(f"session row {self.row} has no open session")
-        return self.info.session_id
+    async def _send(self, call: Call, *, timeout: float | None = None) -> tuple[Any, grpc.aio.Call]:
+        stub = self.rpc.sim if call.method == "GetDepth" else self.rpc.a2v
+        method = getattr(stub, call.method)
+        return await self.rpc.call(
+            method, call.method, call.request, call.metadata, timeout=timeout
+        )
 
 
 class _Runtime:
@@ -392,7 +349,7 @@ class SessionPool:
         """Each row's current session id (None if not open)."""
         if self._runtime is None:
             return (None,) * self._num_sessions
-        return tuple(s.info.session_id if s.info else None for s in self._runtime.sessions)
+        return tuple(s.state.session_id for s in self._runtime.sessions)
 
     def __repr__(self) -> str:
         return (
@@ -494,7 +451,7 @@ class SessionPool:
         runtime = self._require_started()
         rows = self._select(indices)
         chunk = wire.validate_action_batch(actions, rows)
-        unprompted = [row for row in rows if runtime.sessions[row].prompt_text is None]
+        unprompted = [row for row in rows if runtime.sessions[row].state.prompt_text is None]
         if unprompted:
             raise ValueError(
                 f"rows {unprompted} have no prompt yet; call prompt() or reset() first"
@@ -584,7 +541,7 @@ class SessionPool:
     async def _prompt_session(self, session: _PoolSession, prompt: str, seed: int | None) -> None:
         """Prompt a row, re-Initializing it first if its session is lost or gone."""
         try:
-            if session.lost or session.info is None:
+            if session.lost or session.state.info is None:
                 await session.open()
             try:
                 await session.prompt(prompt, seed)
@@ -598,7 +555,7 @@ class SessionPool:
 
     async def _recover(self, session: _PoolSession) -> None:
         await session.open()
-        if session.prompt_text is not None:
+        if session.state.prompt_text is not None:
             await session.reprompt()
 
     async def _start(self, runtime: _Runtime) -> list[wire.SessionInfo]:
@@ -626,11 +583,11 @@ class SessionPool:
     async def _ping(rpc: _Rpc) -> bool:
         try:
             response, _ = await rpc.call(
-                rpc.health.Check, "Check", extras.health_request(), (), policy=RetryPolicy.never()
+                rpc.health.Check, "Check", health.health_request(), (), policy=RetryPolicy.never()
             )
         except TransportError as error:
-            return extras.ping_outcome(error)
-        return extras.is_serving(response)
+            return health.ping_outcome(error)
+        return health.is_serving(response)
 
     # -------------------------------------------------------------------- helpers
 
@@ -667,18 +624,22 @@ class SessionPool:
                 self.decode_threads or os.cpu_count() or 1, thread_name_prefix="oasis-decode"
             )
             runtime = _Runtime(loop, channel, rpc, executor)
-            settings = _Settings(
-                api_key=self.api_key or "",
-                sdk_version=self.client_sdk_version,
-                accepted_formats=self.accepted_formats,
-                required_streams=self.required_streams,
-            )
             runtime.sessions = [
-                _PoolSession(row, rpc, settings, executor) for row in range(self._num_sessions)
+                _PoolSession(row, rpc, self._session_state(), executor)
+                for row in range(self._num_sessions)
             ]
             self._runtime = runtime
             self._finalizer = weakref.finalize(self, runtime.shutdown)
         return self._runtime
+
+    def _session_state(self) -> SessionState:
+        return SessionState(
+            self.api_key,
+            sdk_version=self.client_sdk_version,
+            accepted_formats=self.accepted_formats,
+            required_streams=self.required_streams,
+            decoder_threads=1,  # the pool decodes many streams in parallel
+        )
 
     def _require_started(self) -> _Runtime:
         self.start()
@@ -762,7 +723,7 @@ def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolSt
     truths = [o.truth for o in outcomes]
     truth = None
     if any(t is not None for t in truths):
-        truth = np.full((len(outcomes), CHUNK, len(extras.TRUTH_FIELDS)), np.nan)
+        truth = np.full((len(outcomes), CHUNK, len(TRUTH_FIELDS)), np.nan)
         for j, row_truth in enumerate(truths):
             if row_truth is not None:
                 truth[j, : len(row_truth)] = row_truth[:CHUNK]

@@ -8,8 +8,8 @@ Differences a caller can notice, all opt-in or strictly more robust:
   failure is a :class:`TransportError`, itself a ``grpc.RpcError`` like the official's.
   ``retry=RetryPolicy.never()`` restores the official single attempt.
 - VP9 and JPEG are both offered (``accepted_formats``); ``resize=(h, w)`` decodes straight to
-  that size; ``prompt(..., seed=)`` picks the world; ``last_truth``, ``depth()`` and ``ping()``
-  reach the embedded simulator's extras.
+  that size; ``prompt(..., seed=)`` picks the world; ``last_truth`` and ``depth()`` reach the
+  embedded simulator's ground truth and depth, ``ping()`` the gRPC health service.
 - ``close()`` inside a failing ``with`` block never hides the block's exception, and a failed
   ``__enter__`` releases the channel. The API key is masked in ``repr`` and error messages.
 """
@@ -26,20 +26,13 @@ import grpc
 import numpy as np
 from grpc_health.v1 import health_pb2_grpc
 
-from oasis_torchrl.client import extras, wire
+from oasis_torchrl.client import health, wire
 from oasis_torchrl.client.channel import TlsSetting, create_channel, parse_endpoint
-from oasis_torchrl.client.decoding import (
-    FrameDecoder,
-    decode_chunk,
-    make_decoder,
-    validate_resize,
-)
-from oasis_torchrl.client.errors import (
-    MASK,
-    DecartRoboticsError,
-    TransportError,
-)
+from oasis_torchrl.client.decoding import decode_chunk, validate_resize
+from oasis_torchrl.client.errors import MASK, DecartRoboticsError, TransportError
+from oasis_torchrl.client.ground_truth import depth_maps, raise_depth_error
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
+from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.types import (
     JPEG,
     VP9,
@@ -47,7 +40,7 @@ from oasis_torchrl.client.types import (
     FrameConsumer,
     StreamInfo,
 )
-from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
 from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, DEFAULT_ENDPOINT, ENDPOINT_ENV_VAR
 
 logger = logging.getLogger(__name__)
@@ -102,11 +95,13 @@ class A2VClient:
         self._owned_channel = channel is None and stub is None
         self._channel = create_channel(endpoint, tls) if self._owned_channel else channel
         self._stub = stub if stub is not None else a2v_pb2_grpc.A2VServiceStub(self._channel)
-        self._session: wire.SessionInfo | None = None
-        self._session_id: str | None = None
-        self._metadata: wire.Metadata = wire.call_metadata(self.api_key)
-        self._sequence_num = 0
-        self._decoders: dict[str, FrameDecoder] = {}
+        self._state = SessionState(
+            self.api_key,
+            sdk_version=client_sdk_version,
+            accepted_formats=self.accepted_formats,
+            required_streams=self.required_streams,
+        )
+        self._streams: tuple[StreamInfo, ...] = ()
         self._last_truth: sim_pb2.InferTruth | None = None
 
     @classmethod
@@ -132,17 +127,18 @@ class A2VClient:
     @property
     def session_id(self) -> str | None:
         """The current session's id (None before initialize or after close)."""
-        return self._session_id
+        return self._state.session_id
 
     @property
     def streams(self) -> tuple[StreamInfo, ...]:
         """The streams the server advertised at initialize."""
-        return self._session.streams if self._session else ()
+        return self._streams
 
     @property
     def session_target(self) -> str | None:
         """The ``x-session-target`` pin the server returned at initialize, if any."""
-        return self._session.session_target if self._session else None
+        info = self._state.info
+        return info.session_target if info else None
 
     @property
     def last_truth(self) -> sim_pb2.InferTruth | None:
@@ -153,7 +149,7 @@ class A2VClient:
         key = MASK if self.api_key else None
         return (
             f"{type(self).__name__}(endpoint={self.endpoint!r}, api_key={key!r}, "
-            f"session_id={self._session_id!r})"
+            f"session_id={self.session_id!r})"
         )
 
     def __enter__(self) -> A2VClient:
@@ -177,35 +173,22 @@ class A2VClient:
 
     def initialize(self) -> tuple[StreamInfo, ...]:
         """Open a session: negotiate the frame format and check the required streams."""
-        if not self.api_key:
-            raise wire.missing_api_key_error()
-        request = wire.initialize_request(
-            self.client_sdk_version, self.api_key, self.accepted_formats
-        )
+        call = self._state.initialize()
         logger.info(
             "Initialize: endpoint=%s sdk_version=%s accepted_output_formats=%s",
             self.endpoint,
             self.client_sdk_version,
             [f.name for f in self.accepted_formats],
         )
-        response, call = self._call(self._stub.Initialize, "Initialize", request, with_call=True)
-        wire.raise_if_error(response, self.api_key)
-        session = wire.parse_session(response, call.initial_metadata() if call else ())
-        self._session, self._session_id = session, session.session_id
-        self._metadata = wire.call_metadata(self.api_key, session.session_target)
+        response, grpc_call = self._send(call)
         try:
-            wire.check_session(
-                session,
-                accepted_formats=self.accepted_formats,
-                required_streams=self.required_streams,
+            session = self._state.on_initialize(
+                response, grpc_call.initial_metadata() if grpc_call else ()
             )
         except DecartRoboticsError:
             self._finish_quietly()
             raise
-        self._sequence_num = 0
-        self._decoders = {
-            s.name: make_decoder(session.output_format, s.name) for s in session.streams
-        }
+        self._streams = session.streams
         logger.info(
             "InitializeResponse: session_id=%s output_format=%s streams=%s",
             session.session_id,
@@ -216,56 +199,43 @@ class A2VClient:
 
     def prompt(self, prompt: str, *, seed: int | None = None) -> None:
         """Set the scene (``seed`` picks the world; None lets the server use seed 0)."""
-        session_id = self._require_session()
-        metadata = wire.prompt_metadata(self._metadata, seed)
-        request = a2v_pb2.PromptRequest(session_id=session_id, prompt=prompt)
-        response, _ = self._call(self._stub.Prompt, "Prompt", request, metadata=metadata)
-        wire.raise_if_error(response, self.api_key)
-        # A Prompt restarts the rollout: sequence numbers restart at 0 and a new clip begins.
-        self._sequence_num = 0
-        for decoder in self._decoders.values():
-            decoder.reset()
+        response, _ = self._send(self._state.prompt(prompt, seed))
+        self._state.on_prompt(response)
         if self.frame_consumer is not None:
             self.frame_consumer.new_clip()
 
     def infer(self, actions: Iterable[Iterable[float]]) -> A2VResult:
         """Send 4 ``[throttle, steering]`` actions; returns 4 decoded frames per stream."""
-        session_id = self._require_session()
-        chunk = wire.validate_action_chunk(actions)
-        request = wire.infer_request(session_id, self._sequence_num, chunk)
-        response, call = self._call(self._stub.Infer, "Infer", request, with_call=True)
-        wire.raise_if_error(response, self.api_key)
-        self._sequence_num += 1
-        self._last_truth = extras.parse_truth(call.trailing_metadata() if call else None)
-        frames = self._decode_streams(response.streams)
+        call = self._state.infer(wire.validate_action_chunk(actions))
+        response, grpc_call = self._send(call)
+        reply = self._state.on_infer(response, grpc_call.trailing_metadata() if grpc_call else None)
+        self._last_truth = reply.truth
+        frames = self._decode_streams(reply.packets)
         if self.frame_consumer is not None:
             self.frame_consumer.submit(frames)
-        return A2VResult(sequence_num=response.sequence_num, frames=frames, streams=self.streams)
+        return A2VResult(sequence_num=reply.sequence_num, frames=frames, streams=self.streams)
 
     def depth(self) -> dict[str, np.ndarray]:
         """Metric depth (float32 ``[H, W]``, sky +inf) of the last frame of each stream.
 
         Only the embedded simulator implements this (``oasis_torchrl.sim.v1.SimService``).
         """
-        session_id = self._require_session()
-        stub = sim_pb2_grpc.SimServiceStub(self._require_channel("depth"))
-        request = sim_pb2.DepthRequest(session_id=session_id)
         try:
-            response, _ = self._call(stub.GetDepth, "GetDepth", request)
+            response, _ = self._send(self._state.depth())
         except TransportError as error:
-            extras.raise_depth_error(error)
-        return extras.depth_maps(response)
+            raise_depth_error(error)
+        return depth_maps(response)
 
     def ping(self) -> bool:
         """Ask the server's gRPC health service whether it is SERVING (False if unreachable)."""
         stub = health_pb2_grpc.HealthStub(self._require_channel("ping"))
         try:
             response, _ = self._call(
-                stub.Check, "Check", extras.health_request(), retry=RetryPolicy.never()
+                stub.Check, "Check", health.health_request(), retry=RetryPolicy.never()
             )
         except TransportError as error:
-            return extras.ping_outcome(error)
-        return extras.is_serving(response)
+            return health.ping_outcome(error)
+        return health.is_serving(response)
 
     def close(self) -> None:
         """Finish the session (if any) and release the channel this client created."""
@@ -277,13 +247,10 @@ class A2VClient:
                 self._channel = None
 
     def _finish(self) -> None:
-        if self._session_id is None:
-            return
-        # Forget the id first so a failing Finish is never retried by a second close.
-        session_id, self._session_id = self._session_id, None
-        request = a2v_pb2.FinishRequest(session_id=session_id)
-        response, _ = self._call(self._stub.Finish, "Finish", request)
-        wire.raise_if_error(response, self.api_key)
+        call = self._state.finish()
+        if call is not None:
+            response, _ = self._send(call)
+            self._state.on_finish(response)
 
     def _finish_quietly(self) -> None:
         try:
@@ -297,11 +264,6 @@ class A2VClient:
         except Exception:
             logger.warning("closing the A2V client failed", exc_info=True)
 
-    def _require_session(self) -> str:
-        if self._session_id is None:
-            raise DecartRoboticsError("A2V session is not initialized")
-        return self._session_id
-
     def _require_channel(self, feature: str) -> grpc.Channel:
         if self._channel is None:
             raise DecartRoboticsError(
@@ -309,20 +271,29 @@ class A2VClient:
             )
         return self._channel
 
+    def _send(self, call: Call) -> tuple[Any, grpc.Call | None]:
+        """Send one of the session's calls; returns the response and the gRPC call, if any."""
+        if call.method == "GetDepth":
+            stub = sim_pb2_grpc.SimServiceStub(self._require_channel("depth"))
+        else:
+            stub = self._stub
+        method = getattr(stub, call.method)
+        return self._call(method, call.method, call.request, call.metadata, with_call=True)
+
     def _call(
         self,
         method: Callable[..., Any],
         name: str,
         request: object,
+        metadata: wire.Metadata = (),
         *,
-        metadata: wire.Metadata | None = None,
         with_call: bool = False,
         retry: RetryPolicy | None = None,
     ) -> tuple[Any, grpc.Call | None]:
         """One unary call with retries; returns the response and, if asked, the call."""
         use_call = with_call and hasattr(method, "with_call")
         invoke = method.with_call if use_call else method
-        kwargs = {"metadata": self._metadata if metadata is None else metadata}
+        kwargs = {"metadata": metadata}
 
         def attempt(timeout: float | None) -> Any:
             return invoke(request, timeout=timeout, **kwargs)
@@ -337,19 +308,17 @@ class A2VClient:
         )
         return result if use_call else (result, None)
 
-    def _decode_streams(
-        self, streams: Sequence[a2v_pb2.OutputStream]
-    ) -> dict[str, list[np.ndarray]]:
+    def _decode_streams(self, packets: dict[str, Sequence[bytes]]) -> dict[str, list[np.ndarray]]:
         """Decode each advertised stream's packets into one fresh ``[n, H, W, 3]`` array."""
         sizes = {s.name: self.resize or (s.height, s.width) for s in self.streams}
         frames: dict[str, list[np.ndarray]] = {}
-        for stream in streams:
-            if stream.name not in sizes:
-                logger.warning("ignoring stream %r the server did not advertise", stream.name)
+        for name, stream_packets in packets.items():
+            if name not in sizes:
+                logger.warning("ignoring stream %r the server did not advertise", name)
                 continue
-            out = np.empty((len(stream.frames), *sizes[stream.name], 3), np.uint8)
-            decode_chunk(self._decoders[stream.name], stream.frames, out)
-            frames[stream.name] = list(out)
+            out = np.empty((len(stream_packets), *sizes[name], 3), np.uint8)
+            decode_chunk(self._state.decoders[name], stream_packets, out)
+            frames[name] = list(out)
         missing = set(self.required_streams) - set(frames)
         if missing:
             raise DecartRoboticsError(

@@ -1,45 +1,40 @@
 """``oasis-torchrl drive``: the autopilot drives one route on the embedded server, filmed by the
-three cameras (a quick look at the simulator; the main job is ``oasis-torchrl demo``)."""
+three cameras (settings: :class:`~oasis_torchrl.config.viewing.DriveConfig`)."""
 
 from __future__ import annotations
 
-import argparse
 import json
-import logging
+import sys
 
-logger = logging.getLogger(__name__)
+from omegaconf import DictConfig
+
+from oasis_torchrl.config.viewing import DriveConfig
 
 NAME = "drive"
-HELP = "drive the embedded simulator with the autopilot and write a 3-camera video + summary"
+HELP = "the autopilot drives one route on the embedded server; the cameras go to an MP4"
+CONFIG = DriveConfig
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Output folder, prompt, seed, length and camera size.
+def run(cfg: DictConfig) -> int:
+    """Drive, write ``drive.mp4`` and ``summary.json``, print the summary as JSON.
 
     Example:
-        >>> add_arguments(parser := argparse.ArgumentParser())
-        >>> parser.parse_args(["--steps", "5"]).output
-        'outputs/drive'
+        >>> import tempfile
+        >>> from oasis_torchrl.config import load_config
+        >>> settings = [f"output={tempfile.mkdtemp()}", "steps=2", "width=96", "height=64"]
+        >>> run(load_config("drive", settings))  # doctest: +ELLIPSIS
+        {...
+        0
     """
-    parser.add_argument("--output", default="outputs/drive", help="output folder")
-    parser.add_argument("--prompt", default="urban street, sunset", help="scene prompt")
-    parser.add_argument("--seed", type=int, default=0, help="world seed")
-    parser.add_argument("--steps", type=int, default=60, help="action chunks to drive")
-    parser.add_argument("--width", type=int, default=768, help="camera width")
-    parser.add_argument("--height", type=int, default=512, help="camera height")
+    from oasis_torchrl.drive import drive_route
 
-
-def run(args: argparse.Namespace) -> int:
-    """Drive, write ``drive.mp4`` and ``summary.json``, print the summary as JSON."""
-    from oasis_torchrl.demo import drive_demo
-
-    summary = drive_demo(
-        args.output,
-        prompt=args.prompt,
-        seed=args.seed,
-        steps=args.steps,
-        width=args.width,
-        height=args.height,
+    summary = drive_route(
+        cfg.output,
+        prompt=cfg.prompt,
+        seed=cfg.seed,
+        steps=cfg.steps,
+        width=cfg.width,
+        height=cfg.height,
     )
-    print(json.dumps(summary.__dict__, indent=2))  # the command's output, not library logging
+    sys.stdout.write(json.dumps(summary.__dict__, indent=2) + "\n")
     return 0

@@ -1,178 +1,36 @@
-"""``oasis-torchrl serve``: run the embedded A2V server until SIGTERM or SIGINT.
-
-Every :class:`~oasis_torchrl.sim.config.ServerConfig` field has a flag; the same table turns a
-config back into flags (:func:`config_to_argv`) so a launcher can start the identical server
-as a subprocess. API keys are better passed in ``OASIS_SERVER_API_KEYS`` than with
-``--api-key``: command lines are visible to every user of the machine.
+"""``oasis-torchrl serve``: run the embedded A2V server until SIGTERM or SIGINT (settings:
+:class:`~oasis_torchrl.config.serving.ServeConfig`). API keys are better passed in
+``OASIS_SERVER_API_KEYS`` than with ``--api-key``: command lines are visible to every user of
+the machine.
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import logging
-import os
-import signal
-import threading
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
-from oasis_torchrl.proto import common_pb2
+from omegaconf import DictConfig
 
-if TYPE_CHECKING:
-    from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.config import to_object
+from oasis_torchrl.config.serving import ServeConfig
 
 logger = logging.getLogger(__name__)
 
 NAME = "serve"
 HELP = "run the embedded A2V server (procedural driving simulator) until SIGTERM/SIGINT"
-
-_FORMATS = {"vp9": common_pb2.FRAME_FORMAT_VP9, "jpeg": common_pb2.FRAME_FORMAT_JPEG}
-
-
-def _parse_formats(text: str) -> tuple[int, ...]:
-    """``"vp9,jpeg"`` -> format enum values, in the given order."""
-    names = [name.strip().lower() for name in text.split(",") if name.strip()]
-    unknown = [name for name in names if name not in _FORMATS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"formats must be a comma-separated list of {', '.join(_FORMATS)}, got {text!r}"
-        )
-    return tuple(_FORMATS[name] for name in names)
+CONFIG = ServeConfig
 
 
-def _format_formats(formats: tuple[int, ...]) -> str:
-    names = {value: name for name, value in _FORMATS.items()}
-    return ",".join(names[value] for value in formats)
-
-
-# (flag, ServerConfig field, argparse keywords); every default is None = the config default.
-_FLAGS: tuple[tuple[str, str, dict[str, Any]], ...] = (
-    ("--host", "host", {"help": "interface to bind (default 127.0.0.1)"}),
-    ("--port", "port", {"type": int, "help": "port to bind; 0 picks a free one (default 0)"}),
-    ("--width", "width", {"type": int, "help": "frame width (default 768)"}),
-    ("--height", "height", {"type": int, "help": "frame height (default 512)"}),
-    ("--fps", "fps", {"type": float, "help": "frame rate (default 20)"}),
-    (
-        "--api-key",
-        "api_keys",
-        {
-            "action": "append",
-            "metavar": "KEY",
-            "help": "accepted API key, repeatable (default: $OASIS_SERVER_API_KEYS)",
-        },
-    ),
-    ("--allow-any-key", "allow_any_key", {"action": "store_true", "help": "accept any key"}),
-    ("--latency-ms", "latency_ms", {"type": float, "help": "delay added to every Infer"}),
-    ("--failure-rate", "failure_rate", {"type": float, "help": "injected UNAVAILABLE rate"}),
-    ("--failure-seed", "failure_seed", {"type": int, "help": "seed of the injected failures"}),
-    ("--idle-timeout", "idle_timeout_s", {"type": float, "help": "idle session expiry, seconds"}),
-    ("--max-sessions", "max_sessions", {"type": int, "help": "open sessions at most"}),
-    ("--max-sessions-per-key", "max_sessions_per_key", {"type": int, "help": "per API key"}),
-    ("--max-prompt-chars", "max_prompt_chars", {"type": int, "help": "longest prompt"}),
-    ("--max-message-bytes", "max_message_bytes", {"type": int, "help": "largest request"}),
-    ("--tls-cert", "tls_cert", {"help": "PEM certificate chain (with --tls-key)"}),
-    ("--tls-key", "tls_key", {"help": "PEM private key (with --tls-cert)"}),
-    ("--workers", "workers", {"type": int, "help": "gRPC handler threads (default 32)"}),
-    ("--encode-workers", "encode_workers", {"type": int, "help": "encoder threads (0: auto)"}),
-    ("--formats", "formats", {"type": _parse_formats, "help": "allowed formats, e.g. vp9,jpeg"}),
-    ("--vp9-cpu-used", "vp9_cpu_used", {"type": int, "help": "libvpx speed 0-8 (default 8)"}),
-    ("--vp9-bit-rate", "vp9_bit_rate", {"type": int, "help": "VP9 bits/s (default: by size)"}),
-    ("--vp9-threads", "vp9_threads", {"type": int, "help": "libvpx threads per stream"}),
-    ("--jpeg-quality", "jpeg_quality", {"type": int, "help": "JPEG quality 1-100 (default 90)"}),
-)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add one flag per config field, plus ``--port-file`` and ``--grace``."""
-    for flag, field, options in _FLAGS:
-        if options.get("action") != "store_true":
-            options = {"metavar": flag[2:].upper().replace("-", "_"), **options}
-        parser.add_argument(flag, dest=field, default=None, **options)
-    parser.add_argument(
-        "--port-file", type=Path, help="write the bound port to this file once serving"
-    )
-    parser.add_argument(
-        "--grace", type=float, default=2.0, help="seconds in-flight calls get at shutdown"
-    )
-
-
-def config_from_args(args: argparse.Namespace) -> ServerConfig:
-    """The :class:`ServerConfig` the parsed flags describe (unset flags keep defaults).
+def run(settings: DictConfig) -> int:
+    """Start the server, write ``port_file``, serve until a signal, then stop cleanly.
 
     Example:
-        >>> import argparse
-        >>> parser = argparse.ArgumentParser()
-        >>> add_arguments(parser)
-        >>> config_from_args(parser.parse_args(["--width", "96", "--height", "64",
-        ...                                     "--api-key", "k"])).width
-        96
+        >>> from oasis_torchrl.config import load_config
+        >>> run(load_config("serve", ["tls_cert=/no/cert.pem", "tls_key=/no/key.pem"]))
+        2
     """
-    from oasis_torchrl.sim.config import ServerConfig
+    from oasis_torchrl.sim.serving import serve
 
-    values = {field: getattr(args, field) for _, field, _ in _FLAGS}
-    return ServerConfig(**{field: value for field, value in values.items() if value is not None})
-
-
-def config_to_argv(config: ServerConfig) -> list[str]:
-    """Flags reproducing ``config``, API keys excepted (pass those in the environment).
-
-    Example:
-        >>> from oasis_torchrl.sim.config import ServerConfig
-        >>> config_to_argv(ServerConfig(width=96, height=64, api_keys=("k",), allow_any_key=True))
-        ['--width', '96', '--height', '64', '--allow-any-key']
-    """
-    defaults = {field.name: field.default for field in dataclasses.fields(config)}
-    argv: list[str] = []
-    for flag, field, _ in _FLAGS:
-        value = getattr(config, field)
-        if field == "api_keys" or value == defaults[field]:
-            continue
-        if isinstance(value, bool):
-            argv.append(flag)
-        elif field == "formats":
-            argv += [flag, _format_formats(value)]
-        else:
-            argv += [flag, str(value)]
-    return argv
-
-
-def _write_port_file(path: Path, port: int) -> None:
-    """Write the port atomically, so a reader never sees a partial file."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(f"{port}\n")
-    os.replace(partial, path)
-
-
-def _wait_for_signal() -> None:
-    """Block until SIGTERM or SIGINT (handlers can only be set from the main thread)."""
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(signum, lambda received, frame: stop.set())
-    # Short waits keep the main thread responsive to signals on every platform.
-    while not stop.wait(0.5):
-        pass
-
-
-def run(args: argparse.Namespace) -> int:
-    """Start the server, write ``--port-file``, serve until a signal, then stop cleanly."""
-    from oasis_torchrl.sim.server import A2VServer
-
-    try:
-        config = config_from_args(args)
-        server = A2VServer(config)
-        logger.info("starting with %s", config.redacted())
-        server.start()
-    except (ValueError, OSError, RuntimeError) as error:
-        logger.error("cannot start the server: %s", error)
-        return 2
-    if args.port_file is not None:
-        _write_port_file(args.port_file, server.port)
-    logger.info("serving %s; stop with SIGTERM or Ctrl-C", server.endpoint)
-    try:
-        _wait_for_signal()
-    finally:
-        logger.info("shutting down")
-        server.stop(args.grace)
-    return 0
+    cfg: ServeConfig = to_object(settings)
+    port_file = None if cfg.port_file is None else Path(cfg.port_file)
+    return serve(cfg.server_config(), port_file=port_file, grace=cfg.grace)

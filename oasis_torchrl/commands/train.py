@@ -1,55 +1,37 @@
-"""``oasis-torchrl train {ppo,bc}``: train a driving policy from a YAML config.
+"""``oasis-torchrl train {ppo,bc}``: train a driving policy.
 
-``oasis-torchrl train ppo`` runs TorchRL PPO in the world model (``configs/ppo.yaml``);
-``oasis-torchrl train bc`` runs behaviour cloning on a LeRobot dataset (``configs/bc.yaml``).
-Any config value can be overridden as ``key=value`` (dotted keys), e.g.
+``train ppo`` runs TorchRL PPO in the world model (:class:`~oasis_torchrl.config.PPOConfig`);
+``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`).
+Any setting can be given as ``key=value``, e.g.
 ``oasis-torchrl train ppo env.num_envs=4 collector.total_frames=20000 logger.backend=tensorboard``.
 """
 
 from __future__ import annotations
 
-import argparse
 import logging
-from pathlib import Path
+
+from omegaconf import DictConfig
+
+from oasis_torchrl.config.training import BCConfig, PPOConfig
 
 logger = logging.getLogger(__name__)
 
 NAME = "train"
 HELP = "train a driving policy: ppo (TorchRL, in the world model) or bc (LeRobot dataset)"
-
-ALGORITHMS = ("ppo", "bc")
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The algorithm, an optional config file and ``key=value`` overrides.
-
-    Example:
-        >>> parser = argparse.ArgumentParser()
-        >>> add_arguments(parser)
-        >>> parser.parse_args(["ppo", "optim.lr=1e-4"]).overrides
-        ['optim.lr=1e-4']
-    """
-    parser.add_argument("algorithm", choices=ALGORITHMS, help="ppo or bc")
-    parser.add_argument(
-        "--config", type=Path, help="YAML config (default: configs/<algorithm>.yaml)"
-    )
-    parser.add_argument(
-        "overrides", nargs="*", metavar="KEY=VALUE", help="config overrides, e.g. optim.lr=1e-4"
-    )
+CONFIG = {"ppo": PPOConfig, "bc": BCConfig}
 
 
-def run(args: argparse.Namespace) -> int:
-    """Load the config, train, log where the results are; exit code 2 on bad settings.
+def run(cfg: DictConfig, algorithm: str) -> int:
+    """Train, then log where the results are; exit code 2 on bad settings, 130 when
+    interrupted.
 
     Example:
-        >>> run(argparse.Namespace(algorithm="ppo", config=None, overrides=["optim.lrate=1"]))
+        >>> from oasis_torchrl.config import load_config
+        >>> run(load_config("bc"), "bc")  # no dataset.root
         2
     """
-    from oasis_torchrl.train.config import load_config
-
     try:
-        cfg = load_config(args.config or args.algorithm, args.overrides)
-        if args.algorithm == "ppo":
+        if algorithm == "ppo":
             from oasis_torchrl.train.ppo import train_ppo
 
             result = train_ppo(cfg)

@@ -7,7 +7,7 @@
 - :func:`record_on_ray`: record a dataset on Ray workers and merge it (``record --ray``).
 """
 
-from oasis_torchrl.distributed.config import RayCollectionConfig
+from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.distributed.merge import complete_shards, merge_shards
 from oasis_torchrl.distributed.ray_collection import (
     RayCollection,

@@ -33,7 +33,7 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
-from oasis_torchrl.distributed.config import RayCollectionConfig
+from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.distributed.sharded_recording import ShardRecorder
 
 logger = logging.getLogger(__name__)
@@ -74,7 +74,7 @@ def training_env_factory(
     ``server_address`` replaces ``env.endpoint``.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> make = training_env_factory(load_config("ppo").env, RayCollectionConfig())
         >>> make().batch_size
         torch.Size([4])

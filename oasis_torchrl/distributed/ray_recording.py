@@ -23,8 +23,8 @@ from typing import Any
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 
+from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.data.loading import default_repo_id
-from oasis_torchrl.distributed.config import RayCollectionConfig
 from oasis_torchrl.distributed.merge import merge_shards
 from oasis_torchrl.distributed.ray_collection import RayCollection, WorkerLostError
 

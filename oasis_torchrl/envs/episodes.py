@@ -83,3 +83,25 @@ def _as_sampler(prompts: Prompts, num_rows: int) -> PromptSampler:
     if bad:
         raise ValueError(f"prompts must be non-empty strings, got {bad[0]!r}")
     return _PromptPerRow(prompt_list)
+
+
+def episode_prompts(prompts: Sequence[str]) -> Prompts:
+    """One prompt for every episode, or a sampler drawing one uniformly per episode.
+
+    Example:
+        >>> episode_prompts(["urban"])
+        'urban'
+        >>> sampler = episode_prompts(["urban", "rural"])
+        >>> sampler(0, np.random.default_rng(0)) in ("urban", "rural")
+        True
+    """
+    choices = [str(prompt) for prompt in prompts]
+    if not choices:
+        raise ValueError("env.prompts must hold at least one prompt")
+    if len(choices) == 1:
+        return choices[0]
+
+    def sample(row: int, rng: np.random.Generator) -> str:
+        return choices[int(rng.integers(len(choices)))]
+
+    return sample

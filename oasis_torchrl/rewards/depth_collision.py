@@ -1,12 +1,12 @@
-"""The peer's depth-collision reward (decart-robotics' RL extras), batched over N rows.
+"""The reference SDK's depth-collision reward (decart-robotics' RL extras), batched over N rows.
 
-Same semantics and constants as the peer, per row:
+Same semantics and constants as the reference SDK, per row:
 
 - collision risk: the source's nearness map is min-max normalised per image to [0, 1]. The bottom
   ``ego_strip_fraction`` of the rows (the ego car) is the strip; its ``ego_percentile``-th
   percentile is the reference; a pixel is *near* when its normalised nearness exceeds
   ``max(0, reference - near_margin)``. The near fraction is counted over the image *above* the
-  strip only (the strip is excluded, as the peer does: it is the car itself, always near).
+  strip only (the strip is excluded, as the reference SDK does: it is the car itself, always near).
   ``risk = clip(near_fraction / near_fraction_threshold, 0, 1)``; terminated when risk >= 1.
 - forward: ``expm1(s * mean(clip(throttle, 0, 1))) / expm1(s)`` over the chunk's actions.
 - straightness: a per-row heading accumulates the chunk's summed steering, clamped to
@@ -14,10 +14,10 @@ Same semantics and constants as the peer, per row:
   ``straightness_weight`` at the clamp.
 - reward = forward - straightness_penalty.
 
-Reading of the peer's details kept here: the strip starts at row
+Reading of the reference SDK's details kept here: the strip starts at row
 ``min(max(1, round(H * (1 - fraction))), H - 1)`` (Python rounding), a zero fraction scores the
 whole image and uses it as the strip too, a constant map normalises to zeros. One difference: the
-peer's transformers pipeline quantises the model output to 8 bits before normalising; here the
+reference SDK's transformers pipeline quantises the model output to 8 bits before normalising; here the
 float map is used. Non-finite nearness (only possible from a custom source) normalises to 1 for
 +inf (nearest) and 0 otherwise.
 """
@@ -36,7 +36,7 @@ from oasis_torchrl.rewards.depth_sources import DepthSource, MonocularDepth
 
 @dataclasses.dataclass(frozen=True)
 class DepthCollisionConfig:
-    """Constants of the peer's reward (its defaults), each overridable.
+    """Constants of the reference SDK's reward (its defaults), each overridable.
 
     >>> DepthCollisionConfig(heading_free_play=4.0).heading_clamp
     16.0
@@ -83,7 +83,7 @@ def normalize_per_image(nearness: torch.Tensor) -> torch.Tensor:
 
 
 def ego_strip_start(height: int, fraction: float) -> int:
-    """First row of the bottom ego strip (the peer's rounding; 0 means no strip).
+    """First row of the bottom ego strip (the reference SDK's rounding; 0 means no strip).
 
     >>> ego_strip_start(64, 0.10), ego_strip_start(8, 0.125), ego_strip_start(8, 0.0)
     (58, 7, 0)
@@ -167,9 +167,9 @@ def straightness_penalty(heading: torch.Tensor, config: DepthCollisionConfig) ->
 
 
 class DepthCollisionReward:
-    """The peer's reward as a batched :class:`~oasis_torchrl.rewards.base.RewardModule`.
+    """The reference SDK's reward as a batched :class:`~oasis_torchrl.rewards.base.RewardModule`.
 
-    ``depth_source`` defaults to the peer's model (:class:`MonocularDepth`, loaded on the first
+    ``depth_source`` defaults to the reference SDK's model (:class:`MonocularDepth`, loaded on the first
     call). Output terms (:attr:`terms`): ``forward``, ``straightness_penalty``, ``heading``,
     ``collision_risk``, ``near_fraction``; ``reset(mask)`` zeroes the heading of masked rows.
 

@@ -2,19 +2,37 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from oasis_torchrl.config.fields import option
 from oasis_torchrl.protocol import FPS, SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 
-#: Environment variable read when a config names no API keys (comma-separated keys).
-
 # Keys travel as gRPC metadata (printable ASCII) and in a comma-separated variable.
 _API_KEY_PATTERN = re.compile(r"[\x21-\x2b\x2d-\x7e]{1,256}")
+
+
+def parse_formats(text: str) -> tuple[int, ...]:
+    """``"vp9,jpeg"`` -> frame format values, in the given order.
+
+    Example:
+        >>> parse_formats("vp9, jpeg")  # FrameFormat.VP9, FrameFormat.JPEG
+        (3, 1)
+    """
+    names = [name.strip().upper() for name in text.split(",") if name.strip()]
+    known = {format_name(value).removeprefix("FRAME_FORMAT_"): value for value in SUPPORTED_FORMATS}
+    unknown = [name.lower() for name in names if name not in known]
+    if unknown or not names:
+        raise ValueError(
+            f"formats must be a comma-separated list of {', '.join(k.lower() for k in known)}, "
+            f"got {text!r}"
+        )
+    return tuple(int(known[name]) for name in names)
 
 
 def keys_from_env(environ: dict[str, str] | None = None) -> tuple[str, ...]:
@@ -45,30 +63,39 @@ class ServerConfig:
         ValueError: width must be an even integer in [16, 4096], got 95
     """
 
-    host: str = "127.0.0.1"
-    port: int = 0  # 0: the OS picks a free port
-    width: int = 768
-    height: int = 512
-    fps: float = FPS
-    api_keys: tuple[str, ...] = ()
-    allow_any_key: bool = False
-    latency_ms: float = 0.0  # added to every Infer, emulating a GPU world model
-    failure_rate: float = 0.0  # probability of an injected UNAVAILABLE per A2V call
-    failure_seed: int = 0
-    idle_timeout_s: float = 300.0
-    max_sessions: int = 64
-    max_sessions_per_key: int = 32
-    max_prompt_chars: int = 2000
-    max_message_bytes: int = 64 * 1024  # receive limit per request
-    tls_cert: str | None = None
-    tls_key: str | None = None
-    workers: int = 32  # gRPC handler threads
-    encode_workers: int = 0  # threads encoding streams, shared by all sessions; 0: automatic
-    formats: tuple[int, ...] = field(default=SUPPORTED_FORMATS)  # allowed, in preference order
-    vp9_cpu_used: int = 8
-    vp9_bit_rate: int | None = None  # None: scales with the frame size
-    vp9_threads: int = 1
-    jpeg_quality: int = 90
+    host: str = option("127.0.0.1", help="interface to bind")
+    port: int = option(0, help="port to bind; 0 picks a free one")
+    width: int = option(768, help="frame width")
+    height: int = option(512, help="frame height")
+    fps: float = option(FPS, help="frame rate (the world's time step is 1/fps)")
+    api_keys: tuple[str, ...] = option(
+        (), help="accepted API keys (default: $OASIS_SERVER_API_KEYS; flags are visible to all)"
+    )
+    allow_any_key: bool = option(False, help="accept any non-empty key")
+    latency_ms: float = option(0.0, help="delay added to every Infer, emulating a GPU model")
+    failure_rate: float = option(0.0, help="probability of an injected UNAVAILABLE per call")
+    failure_seed: int = option(0, help="seed of the injected failures")
+    idle_timeout_s: float = option(300.0, help="idle session expiry, seconds")
+    max_sessions: int = option(64, help="open sessions at most")
+    max_sessions_per_key: int = option(32, help="open sessions per API key at most")
+    max_prompt_chars: int = option(2000, help="longest prompt")
+    max_message_bytes: int = option(64 * 1024, help="largest request, bytes")
+    tls_cert: str | None = option(None, help="PEM certificate chain (with tls_key)")
+    tls_key: str | None = option(None, help="PEM private key (with tls_cert)")
+    workers: int = option(32, help="gRPC handler threads")
+    encode_workers: int = option(
+        0, help="threads encoding streams, shared by all sessions (0: automatic)"
+    )
+    formats: tuple[int, ...] = option(
+        SUPPORTED_FORMATS,
+        help="allowed frame formats in preference order, e.g. vp9,jpeg",
+        parse=parse_formats,
+        metavar="FORMATS",
+    )
+    vp9_cpu_used: int = option(8, help="libvpx speed 0-8")
+    vp9_bit_rate: int | None = option(None, help="VP9 bits/s (null: scales with the frame size)")
+    vp9_threads: int = option(1, help="libvpx threads per stream")
+    jpeg_quality: int = option(90, help="JPEG quality 1-100")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "api_keys", tuple(self.api_keys) or keys_from_env())
@@ -121,6 +148,36 @@ class ServerConfig:
             "vp9_threads": self.vp9_threads,
             "jpeg_quality": self.jpeg_quality,
         }
+
+    def to_json(self) -> str:
+        """The config as JSON, API keys included (hand it to a child through a pipe, never a
+        command line): :meth:`from_json` rebuilds it.
+
+        Example:
+            >>> config = ServerConfig(width=96, height=64, api_keys=("k",))
+            >>> ServerConfig.from_json(config.to_json()) == config
+            True
+        """
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> ServerConfig:
+        """The config :meth:`to_json` wrote; unknown fields are an error naming them.
+
+        Example:
+            >>> ServerConfig.from_json('{"widht": 96}')
+            Traceback (most recent call last):
+            ...
+            ValueError: unknown ServerConfig fields: widht
+        """
+        values = json.loads(text)
+        if not isinstance(values, dict):
+            raise ValueError(f"a ServerConfig is a JSON object, got {type(values).__name__}")
+        unknown = sorted(set(values) - {item.name for item in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown ServerConfig fields: {', '.join(unknown)}")
+        sequences = {key: tuple(value) for key, value in values.items() if isinstance(value, list)}
+        return cls(**{**values, **sequences})
 
     def redacted(self) -> dict[str, Any]:
         """The config as a dict fit for logs: API keys replaced by their count."""

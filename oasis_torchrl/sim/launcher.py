@@ -8,9 +8,9 @@ the launcher generates a random one, configures the server with it and exposes i
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
-import os
 import secrets
 import shutil
 import signal
@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, Any
 import grpc
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from oasis_torchrl.protocol import SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.config import ServerConfig
 
 if TYPE_CHECKING:
@@ -122,12 +121,12 @@ class LocalServer:
 
 
 class ServerProcess:
-    """The embedded A2V server as a subprocess (``python -m oasis_torchrl serve``).
+    """The embedded A2V server as a subprocess (``python -m oasis_torchrl.sim``).
 
-    Readiness: the child writes its bound port to a file once serving; the launcher then waits
-    for the gRPC health service to answer SERVING (plain-text servers) within
-    ``startup_timeout``. API keys reach the child through ``OASIS_SERVER_API_KEYS``, never its
-    command line. The child's output goes to :attr:`log_path`.
+    The child reads the config as JSON on its stdin, so API keys never appear on its command
+    line. Readiness: the child writes its bound port to a file once serving; the launcher then
+    waits for the gRPC health service to answer SERVING (plain-text servers) within
+    ``startup_timeout``. The child's output goes to :attr:`log_path`.
 
     Args:
         config: Server settings (defaults to :class:`ServerConfig`); picklable.
@@ -189,24 +188,17 @@ class ServerProcess:
 
     def start(self) -> ServerProcess:
         """Spawn the server and wait until it serves; raises RuntimeError if it does not."""
-        from oasis_torchrl.commands.serve import config_to_argv
-
         if self._process is not None:
             return self
         self._workdir = Path(tempfile.mkdtemp(prefix="oasis-server-"))
         port_file = self._workdir / "port"
-        command = [self.python, "-m", "oasis_torchrl", "serve", *config_to_argv(self.config)]
-        command += ["--port-file", str(port_file)]
-        environment = {**os.environ, SERVER_API_KEYS_ENV_VAR: ",".join(self.config.api_keys)}
+        command = [self.python, "-m", "oasis_torchrl.sim", "--port-file", str(port_file)]
         with open(self.log_path, "wb") as log:
             self._process = subprocess.Popen(
-                command,
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=environment,
+                command, stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT
             )
         try:
+            self._send_config()
             self._wait_until_ready(port_file, time.monotonic() + self.startup_timeout)
         except BaseException:
             self.kill()
@@ -254,6 +246,13 @@ class ServerProcess:
             shutil.rmtree(self._workdir, ignore_errors=True)
             self._workdir = None
         return process.returncode
+
+    def _send_config(self) -> None:
+        """Hand the config (API keys included) to the child on its stdin, then close it."""
+        assert self._process is not None and self._process.stdin is not None
+        # A child that died at once breaks the pipe; waiting for readiness reports its output.
+        with contextlib.suppress(BrokenPipeError), self._process.stdin as stdin:
+            stdin.write(self.config.to_json().encode())
 
     def _wait_until_ready(self, port_file: Path, deadline: float) -> None:
         while not port_file.exists():

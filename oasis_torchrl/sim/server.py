@@ -1,6 +1,6 @@
 """The embedded A2V gRPC server: A2VService, the local SimService and gRPC health checking.
 
-Every rule of the A2V protocol is enforced here (see ``/work/shared/PROTOCOL.md``); request
+Every rule of the A2V protocol is enforced here (see ``docs/PROTOCOL.md``); request
 failures are in-band ``error`` fields, transport conditions are gRPC statuses:
 
 - UNAVAILABLE: an injected transient failure (``failure_rate``), raised before any state

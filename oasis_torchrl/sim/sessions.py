@@ -174,8 +174,10 @@ class Session:
         return self._simulator.scene_proto()
 
     def release(self) -> None:
-        """Mark the session closed and drop its simulator and encoders."""
+        """Mark the session closed and drop its simulator (its threads stopped) and encoders."""
         self.closed = True
+        if self._simulator is not None:
+            self._simulator.close()
         self._simulator = None
         self._encoders = {}
         self._last = None

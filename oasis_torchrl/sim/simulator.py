@@ -251,6 +251,10 @@ class Simulator:
         """The static world of the current scene (see :func:`scene_proto`)."""
         return scene_proto(self.scene)
 
+    def close(self) -> None:
+        """Stop the renderer's threads (idempotent; stepping still works, single-threaded)."""
+        self._renderer.close()
+
     def _require_world(self) -> World:
         if self._world is None:
             raise RuntimeError("Simulator.reset(prompt, seed) must be called before stepping")

@@ -8,7 +8,7 @@ from the videos like ``lerobot-train``), optional random-shift image augmentatio
 loggers, tqdm, and an evaluation in the env at the end. The output folder is a LeRobot policy
 folder (``save_pretrained`` weights, config and processors): it loads with
 ``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``, and as a PPO warm start
-(``init_from``). Config: ``configs/bc.yaml``.
+(``init_from``). Config: :class:`~oasis_torchrl.config.BCConfig`.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from torch.utils.data import DataLoader
 from torchrl.record.loggers import get_logger
 from tqdm import tqdm
 
+from oasis_torchrl.config import save_config
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.checkpoint import lerobot_plugin, load_net
-from oasis_torchrl.train.config import save_config
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 
 logger = logging.getLogger(__name__)
@@ -113,10 +113,10 @@ class BCTrainer:
     """One behaviour-cloning run; :meth:`run` trains, saves and evaluates.
 
     Args:
-        cfg: the resolved ``configs/bc.yaml`` (with overrides).
+        cfg: the resolved :class:`~oasis_torchrl.config.BCConfig` (with overrides).
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> cfg = load_config("bc", ["dataset.root=drives"])  # doctest: +SKIP
         >>> BCTrainer(cfg).run().policy_dir  # doctest: +SKIP
     """
@@ -215,10 +215,11 @@ class BCTrainer:
 
 
 def train_bc(cfg: DictConfig) -> BCResult:
-    """Run behaviour cloning as configured (``configs/bc.yaml``); see :class:`BCTrainer`.
+    """Run behaviour cloning as configured (:class:`~oasis_torchrl.config.BCConfig`); see
+    :class:`BCTrainer`.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> train_bc(load_config("bc", ["dataset.root=drives"]))  # doctest: +SKIP
     """
     return BCTrainer(cfg).run()

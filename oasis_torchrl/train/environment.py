@@ -13,7 +13,7 @@ episode), ``image_size`` ``[height, width]`` of the policy images, ``server`` (`
 ``height`` of the embedded server's frames) and ``reward`` (``kind: ground_truth`` with
 ``progress_scale``, ``collision_penalty``, ``lane_penalty`` and the optional
 :class:`~oasis_torchrl.train.shaping.ClearanceShaping` ``clearance_weight`` (0: off) and
-``clearance_horizon``; or ``kind: depth``, the peer's depth-collision reward, for remote
+``clearance_horizon``; or ``kind: depth``, the reference SDK's depth-collision reward, for remote
 endpoints).
 """
 
@@ -22,7 +22,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
 import torch
 from omegaconf import DictConfig
 from tensordict import TensorDictBase
@@ -30,7 +29,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import Compose, RewardSum, StepCounter, Transform, TransformedEnv
 
 from oasis_torchrl.envs import OasisEnv
-from oasis_torchrl.envs.episodes import Prompts
+from oasis_torchrl.envs.episodes import Prompts, episode_prompts
 from oasis_torchrl.envs.oasis_env import LOCAL
 from oasis_torchrl.models.actor_critic import CRITIC_INPUTS
 from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, RewardModule
@@ -95,28 +94,6 @@ class PrivilegedState(Transform):
         return observation_spec
 
 
-def episode_prompts(prompts: Sequence[str]) -> Prompts:
-    """One prompt for every episode, or a sampler drawing one uniformly per episode.
-
-    Example:
-        >>> episode_prompts(["urban"])
-        'urban'
-        >>> sampler = episode_prompts(["urban", "rural"])
-        >>> sampler(0, np.random.default_rng(0)) in ("urban", "rural")
-        True
-    """
-    choices = [str(prompt) for prompt in prompts]
-    if not choices:
-        raise ValueError("env.prompts must hold at least one prompt")
-    if len(choices) == 1:
-        return choices[0]
-
-    def sample(row: int, rng: np.random.Generator) -> str:
-        return choices[int(rng.integers(len(choices)))]
-
-    return sample
-
-
 def make_reward(cfg: DictConfig) -> RewardModule:
     """The reward module of ``env.reward``.
 
@@ -162,7 +139,7 @@ def build_env(
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> env = build_env(load_config("ppo").env, num_envs=1)
         >>> env.batch_size
         torch.Size([1])

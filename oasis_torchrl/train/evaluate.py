@@ -128,7 +128,7 @@ def rollout_episodes(
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> env = build_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
         >>> rollout = rollout_episodes(env, ScriptedDriver.from_spec("throttle=1"), 3)
         >>> env.close()
@@ -256,7 +256,7 @@ class Evaluator:
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> cfg = load_config("eval", ["episodes=1", "max_steps=2", "env.image_size=[32,48]"])
         >>> with Evaluator(cfg.env, cfg, progress=False) as evaluator:
         ...     report = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))

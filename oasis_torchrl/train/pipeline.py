@@ -2,11 +2,12 @@
 
 1. ``record``: autopilot demonstrations as a LeRobot dataset (one row per frame), with noise
    injected into the executed actions (:mod:`oasis_torchrl.train.demonstrations`);
-2. ``bc``: behaviour cloning on it (``configs/bc.yaml`` plus the config's ``bc`` overrides),
+2. ``bc``: behaviour cloning on it (the ``bc`` stage settings,
+   :class:`~oasis_torchrl.config.BCSettings`),
    then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
    by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
-3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (``configs/ppo.yaml`` plus the
-   ``ppo`` overrides, the shared ``env`` and ``eval`` sections);
+3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
+   :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
    prompts and seeds; the fine-tuned policy's episodes go to rerun (``eval.rerun``, by default
    ``<output_dir>/eval.rrd``) and to a LeRobot dataset if ``eval.lerobot`` is set.
@@ -16,7 +17,8 @@ folder to redo it), so re-running after an interruption continues where it stopp
 ``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
 folders), ``ppo/checkpoints/latest.pt``, ``eval.rrd``, ``summary.json`` (paths, evaluations with
 their episodes, seconds per stage) and ``comparison.png`` (the evaluations as bars; the same
-comparison as a text table is :meth:`PipelineResult.table`). Config: ``configs/demo.yaml``.
+comparison as a text table is :meth:`PipelineResult.table`). Config:
+:class:`~oasis_torchrl.config.DemoConfig`.
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from oasis_torchrl.config import load_config, save_config
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
-from oasis_torchrl.train.config import load_config, save_config
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
 from oasis_torchrl.train.policy_source import AUTOPILOT, CONSTANT, load_policy
@@ -41,8 +43,9 @@ from oasis_torchrl.train.policy_source import AUTOPILOT, CONSTANT, load_policy
 logger = logging.getLogger(__name__)
 
 REFERENCE_KEY = "reference"
-PIPELINE_ONLY = (REFERENCE_KEY, "rerun", "lerobot")
-"""``eval`` keys for the pipeline's final evaluation only (not PPO's)."""
+SHARED_EVAL_KEYS = ("prompts", "seeds", "max_steps")
+"""``eval`` keys PPO's own evaluations take from the pipeline's (how many and how often stay
+the ``ppo.eval`` settings')."""
 
 
 @dataclass
@@ -120,7 +123,7 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
     Example:
         >>> demonstrations(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
     """
-    from oasis_torchrl.commands._dataset_args import quiet_dataset_libraries
+    from oasis_torchrl.data.quiet import quiet_dataset_libraries
 
     info = root / "meta" / "info.json"
     if info.exists():
@@ -168,26 +171,24 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
 def ppo_config(
     cfg: DictConfig, init_from: Path | None, name: str = "ppo", *, fine_tune: bool = True
 ) -> DictConfig:
-    """The PPO config of a pipeline config: ``configs/ppo.yaml``, the shared ``env`` and
-    ``eval`` sections, a warm start from ``init_from`` and, for fine-tuning, the ``ppo``
-    overrides.
+    """The PPO config of a pipeline config: the ``ppo`` stage settings (for fine-tuning; PPO
+    from scratch takes the defaults), the shared ``env``, the evaluated prompts, seeds and
+    episode length of the shared ``eval``, and a warm start from ``init_from``.
 
     Example:
         >>> ppo = ppo_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/p"))
-        >>> ppo.output_dir, ppo.init_from
-        ('/tmp/d/ppo', '/tmp/d/p')
+        >>> ppo.output_dir, ppo.init_from, ppo.eval.max_steps
+        ('/tmp/d/ppo', '/tmp/d/p', 100)
     """
-    # The pipeline records the final evaluation itself; PPO's own evaluations are not recorded.
-    evaluation = {key: value for key, value in cfg.eval.items() if key not in PIPELINE_ONLY}
     values = {
         "seed": cfg.seed,
         "progress": cfg.progress,
         "output_dir": str(Path(cfg.output_dir) / name),
         "init_from": None if init_from is None else str(init_from),
         "env": cfg.env,
-        "eval": evaluation,
+        "eval": {key: cfg.eval[key] for key in SHARED_EVAL_KEYS},
     }
-    return OmegaConf.merge(load_config("ppo"), values, cfg.ppo if fine_tune else {})
+    return OmegaConf.merge(load_config("ppo"), cfg.ppo if fine_tune else {}, values)
 
 
 def clone(cfg: DictConfig, dataset: Path) -> Path:
@@ -279,7 +280,8 @@ def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
 
 
 def run_pipeline(cfg: DictConfig) -> PipelineResult:
-    """Run record -> BC -> PPO fine-tuning -> evaluation as ``cfg`` (``configs/demo.yaml``) says.
+    """Run record -> BC -> PPO fine-tuning -> evaluation as ``cfg`` (a
+    :class:`~oasis_torchrl.config.DemoConfig`) says.
 
     Example:
         >>> result = run_pipeline(load_config("demo"))  # doctest: +SKIP

@@ -9,7 +9,7 @@ periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot d
 configured; on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early
 stopping that never looks at the seeds reported at the end), a warm start from a
 behaviour-cloning policy, and the kept policy exported as a LeRobot policy folder. Config:
-``configs/ppo.yaml``.
+:class:`~oasis_torchrl.config.PPOConfig`.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
+from oasis_torchrl.config import save_config, section
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.protocol import ACTION_NAMES
 from oasis_torchrl.train.checkpoint import (
@@ -40,7 +41,6 @@ from oasis_torchrl.train.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
-from oasis_torchrl.train.config import save_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
@@ -80,7 +80,7 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> net = build_net(load_config("ppo"), ("left_forward", "front", "right_forward"))
         >>> net.config.image_size
         (64, 96)
@@ -93,7 +93,8 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
-        net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
+        config = {"cameras": cameras, "image_size": image_size, **network}
+        net = DrivingNet(DrivingNetConfig.from_dict(config))
     critic_inputs = len(PRIVILEGED_FIELDS) if cfg.privileged_critic else 0
     aux_outputs = len(PRIVILEGED_FIELDS) if cfg.loss.aux_coeff else 0
     if (net.config.critic_inputs, net.config.aux_outputs) != (critic_inputs, aux_outputs):
@@ -111,7 +112,7 @@ def uses_ground_truth(cfg: DictConfig) -> bool:
     targets), which only the embedded server sends.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> uses_ground_truth(load_config("ppo", ["privileged_critic=false", "loss.aux_coeff=0"]))
         False
     """
@@ -148,10 +149,10 @@ class PPOTrainer:
     """One PPO run; :meth:`run` trains, evaluates, checkpoints and exports.
 
     Args:
-        cfg: the resolved ``configs/ppo.yaml`` (with overrides).
+        cfg: the resolved :class:`~oasis_torchrl.config.PPOConfig` (with overrides).
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> cfg = load_config("ppo", ["collector.total_frames=0"])  # doctest: +SKIP
         >>> PPOTrainer(cfg).run()  # doctest: +SKIP
     """
@@ -239,10 +240,8 @@ class PPOTrainer:
         """The un-annealed learning rates of the parameter groups (acting parts, heads,
         scale)."""
         optim = self.cfg.optim
-        return tuple(
-            optim.lr if optim.get(key) is None else optim.get(key)
-            for key in ("lr", "critic_lr", "scale_lr")
-        )
+        critic_lr = optim.lr if optim.critic_lr is None else optim.critic_lr
+        return optim.lr, critic_lr, optim.lr if optim.scale_lr is None else optim.scale_lr
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -316,13 +315,10 @@ class PPOTrainer:
         """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
         cfg = self.cfg
         if cfg.ray.enabled:
-            from oasis_torchrl.distributed import (
-                RayCollection,
-                RayCollectionConfig,
-                training_env_factory,
-            )
+            from oasis_torchrl.config.ray import RayCollectionConfig
+            from oasis_torchrl.distributed import RayCollection, training_env_factory
 
-            ray_cfg = RayCollectionConfig.from_config(cfg.ray)
+            ray_cfg = section(cfg.ray, RayCollectionConfig)
             return RayCollection(
                 ray_cfg,
                 training_env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
@@ -441,7 +437,7 @@ class PPOTrainer:
         a smaller budget)."""
         selection_seeds = self.cfg.eval.get("selection_seeds")
         report = self._evaluate(self.net, selection_seeds)
-        if self.cfg.checkpoint.get("keep_evaluated"):
+        if self.cfg.checkpoint.keep_evaluated:
             save_checkpoint(
                 self.checkpoint_dir / evaluated_checkpoint_name(self.frames),
                 self.net,
@@ -593,10 +589,10 @@ def _postfix(metrics: dict[str, float]) -> dict[str, str]:
 
 
 def train_ppo(cfg: DictConfig) -> PPOResult:
-    """Run PPO as configured (``configs/ppo.yaml``); see :class:`PPOTrainer`.
+    """Run PPO as configured (:class:`~oasis_torchrl.config.PPOConfig`); see :class:`PPOTrainer`.
 
     Example:
-        >>> from oasis_torchrl.train.config import load_config
+        >>> from oasis_torchrl.config import load_config
         >>> result = train_ppo(load_config("ppo", ["env.num_envs=2"]))  # doctest: +SKIP
     """
     return PPOTrainer(cfg).run()

@@ -43,7 +43,7 @@ class RerunTransform(Transform):
         >>> from oasis_torchrl.viz import RolloutLogger
         >>> rerun_logger = RolloutLogger(os.path.join(tempfile.mkdtemp(), "run.rrd"))
         >>> env = OasisEnv("local", 2, server=ServerConfig(width=96, height=64))
-        >>> env = env.append_transform(rerun_logger.transform())
+        >>> env = env.append_transform(RerunTransform(rerun_logger))
         >>> _ = env.rollout(2)
         >>> env.close(); rerun_logger.close()
     """

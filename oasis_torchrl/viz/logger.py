@@ -4,9 +4,10 @@ One logger, four ways in:
 
 - a plain function on a rollout: ``logger.log_rollout(env.rollout(100))`` (``[N, T]``);
 - a collector hook: ``Collector(..., postproc=logger)`` (batches continue episodes);
-- a TorchRL transform: ``env.append_transform(logger.transform())`` (logs every reset and step);
+- a TorchRL transform: ``env.append_transform(RerunTransform(logger))`` (every reset and step);
 - a ``FrameConsumer`` of the sync client:
-  ``A2VClient(..., frame_consumer=logger.frame_consumer())``.
+  ``A2VClient(..., frame_consumer=RerunFrameConsumer(logger))``
+  (both in :mod:`oasis_torchrl.viz.hooks`, which stand on this module, not the reverse).
 
 Every logged reset or step is one *tick* of 4 world frames on the ``frame`` and ``sim_time``
 timelines (layout in :mod:`oasis_torchrl.viz.paths`). Frames are JPEG-encoded and logged on a
@@ -22,7 +23,7 @@ import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -34,9 +35,6 @@ from oasis_torchrl.viz.recording import APPLICATION_ID, DEFAULT_MEMORY_LIMIT, op
 from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
 from oasis_torchrl.viz.worker import BoundedWorker
 from oasis_torchrl.viz.writer import RecordWriter
-
-if TYPE_CHECKING:
-    from oasis_torchrl.viz.hooks import RerunFrameConsumer, RerunTransform
 
 
 class RolloutLogger:
@@ -152,18 +150,6 @@ class RolloutLogger:
     ) -> None:
         """Log one chunk of client frames (camera -> frames in time order) as ``row``."""
         self._submit(read_frames(frames, row, start))
-
-    def transform(self) -> RerunTransform:
-        """A TorchRL transform that logs every reset and step of the env it is appended to."""
-        from oasis_torchrl.viz.hooks import RerunTransform
-
-        return RerunTransform(self)
-
-    def frame_consumer(self, row: int = 0) -> RerunFrameConsumer:
-        """A ``FrameConsumer`` for :class:`~oasis_torchrl.client.A2VClient`, logging as ``row``."""
-        from oasis_torchrl.viz.hooks import RerunFrameConsumer
-
-        return RerunFrameConsumer(self, row)
 
     # -- lifecycle ---------------------------------------------------------------------------
 

@@ -53,7 +53,8 @@ class OasisConfig(PreTrainedConfig):
         shared_encoder: one CNN for all cameras, or one per camera.
         encoder_channels, pool_grid, camera_features, hidden_dim: network sizes.
         use_state: feed ``observation.state`` (the previous action) to the network; see
-            ``DrivingNetConfig.use_state`` (off in ``configs/bc.yaml``: the copycat shortcut).
+            ``DrivingNetConfig.use_state`` (off in :class:`~oasis_torchrl.config.BCConfig`: the
+            copycat shortcut).
         loss: behaviour-cloning loss on the chunk, ``"l1"`` or ``"mse"``.
         action_loss_weights: weight of the throttle and steering errors in the loss. Actions
             are not normalised (see above), so with equal weights the loss follows the dimension

@@ -81,7 +81,7 @@ def test_sequence_desync_restarts_the_row(local_server: LocalServer) -> None:
         pool.prompt([PROMPT] * 2, seeds=SEEDS[:2])
         pool.infer(np.zeros((2, 4, 2), np.float32))
         # Simulate a client that lost track of its rollout (e.g. a response dropped by a proxy).
-        pool._runtime.sessions[0].sequence_num = 5
+        pool._runtime.sessions[0].state.sequence_num = 5
         step = pool.infer(np.full((2, 4, 2), 0.5, np.float32))
         assert step.status.tolist() == [SessionStatus.RESTARTED, SessionStatus.OK]
         assert isinstance(step.errors[0], SequenceError)

@@ -9,7 +9,7 @@ import grpc
 import numpy as np
 import pytest
 
-from oasis_torchrl.client import extras, wire
+from oasis_torchrl.client import ground_truth, wire
 from oasis_torchrl.client.channel import parse_endpoint
 from oasis_torchrl.client.errors import (
     A2VError,
@@ -22,6 +22,7 @@ from oasis_torchrl.client.errors import (
     a2v_error_from_proto,
 )
 from oasis_torchrl.client.retry import RetryBudget, RetryPolicy, acall_with_retry, call_with_retry
+from oasis_torchrl.client.session import SessionState
 from oasis_torchrl.client.types import FrameFormat
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import TRUTH_METADATA
@@ -264,14 +265,71 @@ def test_truth_and_depth_parsing() -> None:
         sequence_num=2,
         frames=[sim_pb2.FrameTruth(speed=float(k), off_road=k == 3) for k in range(4)],
     )
-    parsed = extras.parse_truth([("other", "x"), (TRUTH_METADATA, truth.SerializeToString())])
-    table = extras.truth_array(parsed)
-    assert table.shape == (4, len(extras.TRUTH_FIELDS))
-    assert table[:, extras.TRUTH_FIELDS.index("speed")].tolist() == [0.0, 1.0, 2.0, 3.0]
-    assert table[:, extras.TRUTH_FIELDS.index("off_road")].tolist() == [0.0, 0.0, 0.0, 1.0]
-    assert extras.parse_truth(None) is None
+    parsed = ground_truth.parse_truth([("other", "x"), (TRUTH_METADATA, truth.SerializeToString())])
+    table = ground_truth.truth_array(parsed)
+    assert table.shape == (4, len(ground_truth.TRUTH_FIELDS))
+    assert table[:, ground_truth.TRUTH_FIELDS.index("speed")].tolist() == [0.0, 1.0, 2.0, 3.0]
+    assert table[:, ground_truth.TRUTH_FIELDS.index("off_road")].tolist() == [0.0, 0.0, 0.0, 1.0]
+    assert ground_truth.parse_truth(None) is None
     depth = np.array([[1.5, np.inf], [2.0, 100.0]], "<f2")
     response = sim_pb2.DepthResponse(
         maps=[sim_pb2.DepthMap(name="front", height=2, width=2, depth_f16=depth.tobytes())]
     )
-    np.testing.assert_array_equal(extras.depth_maps(response)["front"], depth.astype(np.float32))
+    np.testing.assert_array_equal(
+        ground_truth.depth_maps(response)["front"], depth.astype(np.float32)
+    )
+
+
+# --------------------------------------------------------------- session state machine
+
+
+def _state() -> SessionState:
+    return SessionState(
+        "key", sdk_version="0.0.2", accepted_formats=[FrameFormat.VP9], required_streams=["front"]
+    )
+
+
+def _initialized(output_format: int = FrameFormat.VP9) -> SessionState:
+    state = _state()
+    streams = [a2v_pb2.StreamInfo(name="front", type=1, height=64, width=96)]
+    response = a2v_pb2.InitializeResponse(
+        session_id="s1", output_format=output_format, streams=streams
+    )
+    state.on_initialize(response, [("x-session-target", b"node-1")])
+    return state
+
+
+def test_session_state_counts_sequences_and_replays_its_prompt() -> None:
+    state = _initialized()
+    assert state.session_id == "s1" and ("x-session-target", "node-1") in state.metadata
+    with pytest.raises(DecartRoboticsError, match="never prompted"):
+        state.replay_prompt()
+    prompt = state.prompt("a road", 7)
+    assert prompt.metadata[-1] == ("x-oasis-seed", "7")
+    state.on_prompt(a2v_pb2.PromptResponse())
+    chunk = np.zeros((4, 2), np.float32)
+    for expected in (0, 1):
+        call = state.infer(chunk)
+        assert call.request.sequence_num == expected
+        state.on_infer(a2v_pb2.InferResponse(sequence_num=expected), None)
+    replay = state.replay_prompt()
+    assert (replay.request.prompt, replay.metadata[-1]) == ("a road", ("x-oasis-seed", "7"))
+    state.on_prompt(a2v_pb2.PromptResponse())
+    assert state.infer(chunk).request.sequence_num == 0  # a Prompt restarts the rollout
+    error = common_pb2.Error(code=common_pb2.ERROR_CODE_INVALID_SESSION, message="gone")
+    with pytest.raises(SessionLostError):
+        state.on_infer(a2v_pb2.InferResponse(error=error), None)
+
+
+def test_session_state_refuses_a_format_it_did_not_offer_but_can_finish_it() -> None:
+    with pytest.raises(DecartRoboticsError, match="negotiated output format JPEG"):
+        _initialized(FrameFormat.JPEG)
+    state = _state()
+    assert state.finish() is None  # nothing open
+    with pytest.raises(DecartRoboticsError):
+        state.on_initialize(
+            a2v_pb2.InitializeResponse(session_id="s2", output_format=FrameFormat.JPEG), ()
+        )
+    finish = state.finish()
+    assert finish is not None and finish.request.session_id == "s2"
+    assert state.finish() is None  # forgotten at once: a failing Finish is not sent twice

@@ -103,7 +103,7 @@ def test_saved_policies_drive(tmp_path: Path) -> None:
 
 
 def test_record_command_offers_every_driver_kind() -> None:
-    from oasis_torchrl.commands.record import DRIVERS
+    from oasis_torchrl.config.recording import DRIVERS
     from oasis_torchrl.drivers import DRIVER_KINDS
 
     assert DRIVERS == DRIVER_KINDS

@@ -16,7 +16,7 @@ import torch
 from torchrl.collectors import Collector
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.commands._dataset_args import sigterm_as_interrupt
+from oasis_torchrl.commands._signals import sigterm_as_interrupt
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.drivers import Autopilot
 from oasis_torchrl.envs import OasisEnv

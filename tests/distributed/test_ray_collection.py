@@ -143,8 +143,8 @@ def test_a_killed_worker_stops_the_run_cleanly(tmp_path: Path, caplog) -> None:
 
 
 def test_ppo_trains_on_ray_workers(tmp_path: Path) -> None:
+    from oasis_torchrl.config import load_config
     from oasis_torchrl.train.checkpoint import load_checkpoint
-    from oasis_torchrl.train.config import load_config
     from oasis_torchrl.train.ppo import PPOTrainer
 
     cfg = load_config(

@@ -1,4 +1,4 @@
-"""Behaviour of the peer's depth-collision reward on hand-built metric depth scenes."""
+"""Behaviour of the reference SDK's depth-collision reward on hand-built metric depth scenes."""
 
 from __future__ import annotations
 

@@ -3,12 +3,16 @@ and batched rendering of several poses (byte for byte the frames of one pose at 
 
 from __future__ import annotations
 
+import os
+import threading
+
 import numpy as np
 import pytest
 
 from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.sim.autopilot import Autopilot
-from oasis_torchrl.sim.render import OBSTACLE_FAR, Renderer, _QuadPalette
+from oasis_torchrl.sim.render import OBSTACLE_FAR, Renderer
+from oasis_torchrl.sim.render.quad_palette import QuadPalette
 from oasis_torchrl.sim.scene import build_scene, obstacles_at
 from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.vehicle import VehicleState
@@ -90,7 +94,7 @@ def test_odd_sizes_render(width: int, height: int) -> None:
 def test_quad_palette_matches_a_plain_lookup() -> None:
     rng = np.random.default_rng(0)
     palette = rng.integers(0, 256, (256, 3)).astype(np.uint8)
-    converter = _QuadPalette(palette)
+    converter = QuadPalette(palette)
     for size in (1, 2, 3, 4, 5, 7, 8, 1001):
         indices = rng.integers(0, 256, size).astype(np.uint8)
         out = np.empty((size, 3), np.uint8)
@@ -168,3 +172,22 @@ def test_render_many_rejects_mismatched_arguments() -> None:
     frames["front"] = np.zeros((2, HEIGHT, WIDTH), np.uint8)
     with pytest.raises(ValueError, match="out\\['front'\\]"):
         renderer.render_many([state, state], [0, 1], frames)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="one core: large images render in one thread")
+def test_a_large_renderer_stops_its_threads_on_close() -> None:
+    scene = build_scene("highway", 0)
+    state = World(scene, dt=0.05).state
+    before = set(threading.enumerate())
+    renderer = Renderer(768, 512)
+    renderer.prepare(scene)
+    first = {name: np.empty((512, 768, 3), np.uint8) for name in CAMERAS}
+    renderer.render(state, 0, first)
+    threads = [t for t in set(threading.enumerate()) - before if t.name.startswith("oasis-render")]
+    assert threads
+    renderer.close()
+    assert not any(thread.is_alive() for thread in threads)
+    again = {name: np.empty((512, 768, 3), np.uint8) for name in CAMERAS}
+    renderer.render(state, 0, again)  # still renders, in the calling thread
+    for name in CAMERAS:
+        assert np.array_equal(first[name], again[name])

@@ -8,7 +8,7 @@ import pytest
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from oasis_torchrl.train.config import load_config
+from oasis_torchrl.config import load_config
 from oasis_torchrl.train.demonstrations import ActionNoise, NoiseProcess, record_demonstrations
 
 from .conftest import TINY_ENV

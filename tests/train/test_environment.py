@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from oasis_torchrl.train.config import load_config
+from oasis_torchrl.config import load_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 
 from .conftest import TINY_ENV

@@ -11,9 +11,9 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from oasis_torchrl.config import load_config
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
-from oasis_torchrl.train.config import load_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 

@@ -9,9 +9,9 @@ import torch
 from tensordict import TensorDict
 from torchrl.objectives import ClipPPOLoss
 
+from oasis_torchrl.config import load_config
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.config import HEADS, TANH_NORMAL
-from oasis_torchrl.train.config import load_config
 from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 

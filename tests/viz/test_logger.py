@@ -19,7 +19,7 @@ from oasis_torchrl.client import A2VClient
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
-from oasis_torchrl.viz import LogOptions, RolloutLogger
+from oasis_torchrl.viz import LogOptions, RerunFrameConsumer, RerunTransform, RolloutLogger
 
 from ._readback import Readback
 from ._rollouts import CAMERAS, SIZE, TERMS, action, color, reward, rollout
@@ -183,7 +183,7 @@ def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) ->
         max_steps=2,
     )
     with RolloutLogger(tmp_path / "transform.rrd") as rerun_logger:
-        env = env.append_transform(rerun_logger.transform())
+        env = env.append_transform(RerunTransform(rerun_logger))
         td = env.rollout(5, break_when_any_done=False)
     env.close()
     live = Readback(tmp_path / "transform.rrd")
@@ -214,7 +214,7 @@ def test_frame_consumer_of_the_sync_client(tmp_path: Path, local_server: LocalSe
         client = A2VClient(
             local_server.endpoint,
             api_key=local_server.api_key,
-            frame_consumer=rerun_logger.frame_consumer(row=3),
+            frame_consumer=RerunFrameConsumer(rerun_logger, row=3),
         )
         with client:
             client.initialize()

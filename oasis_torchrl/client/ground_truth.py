@@ -1,7 +1,7 @@
-"""Optional services beyond A2V: gRPC health (ping) and the embedded simulator's side channel.
+"""What the embedded simulator tells beyond A2V: per-frame ground truth and depth maps.
 
-The hosted service knows none of these; every helper degrades clearly: ground truth is None
-when the server sends none, and a missing service raises :class:`UnsupportedFeatureError`.
+The hosted service sends none of it; every helper degrades clearly: ground truth is None when
+the server sends none, and a missing ``SimService`` raises :class:`UnsupportedFeatureError`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,6 @@ from typing import NoReturn
 
 import grpc
 import numpy as np
-from grpc_health.v1 import health_pb2
 
 from oasis_torchrl.client.errors import TransportError, UnsupportedFeatureError
 from oasis_torchrl.proto import sim_pb2
@@ -21,8 +20,6 @@ TRUTH_FIELDS: tuple[str, ...] = tuple(
     field.name for field in sorted(sim_pb2.FrameTruth.DESCRIPTOR.fields, key=lambda f: f.number)
 )
 """FrameTruth field names, in the order of the last axis of ``PoolStep.truth``."""
-
-NOT_SERVING_CODES = frozenset({grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED})
 
 
 def parse_truth(
@@ -72,40 +69,6 @@ def depth_maps(response: sim_pb2.DepthResponse) -> dict[str, np.ndarray]:
         .astype(np.float32)
         for depth in response.maps
     }
-
-
-def health_request() -> health_pb2.HealthCheckRequest:
-    """A health check of the whole server (service name "").
-
-    >>> health_request().service
-    ''
-    """
-    return health_pb2.HealthCheckRequest(service="")
-
-
-def is_serving(response: health_pb2.HealthCheckResponse) -> bool:
-    """Whether a health answer says SERVING.
-
-    >>> is_serving(health_pb2.HealthCheckResponse(status=health_pb2.HealthCheckResponse.SERVING))
-    True
-    """
-    return response.status == health_pb2.HealthCheckResponse.SERVING
-
-
-def ping_outcome(error: TransportError) -> bool:
-    """Turn a failed health check into ping's answer: False if the server is unreachable.
-
-    >>> ping_outcome(TransportError(grpc.StatusCode.UNAVAILABLE, "down", method="Check"))
-    False
-    """
-    if error.code() == grpc.StatusCode.UNIMPLEMENTED:
-        raise UnsupportedFeatureError(
-            "ping needs the gRPC health service (grpc.health.v1.Health), which this server "
-            "does not implement"
-        ) from error
-    if error.code() in NOT_SERVING_CODES:
-        return False
-    raise error
 
 
 def raise_depth_error(error: TransportError) -> NoReturn:

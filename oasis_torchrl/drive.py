@@ -1,6 +1,6 @@
-"""The demo drive: the autopilot on the embedded server, filmed by the three cameras.
+"""A filmed drive: the autopilot on the embedded server, filmed by the three cameras.
 
-:func:`drive_demo` starts the embedded A2V server, drives one scripted route (a fixed prompt
+:func:`drive_route` starts the embedded A2V server, drives one scripted route (a fixed prompt
 and seed) with the privileged autopilot through the real protocol, writes the cameras side by
 side to an MP4 and returns a summary.
 """
@@ -39,7 +39,7 @@ class DriveSummary:
     video: str
 
 
-def drive_demo(
+def drive_route(
     output: str | Path,
     *,
     prompt: str = "urban street, sunset",
@@ -52,7 +52,7 @@ def drive_demo(
 
     Example:
         >>> import tempfile
-        >>> summary = drive_demo(tempfile.mkdtemp(), steps=3, width=96, height=64)
+        >>> summary = drive_route(tempfile.mkdtemp(), steps=3, width=96, height=64)
         >>> summary.frames
         16
     """

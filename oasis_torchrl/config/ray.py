@@ -1,30 +1,31 @@
-"""Settings of Ray collection (the ``ray`` section of ``configs/ray.yaml``).
-
-Keys: ``enabled``, ``address`` (``local`` starts a Ray runtime in this process; ``auto``, a
-``host:port`` or a ``ray://host:10001`` address joins an existing cluster), ``num_collectors``
-(Ray actors), ``envs_per_collector``, ``sessions_per_env`` (rows of each ``OasisEnv``),
-``server_address`` (``null``: every env starts its own embedded server; an ``http://host:port``
-of an ``oasis-torchrl serve`` server: all envs share it), ``cpus_per_collector``, ``num_cpus``
-and ``object_store_memory`` (local runtime only), ``sync`` (one batch from every collector per
-iteration, or first-ready), ``on_failure`` (``stop`` or ``continue``), ``shard_root`` (record
-each worker's batches into its own LeRobot shard there) and ``part_batches`` (close and start a
-new shard part every that many batches, so a killed worker loses at most one part; 0: never).
-"""
+"""Settings of Ray collection: the ``ray`` section of the PPO config and of ``record --ray``."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from oasis_torchrl.config.fields import Alias, option
 
 LOCAL_ADDRESS = "local"
 FAILURE_POLICIES = ("stop", "continue")
+RAY_ALIASES = {
+    "--ray": Alias("ray.enabled"),
+    "--ray-address": Alias("ray.address"),
+    "--collectors": Alias("ray.num_collectors"),
+    "--sessions-per-env": Alias("ray.sessions_per_env"),
+    "--cpus-per-collector": Alias("ray.cpus_per_collector"),
+    "--server-address": Alias("ray.server_address"),
+    "--shard-root": Alias("ray.shard_root"),
+    "--part-batches": Alias("ray.part_batches"),
+    "--on-failure": Alias("ray.on_failure"),
+}
+"""Short flags of the ``ray`` section of a command that records or collects on Ray."""
 
 
 @dataclass(frozen=True)
 class RayCollectionConfig:
-    """Where and how wide Ray collection runs; see the module docstring for each field.
+    """Where and how wide Ray collection runs (each field's help says what it sets).
 
     Example:
         >>> cfg = RayCollectionConfig(num_collectors=2, sessions_per_env=3)
@@ -34,19 +35,38 @@ class RayCollectionConfig:
         'local'
     """
 
-    enabled: bool = False
-    address: str = LOCAL_ADDRESS
-    num_collectors: int = 2
-    envs_per_collector: int = 1
-    sessions_per_env: int = 4
-    server_address: str | None = None
-    cpus_per_collector: float = 1.0
-    num_cpus: int | None = None
-    object_store_memory: int | None = None
-    sync: bool = True
-    on_failure: str = "stop"
-    shard_root: str | None = None
-    part_batches: int = 0
+    enabled: bool = option(False, help="collect on Ray instead of in this process")
+    address: str = option(
+        LOCAL_ADDRESS,
+        help="local (start a Ray runtime here) | auto | host:6379 | ray://host:10001",
+    )
+    num_collectors: int = option(2, help="Ray actors, each a TorchRL collector")
+    envs_per_collector: int = option(
+        1, help="OasisEnvs per actor (> 1: a MultiSyncCollector inside the actor)"
+    )
+    sessions_per_env: int = option(4, help="world-model sessions (rows) of each OasisEnv")
+    server_address: str | None = option(
+        None,
+        help="null: an embedded server per env; http://host:port of an 'oasis-torchrl serve' "
+        "server: all envs share it",
+    )
+    cpus_per_collector: float = option(1.0, help="Ray CPUs reserved per actor")
+    num_cpus: int | None = option(None, help="local runtime only: CPUs Ray may use (null: all)")
+    object_store_memory: int | None = option(
+        None, help="local runtime only: bytes of object store (null: Ray's default)"
+    )
+    sync: bool = option(True, help="one batch from every actor per iteration; false: first-ready")
+    on_failure: str = option(
+        "stop", help="a lost actor: stop (finalize shards, raise) | continue without it"
+    )
+    shard_root: str | None = option(
+        None, help="record each actor's batches as a LeRobot shard under this folder"
+    )
+    part_batches: int = option(
+        0,
+        help="finalize a new shard part every N batches, so a lost worker loses at most one "
+        "part (0: once, at the end)",
+    )
 
     def __post_init__(self) -> None:
         for name in ("num_collectors", "envs_per_collector", "sessions_per_env"):
@@ -64,25 +84,6 @@ class RayCollectionConfig:
                 f"ray.shard_root needs ray.envs_per_collector=1, got {self.envs_per_collector}; "
                 "widen with sessions_per_env or num_collectors instead"
             )
-
-    @classmethod
-    def from_config(cls, section: DictConfig | dict[str, Any]) -> RayCollectionConfig:
-        """Build from a config section; unknown keys are an error naming them.
-
-        Example:
-            >>> RayCollectionConfig.from_config({"num_collectors": 3}).num_collectors
-            3
-        """
-        values = (
-            OmegaConf.to_container(section, resolve=True)
-            if isinstance(section, DictConfig)
-            else dict(section)
-        )
-        known = {field.name for field in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown ray config keys {unknown}; known: {sorted(known)}")
-        return cls(**values)
 
     @property
     def total_sessions(self) -> int:

@@ -7,7 +7,7 @@ official protos clash with ours in one process) and compares env steps per secon
 ``OasisEnv`` of the same N on the same server (a subprocess adding ``latency_ms`` per Infer, as a
 GPU world model does). Targets: >= 6x at N=8, >= 10x at N=16.
 
-Usage: ``python benchmarks/env_vs_peer.py [--envs 8 16 --latency-ms 200 --seconds 8]``.
+Usage: ``python benchmarks/env_vs_reference.py [--envs 8 16 --latency-ms 200 --seconds 8]``.
 """
 
 from __future__ import annotations

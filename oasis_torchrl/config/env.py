@@ -1,0 +1,77 @@
+"""Settings of the world-model env a command drives: the ``env`` section of every config."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from oasis_torchrl.config.fields import option
+from oasis_torchrl.protocol import FPS
+
+LOCAL = "local"
+"""``env.endpoint`` of an embedded server started for the env."""
+REWARD_KINDS = ("ground_truth", "depth")
+
+
+@dataclass
+class EmbeddedServerConfig:
+    """The embedded server an ``endpoint: local`` env starts (other endpoints ignore it)."""
+
+    width: int = option(96, help="frame width of the embedded server")
+    height: int = option(64, help="frame height of the embedded server")
+    fps: float = option(FPS, help="frame rate of the embedded world (its time step is 1/fps)")
+
+
+@dataclass
+class RewardConfig:
+    """The reward: ground truth of the embedded server, or the depth-collision reward."""
+
+    kind: str = option(
+        "ground_truth",
+        help="ground_truth (embedded server) | depth (monocular depth, for remote endpoints)",
+    )
+    progress_scale: float = option(0.1, help="reward per metre along the road")
+    collision_penalty: float = option(
+        2.0,
+        help="penalty of a collision, on top of the progress it forgoes (10 made PPO drive "
+        "slowly instead of steering around obstacles)",
+    )
+    lane_penalty: float = option(0.01, help="penalty per metre off the lane centre")
+    clearance_weight: float = option(
+        0.0, help="cost of an obstacle ahead (ClearanceShaping; 0: off)"
+    )
+    clearance_horizon: float = option(25.0, help="metres ahead from which an obstacle costs")
+
+    def __post_init__(self) -> None:
+        if self.kind not in REWARD_KINDS:
+            raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {self.kind!r}")
+
+
+@dataclass
+class EnvConfig:
+    """The world-model env: endpoint, prompts, batch, episode length, image size, reward."""
+
+    endpoint: str = option(LOCAL, help="'local' (an embedded server) or an A2V endpoint URL")
+    prompts: list[str] = option(
+        default_factory=lambda: ["urban"],
+        help="episode prompts: one for every episode, or several drawn from per episode",
+    )
+    num_envs: int = option(8, help="concurrent world-model sessions (rows of the batch)")
+    max_steps: int = option(150, help="chunks per episode (150 = 30 s of world time)")
+    image_size: tuple[int, int] | None = option(
+        (64, 96),
+        help="[height, width] the frames are decoded to, the policy's input size (null: the "
+        "server's size)",
+    )
+    server: EmbeddedServerConfig = option(
+        default_factory=EmbeddedServerConfig, help="the embedded server of endpoint 'local'"
+    )
+    reward: RewardConfig = option(default_factory=RewardConfig, help="the reward")
+
+    def __post_init__(self) -> None:
+        if not self.prompts:
+            raise ValueError("env.prompts must hold at least one prompt")
+        if self.num_envs < 1 or self.max_steps < 1:
+            raise ValueError(
+                f"env.num_envs and env.max_steps must be >= 1, got {self.num_envs}, "
+                f"{self.max_steps}"
+            )

@@ -1,0 +1,49 @@
+"""Settings of an evaluation: the ``eval`` sections and the ``eval`` command."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from oasis_torchrl.config.env import EnvConfig
+from oasis_torchrl.config.fields import option
+
+
+@dataclass
+class EvaluationConfig:
+    """Fixed prompts and seeds a policy is evaluated on (one env row per episode)."""
+
+    prompts: list[str] = option(default_factory=lambda: ["urban"], help="evaluation prompts")
+    episodes: int = option(8, help="episodes per prompt and seed, one env row each (0: none)")
+    seeds: list[int] = option(default_factory=lambda: [1000], help="evaluation seeds")
+    max_steps: int = option(150, help="chunks per episode")
+    rerun: str | None = option(
+        None, help="record the episodes: an .rrd path, 'spawn' or a viewer URL"
+    )
+    lerobot: str | None = option(None, help="also record them as a LeRobot dataset here")
+
+    def __post_init__(self) -> None:
+        if self.episodes < 0 or self.max_steps < 1:
+            raise ValueError(
+                f"eval.episodes must be >= 0 and eval.max_steps >= 1, got {self.episodes}, "
+                f"{self.max_steps}"
+            )
+        if self.episodes and (not self.prompts or not self.seeds):
+            raise ValueError("eval needs at least one prompt and one seed")
+
+
+@dataclass
+class EvalConfig(EvaluationConfig):
+    """``oasis-torchrl eval``: a policy, prompts and seeds in; distance, collision rate and
+    return out (JSON)."""
+
+    policy: str = option(
+        "autopilot",
+        help="autopilot | constant:throttle=1.0,steering=0.0 (any scripted driver spec) | a PPO "
+        "checkpoint (.pt) | a LeRobot policy folder",
+    )
+    output: str | None = option(None, help="JSON file (the report is also printed)")
+    env: EnvConfig = option(
+        default_factory=EnvConfig,
+        help="the env (rows, prompts and episode length come from the evaluation settings; "
+        "a network policy's own image size replaces env.image_size)",
+    )

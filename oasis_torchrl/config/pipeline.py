@@ -1,0 +1,101 @@
+"""Settings of the main job (``oasis-torchrl demo``): record autopilot demonstrations ->
+behaviour cloning (-> DAgger rounds) -> PPO fine-tuning -> evaluation of all of them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from oasis_torchrl.config.env import EnvConfig, RewardConfig
+from oasis_torchrl.config.evaluation import EvaluationConfig
+from oasis_torchrl.config.fields import option
+from oasis_torchrl.config.training import (
+    BCSettings,
+    BCTrainConfig,
+    CollectorConfig,
+    LossConfig,
+    OptimConfig,
+    PPOEvaluationConfig,
+    PPOSettings,
+)
+
+
+@dataclass
+class NoiseConfig:
+    """Ornstein-Uhlenbeck noise on the executed actions (DART): per-chunk innovation
+    standard deviations and their correlation from chunk to chunk."""
+
+    throttle: float = option(0.1, help="throttle innovation std")
+    steering: float = option(0.02, help="steering innovation std")
+    correlation: float = option(0.8, help="chunk-to-chunk correlation in [0, 1)")
+
+
+@dataclass
+class DemonstrationsConfig:
+    """The autopilot demonstrations (frame rows, a LeRobot dataset)."""
+
+    episodes: int = option(16, help="episodes to record")
+    seed: int = option(1, help="seed of their episodes and noise")
+    noise: NoiseConfig = option(default_factory=NoiseConfig, help="executed-action noise")
+
+
+@dataclass
+class DaggerConfig:
+    """Rounds of: the clone drives, the autopilot labels, the clone is fine-tuned on it all."""
+
+    rounds: int = option(0, help="DAgger rounds after the first clone")
+    episodes: int = option(16, help="episodes the clone drives per round")
+    steps: int = option(500, help="fine-tuning steps per round")
+    noise: NoiseConfig = option(
+        default_factory=lambda: NoiseConfig(throttle=0.05), help="executed-action noise"
+    )
+
+
+@dataclass
+class PipelineEvaluationConfig(EvaluationConfig):
+    """The final comparison of every policy on the same prompts and seeds."""
+
+    reference: list[str] = option(
+        default_factory=lambda: ["autopilot", "constant:throttle=1.0,steering=0.0"],
+        help="driver specs evaluated for comparison",
+    )
+
+
+def _demo_bc() -> BCSettings:
+    return BCSettings(train=BCTrainConfig(steps=1500))
+
+
+def _demo_ppo() -> PPOSettings:
+    return PPOSettings(
+        collector=CollectorConfig(frames_per_batch=512, total_frames=4096),
+        loss=LossConfig(critic_warmup_iters=4),
+        optim=OptimConfig(lr=3.0e-4, mini_batch_size=128),
+        eval=PPOEvaluationConfig(every=0, episodes=0),
+    )
+
+
+@dataclass
+class DemoConfig:
+    """``oasis-torchrl demo``: the main job, on the embedded server by default."""
+
+    seed: int = option(0, help="seed of the run")
+    output_dir: str = option("outputs/demo", help="where every stage writes")
+    env: EnvConfig = option(
+        default_factory=lambda: EnvConfig(max_steps=100, reward=RewardConfig(clearance_weight=0.2)),
+        help="the env shared by recording, PPO and evaluation",
+    )
+    record: DemonstrationsConfig = option(
+        default_factory=DemonstrationsConfig, help="autopilot demonstrations"
+    )
+    bc: BCSettings = option(default_factory=_demo_bc, help="behaviour cloning")
+    dagger: DaggerConfig = option(default_factory=DaggerConfig, help="DAgger rounds")
+    ppo: PPOSettings = option(
+        default_factory=_demo_ppo,
+        help="PPO fine-tuning from the clone (the env is the shared one)",
+    )
+    eval: PipelineEvaluationConfig = option(
+        default_factory=lambda: PipelineEvaluationConfig(
+            max_steps=100, rerun="${output_dir}/eval.rrd"
+        ),
+        help="the final comparison (the fine-tuned policy's episodes are recorded)",
+    )
+    progress: bool = option(True, help="tqdm progress bars")

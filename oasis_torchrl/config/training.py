@@ -1,0 +1,268 @@
+"""Settings of the training recipes: PPO in the world model and behaviour cloning (BC).
+
+Each recipe's settings split in two: what a training stage needs (``PPOSettings``,
+``BCSettings``: network, optimiser, loss, schedule) and what a stand-alone run adds (the env,
+the evaluation, seed and output folder: ``PPOConfig``, ``BCConfig``). The main job
+(:class:`~oasis_torchrl.config.pipeline.DemoConfig`) nests the stage settings and shares one
+env and one evaluation between its stages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from oasis_torchrl.config.env import EnvConfig, RewardConfig
+from oasis_torchrl.config.evaluation import EvaluationConfig
+from oasis_torchrl.config.fields import option
+from oasis_torchrl.config.ray import RayCollectionConfig
+
+LOGGER_BACKENDS = ("csv", "tensorboard")
+
+
+@dataclass
+class LoggerConfig:
+    """Where training curves go (a TorchRL logger)."""
+
+    backend: str = option("csv", help="csv | tensorboard")
+    exp_name: str = option("ppo", help="experiment name (the logger's folder)")
+
+    def __post_init__(self) -> None:
+        if self.backend not in LOGGER_BACKENDS:
+            raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
+
+
+# -- PPO ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class NetworkConfig:
+    """The driving network of a fresh PPO run (oasis_torchrl.models.DrivingNetConfig fields;
+    ignored on a warm start)."""
+
+    shared_encoder: bool = option(True, help="one encoder for every camera")
+    encoder_channels: list[int] = option(
+        default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
+    )
+    pool_grid: list[int] = option(
+        default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
+    )
+    camera_features: int = option(128, help="features per camera")
+    hidden_dim: int = option(256, help="width of the actor and value MLPs")
+    use_state: bool = option(True, help="the previous action as an input")
+    init_action: list[float] = option(
+        default_factory=lambda: [0.5, 0.0],
+        help="a fresh actor's mean [throttle, steering]: drive, don't stand",
+    )
+    head: str = option(
+        "mixture",
+        help="action head: mixture (a mixture of tanh-normals over the chunk, commits to one "
+        "manoeuvre) | tanh_normal (one tanh-normal, unimodal)",
+    )
+    components: int = option(3, help="mixture components")
+    init_scale: list[float] = option(
+        default_factory=lambda: [0.5, 0.1],
+        help="initial scale (before the tanh) of [throttle, steering]",
+    )
+
+
+@dataclass
+class CollectorConfig:
+    """How much experience: TorchRL counts one env step (one 4-frame chunk) as a frame."""
+
+    frames_per_batch: int = option(512, help="env steps per PPO iteration (all rows together)")
+    total_frames: int = option(20480, help="env steps in the whole run")
+
+
+@dataclass
+class LossConfig:
+    """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
+
+    gamma: float = option(0.98, help="discount")
+    lmbda: float = option(0.95, help="GAE lambda")
+    clip_epsilon: float = option(0.2, help="PPO clip range")
+    entropy_coeff: float = option(0.001, help="entropy bonus")
+    critic_coeff: float = option(0.5, help="value loss weight")
+    loss_critic_type: str = option("smooth_l1", help="value loss: smooth_l1 | l2 | l1")
+    critic_warmup_iters: int = option(
+        0, help="first iterations train the critic only (use after a warm start)"
+    )
+    aux_coeff: float = option(
+        1.0,
+        help="the camera features also learn to predict the privileged state (MSE, a "
+        "training-only head; embedded server only; 0: off)",
+    )
+
+
+@dataclass
+class OptimConfig:
+    """Adam over the actor, encoder and critic."""
+
+    lr: float = option(3.0e-4, help="learning rate of the actor and encoder")
+    critic_lr: float | None = option(
+        1.0e-3, help="learning rate of the critic head (null: lr); a fresh critic needs the pace"
+    )
+    scale_lr: float | None = option(
+        3.0e-3,
+        help="learning rate of the action scale (null: lr); its gradient is weak and noisy",
+    )
+    max_grad_norm: float = option(0.5, help="gradient clipping")
+    epochs: int = option(4, help="passes over each batch")
+    target_kl: float | None = option(
+        None, help="stop an iteration's updates once the approximate KL passes it"
+    )
+    mini_batch_size: int = option(128, help="env steps per minibatch")
+    anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
+
+
+@dataclass
+class PPOEvaluationConfig(EvaluationConfig):
+    """PPO's periodic evaluations (and the final one, on ``seeds``)."""
+
+    every: int = option(10, help="iterations between evaluations (0: only at the end)")
+    selection_seeds: list[int] | None = option(
+        None,
+        help="periodic evaluations on these seeds pick the policy kept (checkpoints/best.pt), "
+        "evaluated on `seeds` at the end",
+    )
+
+
+@dataclass
+class CheckpointConfig:
+    """When the trainer saves its state."""
+
+    every: int = option(5, help="iterations between checkpoints (the last one is always saved)")
+    keep_evaluated: bool = option(
+        False, help="also keep each periodically evaluated policy (checkpoints/frames_<N>.pt)"
+    )
+
+
+@dataclass
+class PPOSettings:
+    """A PPO training stage: network, warm start, collection, loss, optimiser, evaluations."""
+
+    network: NetworkConfig = option(default_factory=NetworkConfig, help="the fresh network")
+    privileged_critic: bool = option(
+        True, help="the critic also reads ground truth (embedded server only)"
+    )
+    warm_start_scale: list[float] | None = option(
+        default_factory=lambda: [0.2, 0.05],
+        help="[throttle, steering] action scale after a warm start (null: the source's)",
+    )
+    collector: CollectorConfig = option(default_factory=CollectorConfig, help="experience")
+    loss: LossConfig = option(default_factory=LossConfig, help="the PPO loss")
+    optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
+    eval: PPOEvaluationConfig = option(
+        default_factory=PPOEvaluationConfig, help="evaluations during and after training"
+    )
+    logger: LoggerConfig = option(default_factory=LoggerConfig, help="training curves")
+    checkpoint: CheckpointConfig = option(default_factory=CheckpointConfig, help="checkpoints")
+    ray: RayCollectionConfig = option(
+        default_factory=RayCollectionConfig, help="collection on Ray (off by default)"
+    )
+
+
+@dataclass
+class PPOConfig(PPOSettings):
+    """``oasis-torchrl train ppo``: TorchRL PPO in the world model (Collector -> GAE ->
+    ClipPPOLoss, a TanhNormal actor over a 4-action chunk, a value head on the same encoder)."""
+
+    seed: int = option(0, help="seed of the run")
+    output_dir: str = option(
+        "outputs/ppo", help="logs, checkpoints, evaluation records, final policy"
+    )
+    env: EnvConfig = option(
+        default_factory=lambda: EnvConfig(reward=RewardConfig(clearance_weight=0.2)),
+        help="the training env",
+    )
+    init_from: str | None = option(
+        None, help="warm start: a BC/LeRobot policy folder or a PPO checkpoint"
+    )
+    resume: str | None = option(
+        None, help="a checkpoint to resume, or 'latest' (output_dir/checkpoints)"
+    )
+    progress: bool = option(True, help="tqdm progress bars")
+
+
+# -- behaviour cloning -------------------------------------------------------------------------
+
+
+@dataclass
+class BCPolicyConfig:
+    """The cloned policy (lerobot_policy_oasis.OasisConfig fields)."""
+
+    image_size: list[int] = option(default_factory=lambda: [64, 96], help="[height, width]")
+    shared_encoder: bool = option(True, help="one encoder for every camera")
+    encoder_channels: list[int] = option(
+        default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
+    )
+    pool_grid: list[int] = option(
+        default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
+    )
+    camera_features: int = option(128, help="features per camera")
+    hidden_dim: int = option(256, help="width of the actor MLP")
+    use_state: bool = option(
+        False, help="the previous action as an input (off: a clone would copy it)"
+    )
+    loss: str = option("l1", help="l1 | mse")
+    action_loss_weights: list[float] = option(
+        default_factory=lambda: [1.0, 5.0],
+        help="[throttle, steering] loss weights: steering varies ~5x less (not normalised)",
+    )
+    optimizer_lr: float = option(1.0e-3, help="learning rate")
+    optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
+    optimizer_grad_clip_norm: float = option(10.0, help="gradient clipping")
+
+
+@dataclass
+class BCTrainConfig:
+    """The BC schedule."""
+
+    steps: int = option(3000, help="gradient steps")
+    batch_size: int = option(64, help="samples per step")
+    num_workers: int = option(0, help="data loader workers")
+    shift_pad: int = option(4, help="random-shift augmentation in pixels (0: off)")
+    log_every: int = option(50, help="steps between logged losses")
+    save_every: int = option(
+        1000, help="also save the policy folder every N steps (0: only at the end)"
+    )
+
+
+@dataclass
+class BCSettings:
+    """A behaviour-cloning stage: the policy, its schedule, its logger."""
+
+    policy: BCPolicyConfig = option(default_factory=BCPolicyConfig, help="the policy")
+    train: BCTrainConfig = option(default_factory=BCTrainConfig, help="the schedule")
+    logger: LoggerConfig = option(
+        default_factory=lambda: LoggerConfig(exp_name="bc"), help="training curves"
+    )
+
+
+@dataclass
+class DatasetConfig:
+    """The LeRobot dataset to clone (frame rows: one [throttle, steering] per row at 20 fps)."""
+
+    root: str | None = option(None, help="the dataset folder (required)")
+    repo_id: str | None = option(None, help="default local/<folder name>")
+    episodes: list[int] | None = option(None, help="episode indices, default all")
+    cache: bool = option(True, help="decode the videos once into memory (much faster epochs)")
+
+
+@dataclass
+class BCConfig(BCSettings):
+    """``oasis-torchrl train bc``: behaviour cloning of the oasis policy on a LeRobot dataset;
+    ``<output_dir>/policy`` is a LeRobot policy folder."""
+
+    seed: int = option(0, help="seed of the run")
+    output_dir: str = option("outputs/bc", help="logs and the policy folder")
+    init_from: str | None = option(
+        None, help="start from this policy (LeRobot folder or PPO checkpoint)"
+    )
+    dataset: DatasetConfig = option(default_factory=DatasetConfig, help="the demonstrations")
+    eval: EvaluationConfig = option(
+        default_factory=EvaluationConfig, help="evaluation after training (episodes 0: none)"
+    )
+    env: EnvConfig = option(
+        default_factory=EnvConfig, help="the evaluation env (the policy's image size is used)"
+    )
+    progress: bool = option(True, help="tqdm progress bars")

@@ -1,0 +1,81 @@
+"""Settings of the looking commands: ``view`` (rerun) and ``drive`` (a filmed autopilot drive)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from oasis_torchrl.config.fields import REQUIRED, option
+
+
+def parse_indices(text: str) -> list[int]:
+    """``"0,3,5"`` -> ``[0, 3, 5]``.
+
+    Example:
+        >>> parse_indices("0, 3,5")
+        [0, 3, 5]
+        >>> parse_indices("a")
+        Traceback (most recent call last):
+        ...
+        ValueError: expected comma-separated non-negative integers, got 'a'
+    """
+    try:
+        values = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        values = []
+    if not values or min(values) < 0:
+        raise ValueError(f"expected comma-separated non-negative integers, got {text!r}")
+    return values
+
+
+@dataclass
+class ViewConfig:
+    """``oasis-torchrl view PATH``: an ``.rrd`` (opened in the native viewer), a LeRobot dataset
+    folder or a rollout saved with ``oasis_torchrl.viz.replay.save_rollout``, shown in a spawned
+    rerun viewer, sent to a running one (``--connect``) or saved (``--save out.rrd``)."""
+
+    path: str = option(
+        REQUIRED,
+        help=".rrd file, LeRobot dataset folder or saved rollout folder",
+        positional=True,
+    )
+    episodes: list[int] | None = option(
+        None, help="dataset episodes to show, e.g. 0,3,5 (null: all)", parse=parse_indices
+    )
+    rows: list[int] | None = option(
+        None, help="rollout env rows to show, e.g. 0,5 (null: all)", parse=parse_indices
+    )
+    save: str | None = option(None, help="write an .rrd file instead", metavar="OUT.rrd")
+    connect: str | None = option(
+        None,
+        help="send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy",
+        metavar="URL",
+    )
+    memory_limit: str | None = option(
+        None, help="memory limit of a spawned viewer, e.g. 4GB or 50% (null: rerun's 25%)"
+    )
+    jpeg_quality: int | None = option(None, help="JPEG quality 1-100 of frames (null: 85)")
+
+    def __post_init__(self) -> None:
+        if self.save is not None and self.connect is not None:
+            raise ValueError("--save and --connect exclude each other: give one")
+        if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be in 1-100, got {self.jpeg_quality}")
+
+    @property
+    def target(self) -> str:
+        """Where the recording goes: the ``--save`` file, the ``--connect`` URL or a spawned
+        viewer."""
+        return self.save or self.connect or "spawn"
+
+
+@dataclass
+class DriveConfig:
+    """``oasis-torchrl drive``: the autopilot drives one route on the embedded server; the
+    three cameras go side by side to an MP4."""
+
+    output: str = option("outputs/drive", help="output folder")
+    prompt: str = option("urban street, sunset", help="scene prompt")
+    seed: int = option(0, help="world seed")
+    steps: int = option(60, help="action chunks to drive")
+    width: int = option(768, help="camera width")
+    height: int = option(512, help="camera height")

@@ -1,0 +1,96 @@
+"""Configs: dataclass schemas, YAML files, flags and key=value overrides, generated help."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from oasis_torchrl.cli import build_parser, main, parse_arguments
+from oasis_torchrl.config import config_names, load_config, to_object
+from oasis_torchrl.config.arguments import load_from_args
+from oasis_torchrl.config.recording import RecordConfig
+
+
+@pytest.mark.parametrize("name", ["bc", "demo", "drive", "eval", "ppo", "serve"])
+def test_named_configs_load_and_check(name: str) -> None:
+    assert name in config_names()
+    type(to_object(load_config(name)))  # the dataclasses' own checks pass on the defaults
+
+
+def test_overrides_apply_with_types() -> None:
+    cfg = load_config("ppo", ["env.prompts=[urban,rural]", "optim.lr=1e-4", "resume=latest"])
+    assert list(cfg.env.prompts) == ["urban", "rural"]
+    assert cfg.optim.lr == pytest.approx(1e-4)
+    assert cfg.resume == "latest"
+
+
+def test_bad_settings_name_the_problem(tmp_path: Path) -> None:
+    with pytest.raises(
+        ValueError, match=r"optim\.lrr=1: unknown key 'optim\.lrr' \(did you mean 'lr'"
+    ):
+        load_config("ppo", ["optim.lrr=1"])
+    with pytest.raises(ValueError, match=r"env\.num_envs=many: Value 'many'"):
+        load_config("ppo", ["env.num_envs=many"])
+    with pytest.raises(ValueError, match=r"env\.num_envs and env\.max_steps must be >= 1"):
+        load_config("ppo", ["env.num_envs=0"])
+    with pytest.raises(ValueError, match="must look like key=value"):
+        load_config("ppo", ["optim.lr"])
+    with pytest.raises(ValueError, match="no config named 'nope'"):
+        load_config("nope")
+    bad_file = tmp_path / "bad.yaml"
+    bad_file.write_text("optim: {lrate: 1}\n")
+    with pytest.raises(ValueError, match=r"bad\.yaml: unknown key 'optim\.lrate'"):
+        load_config("ppo", file=bad_file)
+
+
+def test_commands_report_bad_settings() -> None:
+    assert main(["train", "ppo", "optim.lrate=1"]) == 2
+    assert main(["train", "bc"]) == 2  # no dataset.root
+    assert main(["record", "--episodes", "3"]) == 2  # no --root
+
+
+def test_file_then_flags_then_overrides(tmp_path: Path) -> None:
+    settings = tmp_path / "ppo.yaml"
+    settings.write_text("seed: 5\noptim: {lr: 0.01}\n")
+    parser = build_parser()
+    argv = ["train", "ppo", "seed=1", "--config", str(settings), "--optim.lr", "0.02", "seed=2"]
+    args = parse_arguments(parser, argv)
+    assert (args.config, args.overrides) == (settings, ["seed=1", "seed=2"])
+    cfg = load_from_args(args, args.schema)
+    assert (cfg.seed, cfg.optim.lr) == (2, 0.02)
+    with pytest.raises(SystemExit):
+        parse_arguments(parser, ["train", "ppo", "--nope"])
+
+
+def test_short_flags_set_the_same_settings_as_dotted_keys() -> None:
+    argv = ["record", "--root", "out", "--num-envs", "3", "--prompt", "rain", "--prompt", "fog",
+            "--width", "96", "--image-size", "32x48", "--ray-address", "auto"]  # fmt: skip
+    cfg = load_from_args(parse_arguments(build_parser(), argv), RecordConfig)
+    assert (cfg.env.num_envs, list(cfg.env.prompts), cfg.env.server.width) == (
+        3,
+        ["rain", "fog"],
+        96,
+    )
+    assert (list(cfg.image_size), cfg.ray.address) == ([32, 48], "auto")
+    dotted = ["record", "--root", "out", "env.num_envs=3", "env.server.width=96"]
+    same = load_from_args(parse_arguments(build_parser(), dotted), RecordConfig)
+    assert (same.env.num_envs, same.env.server.width) == (3, 96)
+
+
+def test_help_comes_from_the_dataclasses(capsys: pytest.CaptureFixture[str]) -> None:
+    for command in (["serve"], ["record"], ["train", "ppo"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--vp9-cpu-used VP9_CPU_USED" in text and "libvpx speed 0-8 (default: 8)" in text
+    assert "--num-envs NUM_ENVS" in text and "sets env.num_envs" in text
+    assert "--optim.lr LR" in text and "(default: 0.0003)" in text
+
+
+def test_saved_config_loads_back(tmp_path: Path) -> None:
+    cfg = load_config("demo", [f"output_dir={tmp_path}", "ppo.optim.lr=0.001"])
+    saved = tmp_path / "config.yaml"
+    OmegaConf.save(cfg, saved)
+    assert load_config("demo", file=saved) == cfg
