@@ -165,7 +165,8 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     if round_:
         values["init_from"] = str(out / f"round_{round_ - 1}" / "policy")
         values["train"] = {"steps": cfg.dagger.steps}
-    return OmegaConf.merge(load_config("bc"), cfg.bc, values)
+    # The stage settings as plain values: a structured BCSettings does not merge into BCConfig.
+    return OmegaConf.merge(load_config("bc"), OmegaConf.to_container(cfg.bc), values)
 
 
 def ppo_config(
@@ -188,7 +189,8 @@ def ppo_config(
         "env": cfg.env,
         "eval": {key: cfg.eval[key] for key in SHARED_EVAL_KEYS},
     }
-    return OmegaConf.merge(load_config("ppo"), cfg.ppo if fine_tune else {}, values)
+    stage = OmegaConf.to_container(cfg.ppo) if fine_tune else {}
+    return OmegaConf.merge(load_config("ppo"), stage, values)
 
 
 def clone(cfg: DictConfig, dataset: Path) -> Path:
