@@ -59,6 +59,11 @@ class NetworkConfig:
         "manoeuvre) | tanh_normal (one tanh-normal, unimodal)",
     )
     components: int = option(3, help="mixture components")
+    init_spread: list[float] = option(
+        default_factory=lambda: [0.0, 0.3],
+        help="a fresh mixture's components spread this far around init_action (keep, left, "
+        "right), the middle one most likely",
+    )
     init_scale: list[float] = option(
         default_factory=lambda: [0.5, 0.1],
         help="initial scale (before the tanh) of [throttle, steering]",

@@ -59,6 +59,12 @@ class DrivingNetConfig:
             number in ``[-0.99, 0.99]``, repeated over the chunk. ``(0.5, 0.0)`` starts PPO
             from scratch at half throttle, straight: with the default zero chunk a fresh car
             stands still and measured runs spent their first ~6000 env steps learning to move.
+        init_spread: mixture only: the fresh components' mean actions spread evenly from
+            ``init_action - init_spread`` to ``init_action + init_spread`` (one value per action
+            number), the outer ones ``e^-2`` as likely as the middle one, which the policy
+            commits to. ``(0.0, 0.3)`` gives a fresh actor (and behaviour cloning's first
+            steps) a keep, a left and a right manoeuvre: identical components would get
+            identical gradients and stay one.
         init_scale: initial scale (before the tanh) of the action distribution, one value per
             action number (repeated over the chunk and the components): ``(0.5, 0.1)``
             explores throttle widely and steering by a tenth of a lane change, not a whole one.
@@ -87,6 +93,7 @@ class DrivingNetConfig:
     head: str = MIXTURE
     components: int = 3
     init_action: tuple[float, ...] = (0.0, 0.0)
+    init_spread: tuple[float, ...] = (0.0, 0.3)
     init_scale: tuple[float, ...] = (0.5, 0.1)
     min_scale: float = 1e-3
 
@@ -111,6 +118,15 @@ class DrivingNetConfig:
             raise ValueError(
                 f"DrivingNetConfig.init_action needs {self.action_dim} values in "
                 f"[-{MAX_INIT_ACTION}, {MAX_INIT_ACTION}], got {list(self.init_action)}"
+            )
+        if len(self.init_spread) != self.action_dim or any(
+            spread < 0 or abs(action) + spread > MAX_INIT_ACTION
+            for action, spread in zip(self.init_action, self.init_spread, strict=True)
+        ):
+            raise ValueError(
+                f"DrivingNetConfig.init_spread needs {self.action_dim} values >= 0 that keep "
+                f"init_action +- init_spread in [-{MAX_INIT_ACTION}, {MAX_INIT_ACTION}], got "
+                f"{list(self.init_spread)} around {list(self.init_action)}"
             )
         if len(self.encoder_channels) != 3:
             raise ValueError(
@@ -167,7 +183,7 @@ class DrivingNetConfig:
         unknown = sorted(set(values) - set(known))
         if unknown:
             raise ValueError(f"unknown DrivingNetConfig fields {unknown}; known: {sorted(known)}")
-        values = {"head": TANH_NORMAL, **values}
+        values = {"head": TANH_NORMAL, "init_spread": [0.0] * ACTION_DIM, **values}
         if isinstance(values.get("init_scale"), (int, float)):
             values["init_scale"] = [values["init_scale"]] * values.get("action_dim", ACTION_DIM)
         return cls(

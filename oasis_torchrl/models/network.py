@@ -31,6 +31,8 @@ def _mlp(in_features: int, hidden: int, out_features: int) -> nn.Sequential:
 LOC_BOUND = 3.0
 """Bound of the chunk location before the tanh: ``tanh(3) = 0.995``, close to full throttle and
 far enough from 1 for float32 log-probabilities."""
+SPREAD_PRIOR = 2.0
+"""A fresh mixture's outer components are ``e^-SPREAD_PRIOR`` as likely as its middle one."""
 TARGET_BOUND = 0.99
 """Demonstrated actions are clamped to this for their likelihood: ``atanh(0.99) = 2.65`` is a
 location the bounded head reaches (full throttle, exactly 1, would need an infinite one)."""
@@ -82,13 +84,17 @@ class DrivingNet(nn.Module):
         self.log_scale = nn.Parameter(torch.empty(self._chunk_shape))
         self.set_scale(cfg.init_scale)
         # A small last actor layer starts PPO near one chunk (init_action) for every input,
-        # instead of saturated tanh ends; every component starts there, with equal weights.
+        # instead of saturated tanh ends; the mixture's components around it (init_spread).
+        offsets = torch.linspace(-1.0, 1.0, self.components) if self.components > 1 else None
         with torch.no_grad():
             self.actor[-1].weight.mul_(0.01)
             bias = self.actor[-1].bias
-            bias[: self.logit_outputs] = 0.0
-            location = self._raw_location(cfg.init_action)
-            bias[self.logit_outputs :] = location.repeat(self.components * cfg.chunk)
+            actions = torch.tensor([cfg.init_action])
+            if offsets is not None:
+                bias[: self.logit_outputs] = -SPREAD_PRIOR * offsets.square()
+                actions = actions + offsets.unsqueeze(1) * torch.tensor(cfg.init_spread)
+            location = self._raw_location(actions).unsqueeze(1).expand(-1, cfg.chunk, -1)
+            bias[self.logit_outputs :] = location.flatten()
 
     @property
     def _chunk_shape(self) -> tuple[int, ...]:
@@ -98,10 +104,9 @@ class DrivingNet(nn.Module):
         return (self.components, *chunk) if self.config.head == MIXTURE else chunk
 
     @staticmethod
-    def _raw_location(action: Sequence[float]) -> torch.Tensor:
+    def _raw_location(action: torch.Tensor) -> torch.Tensor:
         """The actor output whose chunk location is ``atanh(action)`` (inverse of the bound)."""
-        loc = torch.atanh(torch.tensor(action, dtype=torch.float32))
-        return LOC_BOUND * torch.atanh(loc / LOC_BOUND)
+        return LOC_BOUND * torch.atanh(torch.atanh(action.float()) / LOC_BOUND)
 
     def features(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """Shared features ``[..., features_dim]`` from each camera's frames and the state."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -149,18 +151,43 @@ def test_stochastic_actor_samples_in_bounds_with_finite_log_prob(head: str) -> N
     torch.testing.assert_close(dist.log_prob(td["action"]), td["action_log_prob"])
 
 
-@pytest.mark.parametrize("init_action", [(0.5, 0.0), (-0.3, 0.99)])
-def test_a_fresh_actor_starts_at_its_init_action(init_action: tuple[float, float]) -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_action=init_action))
+@pytest.mark.parametrize("head", HEADS)
+@pytest.mark.parametrize("init_action", [(0.5, 0.0), (-0.3, 0.69)])
+def test_a_fresh_actor_starts_at_its_init_action(
+    init_action: tuple[float, float], head: str
+) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_action=init_action, head=head))
     chunk = net(_frames((16,)), torch.rand(16, 2))
     expected = torch.tensor(init_action).expand(16, 4, 2)
     torch.testing.assert_close(chunk, expected, atol=0.02, rtol=0)
 
 
-@pytest.mark.parametrize("init_action", [(0.5,), (0.0, 1.0), (-0.995, 0.0)])
-def test_init_action_must_fit_the_actions(init_action: tuple[float, ...]) -> None:
-    with pytest.raises(ValueError, match=r"init_action needs 2 values in \[-0.99, 0.99\]"):
-        DrivingNetConfig(init_action=init_action)
+def test_a_fresh_mixture_spreads_its_components_around_the_init_action() -> None:
+    config = DrivingNetConfig(image_size=SIZE, init_action=(0.5, 0.1), init_spread=(0.2, 0.3))
+    params = DrivingNet(config).action_params(torch.rand(16, config.features_dim))
+    weights = params["logits"].softmax(-1)
+    expected = torch.tensor([1.0, math.exp(2.0), 1.0]) / (2.0 + math.exp(2.0))
+    torch.testing.assert_close(weights, expected.expand(16, 3), atol=0.01, rtol=0)
+    means = torch.tanh(params["loc"]).mean((0, 2))  # [component, action number]
+    spread = torch.tensor([[0.3, -0.2], [0.5, 0.1], [0.7, 0.4]])
+    torch.testing.assert_close(means, spread, atol=0.02, rtol=0)
+
+
+@pytest.mark.parametrize(
+    ("init_action", "init_spread", "message"),
+    [
+        ((0.5,), (0.0, 0.3), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((0.0, 1.0), (0.0, 0.0), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((-0.995, 0.0), (0.0, 0.3), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((0.0, 0.8), (0.0, 0.3), r"init_spread needs 2 values >= 0 that keep"),
+        ((0.0, 0.0), (0.3,), r"init_spread needs 2 values >= 0 that keep"),
+    ],
+)
+def test_init_action_must_fit_the_actions(
+    init_action: tuple[float, ...], init_spread: tuple[float, ...], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        DrivingNetConfig(init_action=init_action, init_spread=init_spread)
 
 
 def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
