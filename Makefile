@@ -1,41 +1,77 @@
 # Two commands on a fresh machine: `make demo` (the main job, on the embedded local server) and
-# `make test` (the whole suite). Both create or reuse .venv and install the pinned dependency set.
+# `make test` (the whole suite). Both create or reuse .venv (Python 3.12, the version the lock
+# file was tested on) and install the pinned dependency set of constraints.txt.
 
-PYTHON ?= $(shell command -v python3.11 || command -v python3)
+PYTHON_VERSION := 3.12
+PYENV_ROOT ?= $(HOME)/.pyenv
+IS_PYTHON_VERSION := import sys; sys.exit("%d.%d" % sys.version_info[:2] != "$(PYTHON_VERSION)")
+# The first interpreter that really is $(PYTHON_VERSION): python3.12 on PATH (a pyenv shim only
+# counts when it runs), the newest pyenv-installed 3.12.x, then python3. `make PYTHON=...` wins.
+ifndef PYTHON
+PYTHON := $(shell for python in python$(PYTHON_VERSION) \
+	$$(ls -1d $(PYENV_ROOT)/versions/$(PYTHON_VERSION).*/bin/python 2>/dev/null | sort -rV) \
+	python3; do "$$python" -c '$(IS_PYTHON_VERSION)' 2>/dev/null && { command -v "$$python"; break; }; done)
+endif
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,lerobot,rerun,depth,ray
 DEMO_OUT ?= outputs/demo
 
-.PHONY: demo test lint protos lock bench clean-venv
+define NO_PYTHON
+No Python $(PYTHON_VERSION) found (looked for python$(PYTHON_VERSION) on PATH and
+$(PYENV_ROOT)/versions/$(PYTHON_VERSION).*). Install one, then run make again:
+  pyenv:          pyenv install $(PYTHON_VERSION)
+  Ubuntu 24.04:   sudo apt-get install python$(PYTHON_VERSION) python$(PYTHON_VERSION)-venv
+  macOS:          brew install python@$(PYTHON_VERSION)
+or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
+endef
+export NO_PYTHON
 
-$(STAMP): pyproject.toml policies/pyproject.toml constraints.txt
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+.PHONY: demo test lint protos lock bench clean-venv venv-python
+
+venv-python:
+	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
+		echo "$(VENV) is not Python $(PYTHON_VERSION) (the lock file's): recreating it"; \
+		rm -rf $(VENV); \
+	fi
+	@if [ ! -x $(PY) ]; then \
+		if [ -z "$(PYTHON)" ]; then echo "$$NO_PYTHON" >&2; exit 1; fi; \
+		if ! "$(PYTHON)" -c '$(IS_PYTHON_VERSION)' 2>/dev/null; then \
+			echo "PYTHON=$(PYTHON) is not a working Python $(PYTHON_VERSION)" >&2; exit 1; \
+		fi; \
+		echo "creating $(VENV) with $(PYTHON)"; \
+		"$(PYTHON)" -m venv $(VENV); \
+	fi
+
+$(STAMP): pyproject.toml policies/pyproject.toml constraints.txt | venv-python
 	$(PY) -m pip install --quiet --upgrade "pip>=24"
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[$(EXTRAS)]"
 	$(PY) -m pip install --quiet -c constraints.txt --no-deps -e policies/
 	touch $(STAMP)
 
-demo: $(STAMP)
+demo: venv-python $(STAMP)
 	$(PY) -m oasis_torchrl demo output_dir=$(DEMO_OUT)
 
-test: $(STAMP)
+test: venv-python $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider
 
-lint: $(STAMP)
+lint: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-protos: $(STAMP)
+protos: venv-python $(STAMP)
 	$(PY) -m grpc_tools.protoc -Iprotos --python_out=. --grpc_python_out=. --pyi_out=. \
 		$$(cd protos && find . -name '*.proto' | sed 's|^\./|protos/|')
 
-lock: $(STAMP)
-	{ sed -n '1,2p' constraints.txt; $(PY) -m pip freeze --exclude-editable; } > constraints.tmp
+# The whole installed set, pinned (the project's own editable installs left out), under the
+# header comment of constraints.txt.
+lock: venv-python $(STAMP)
+	{ sed -n '1,/^[^#]/p' constraints.txt | sed '$$d'; \
+		$(PY) -m pip freeze --exclude-editable; } > constraints.tmp
 	mv constraints.tmp constraints.txt
 
-bench: $(STAMP)
+bench: venv-python $(STAMP)
 	for script in benchmarks/*.py; do $(PY) $$script; done
 
 clean-venv:

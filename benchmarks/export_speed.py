@@ -38,7 +38,6 @@ import numpy as np
 import torch
 from lerobot.datasets.compute_stats import RunningQuantileStats, auto_downsample_height_width
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.datasets.video_utils import _get_codec_options
 from PIL import Image
 from tensordict import TensorDictBase
 
@@ -46,7 +45,7 @@ from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.data.chunk_rows import batch_to_rows, infer_layout
 from oasis_torchrl.data.episode_buffer import EpisodeBuffer
 from oasis_torchrl.data.features import build_features, check_columns
-from oasis_torchrl.data.writer import open_dataset, write_episode
+from oasis_torchrl.data.writer import camera_encoder, open_dataset, write_episode
 from oasis_torchrl.drivers import Autopilot
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
@@ -73,9 +72,11 @@ def best_of(repeats: int, run: Callable[[], float]) -> float:
 
 
 def _encode_camera(frames: np.ndarray, path: Path, vcodec: str) -> None:
+    encoder = camera_encoder(vcodec)  # LeRobot's settings, as its encoder threads use them
     with av.open(str(path), "w") as container:
-        stream = container.add_stream(vcodec, FPS, options=_get_codec_options(vcodec, 2, 30, None))
-        stream.pix_fmt = "yuv420p"
+        options = encoder.get_codec_options(as_strings=True)
+        stream = container.add_stream(encoder.vcodec, FPS, options=options)
+        stream.pix_fmt = encoder.pix_fmt
         stream.height, stream.width = frames.shape[1:3]
         stream.time_base = Fraction(1, FPS)
         for index, image in enumerate(frames):

@@ -1,4 +1,5 @@
-"""Per-sample speed of our driving network vs the reference SDK's SB3 CNN policy, same run, same threads.
+"""Per-sample speed of our driving network vs the reference SDK's SB3 CNN policy, same run,
+same threads.
 
 The reference SDK (decart-robotics' RL extras): one shared CNN per camera at 128x192 (conv 16 k5 s2,
 conv 32 k3 s2, global average pool), the three concatenated and projected to 384, then
@@ -12,9 +13,9 @@ Cases, each the action (chunk) and the value for a batch, best of several repeat
 - ``batch``: batch 64, inference mode (collector throughput);
 - ``train``: batch 64, forward and backward (PPO update throughput).
 
-Sizes: the reference SDK at its 128x192, ours at its default 64x96 and at the reference SDK's 128x192 (the same
-input), with shared and separate camera weights. Reported as microseconds per sample and the
-reference SDK's time over ours (``speedup``; > 1 means ours is faster).
+Sizes: the reference SDK at its 128x192, ours at its default 64x96 and at the reference SDK's
+128x192 (the same input), with shared and separate camera weights. Reported as microseconds
+per sample and the reference SDK's time over ours (``speedup``; > 1 means ours is faster).
 
 Usage: ``python benchmarks/policy_speed.py [--threads 1 --repeats 5]``; prints JSON.
 """

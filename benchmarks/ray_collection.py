@@ -22,9 +22,9 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.collectors import Collector
 
-from oasis_torchrl.distributed import RayCollection, RayCollectionConfig, oasis_env_factory
-from oasis_torchrl.envs import OasisEnv
-from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
+from oasis_torchrl.distributed import RayCollection, RayCollectionConfig, env_factory
+from oasis_torchrl.envs import make_env
 
 logger = logging.getLogger(__name__)
 
@@ -48,8 +48,8 @@ def timed(batches: Iterable[Any], count: int) -> tuple[int, float]:
     return steps, time.perf_counter() - started
 
 
-def single_process(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> tuple[int, float]:
-    env = OasisEnv("local", num_envs=args.sessions, **env_kwargs)
+def single_process(args: argparse.Namespace, env: EnvConfig) -> tuple[int, float]:
+    env = make_env(env, num_envs=args.sessions, all_frames=False)
     collector = Collector(
         env,
         constant_policy(),
@@ -63,14 +63,14 @@ def single_process(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> tupl
         collector.shutdown()
 
 
-def on_ray(args: argparse.Namespace, env_kwargs: dict[str, Any], workers: int) -> tuple[int, float]:
+def on_ray(args: argparse.Namespace, env: EnvConfig, workers: int) -> tuple[int, float]:
     if args.sessions % workers:
         raise ValueError(f"--sessions {args.sessions} is not divisible by {workers} workers")
     config = RayCollectionConfig(num_collectors=workers, sessions_per_env=args.sessions // workers)
     frames = args.sessions * args.steps
     with RayCollection(
         config,
-        oasis_env_factory(OasisEnv, config, **env_kwargs),
+        env_factory(env, config, all_frames=False),
         constant_policy(),
         frames_per_batch=frames,
         total_frames=frames * (args.batches + 2),
@@ -87,10 +87,11 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=192)
     parser.add_argument("--height", type=int, default=128)
     args = parser.parse_args()
-    env_kwargs = {
-        "server": ServerConfig(width=args.width, height=args.height),
-        "max_steps": 10_000,
-    }
+    env = EnvConfig(
+        max_steps=10_000,
+        image_size=None,
+        server=EmbeddedServerConfig(width=args.width, height=args.height),
+    )
     ray.init(
         address="local",
         num_cpus=2,
@@ -99,9 +100,9 @@ def main() -> None:
         object_store_memory=200 * 1024**2,
     )
     results = []
-    runs = {"single_process": lambda: single_process(args, env_kwargs)}
+    runs = {"single_process": lambda: single_process(args, env)}
     for workers in (1, 2):
-        runs[f"ray_{workers}_workers"] = lambda w=workers: on_ray(args, env_kwargs, w)
+        runs[f"ray_{workers}_workers"] = lambda w=workers: on_ray(args, env, w)
     try:
         for name, run in runs.items():
             steps, seconds = run()

@@ -60,7 +60,7 @@ def drive_route(
     output.mkdir(parents=True, exist_ok=True)
     server = ServerConfig(width=width, height=height)
     env = OasisEnv("local", 1, prompt, server=server, all_frames=True, max_steps=steps)
-    pilot = Autopilot(fps=env.fps)
+    pilot = Autopilot()
     started = time.perf_counter()
     taken = 0
     try:

@@ -1,14 +1,14 @@
-"""Drivers for recording: TorchRL-policy-like callables ``td -> td`` that set ``"action"``.
+"""Drivers: TorchRL-policy-like callables ``td -> td`` that set ``"action"``, and the one
+grammar that names them (:func:`load_driver`).
 
-- :class:`Autopilot`: the embedded simulator's privileged expert
-  (:mod:`oasis_torchrl.sim.autopilot`), working from the TensorDict alone: the row's
-  ``"prompt"`` and ``"episode_seed"`` rebuild the (deterministic) world with
-  :func:`~oasis_torchrl.sim.scene.build_scene`, and the row's ground truth ``("truth", field)``
-  places the car in it.
+- :class:`Autopilot`: the embedded server's privileged expert; the server runs it next to each
+  session's world and sends its next chunk with the ground truth, which the env exposes as
+  ``"expert_action"``.
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
-- :class:`PolicyDriver`: a saved policy (TorchScript or ``torch.save``d module).
-- :class:`DriverSpec`: any of them as plain picklable values, built where it drives (e.g. in a
-  Ray worker: a loaded TorchScript policy does not pickle, its file name does).
+- :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
+  checkpoint, or any TorchScript / ``torch.save``d module.
+- :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
+  (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
 Every driver returns action chunks ``[N, 4, 2]`` (or ``[N, 2]`` for an env built with
 ``chunk_actions=False``).
@@ -17,27 +17,22 @@ Every driver returns action chunks ``[N, 4, 2]`` (or ``[N, 2]`` for an env built
 from __future__ import annotations
 
 import logging
+import pickle
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import torch
-from tensordict import NonTensorData, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from oasis_torchrl.client import TRUTH_FIELDS
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
-from oasis_torchrl.sim.autopilot import Autopilot as SimAutopilot
-from oasis_torchrl.sim.scene import Scene, cached_scene
-from oasis_torchrl.sim.vehicle import VehicleState
-from oasis_torchrl.sim.world import FrameTruth, World
+from oasis_torchrl.models import DrivingNet, make_actor_critic
+from oasis_torchrl.models.checkpoint import load_checkpoint, load_net, net_from_checkpoint
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
-
-TRUTH = "truth"
 
 
 class Driver(ABC):
@@ -55,6 +50,9 @@ class Driver(ABC):
         torch.Size([3, 2])
     """
 
+    image_size: tuple[int, int] | None = None
+    """``(height, width)`` of the frames the driver looks at (None: it does not look)."""
+
     def __init__(self, *, chunk_actions: bool = True) -> None:
         self.chunk_actions = chunk_actions
 
@@ -71,96 +69,38 @@ class Driver(ABC):
 
 # -- autopilot ----------------------------------------------------------------------------
 
-
-def _row_strings(td: TensorDictBase, key: str) -> list[str]:
-    value = td.get(key, None)
-    if value is None:
-        raise KeyError(f"the observation has no {key!r}")
-    if isinstance(value, NonTensorData):
-        value = value.data
-    if isinstance(value, str):
-        return [value] * td.batch_size[0]
-    return list(value.tolist())
-
-
-class _RowPilot:
-    """The simulator's :class:`~oasis_torchrl.sim.autopilot.Autopilot` for one env row.
-
-    That autopilot reads a live simulator's ``world``; here the world is rebuilt from the row:
-    the scene from prompt and seed, the car's state and truth from the row's ground truth.
-    """
-
-    def __init__(self, scene: Scene, fps: float, target_speed: float | None) -> None:
-        self.scene = scene
-        self.world = World(scene, dt=1.0 / fps)
-        self.pilot = SimAutopilot(SimpleNamespace(world=self.world), target_speed)
-
-    def act(self, truth: FrameTruth) -> np.ndarray:
-        """The next chunk ``(4, 2)`` from the car's current ground truth."""
-        world = self.world
-        world.state = VehicleState(truth.x, truth.y, truth.heading, truth.speed)
-        world.truth = truth
-        # A fresh episode has not moved yet (its reset chunk stands still).
-        world.steps = 0 if truth.distance == 0.0 else world.steps + CHUNK
-        return self.pilot.act()
+EXPERT_ACTION = "expert_action"
 
 
 class Autopilot(Driver):
-    """The privileged expert (:mod:`oasis_torchrl.sim.autopilot`), driven from the TensorDict.
+    """The embedded server's privileged expert: drives with each row's ``"expert_action"``.
 
-    Each row's ``"prompt"`` and ``"episode_seed"`` rebuild its world (cached per pair) and its
-    ground truth ``("truth", field)`` (last frame of the chunk) places the car; only the
-    embedded server sends ground truth. Rows whose truth is missing (NaN) get zeros.
+    The embedded server runs an autopilot beside every session's world (it knows the scene and
+    the car's exact state) and sends the chunk it would take next with the ground truth; the env
+    exposes it as ``"expert_action"`` whenever ground truth is on. Rows without one (NaN: the
+    row's session was lost) get zeros.
 
     Args:
-        fps: world-model frame rate (the simulator's time step is ``1 / fps``).
-        target_speed: cruise speed in m/s (default: the autopilot's, from the speed limit).
         chunk_actions: see :class:`Driver`.
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv  # doctest: +SKIP
-        >>> env = OasisEnv("local", num_envs=2)  # doctest: +SKIP
-        >>> rollout = env.rollout(20, Autopilot())  # doctest: +SKIP
+        >>> from tensordict import TensorDict
+        >>> expert = torch.tensor([[[0.6, 0.1]] * 4, [[float("nan")] * 2] * 4])
+        >>> Autopilot()(TensorDict(expert_action=expert, batch_size=[2]))["action"][:, 0]
+        tensor([[0.6000, 0.1000],
+                [0.0000, 0.0000]])
     """
-
-    def __init__(
-        self,
-        fps: float = FPS,
-        target_speed: float | None = None,
-        *,
-        chunk_actions: bool = True,
-    ) -> None:
-        super().__init__(chunk_actions=chunk_actions)
-        self.fps = fps
-        self.target_speed = target_speed
-        self._rows: dict[int, _RowPilot] = {}
-
-    def _pilot(self, row: int, prompt: str, seed: int) -> _RowPilot:
-        scene = cached_scene(prompt, seed)
-        pilot = self._rows.get(row)
-        if pilot is None or pilot.scene is not scene:
-            pilot = self._rows[row] = _RowPilot(scene, self.fps, self.target_speed)
-        return pilot
 
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """The expert's next chunk for every row."""
-        missing = [name for name in TRUTH_FIELDS if (TRUTH, name) not in td.keys(True)]
-        if missing:
+        expert = td.get(EXPERT_ACTION, None)
+        if expert is None:
             raise KeyError(
-                f"the autopilot needs ground truth {[(TRUTH, m) for m in missing]}, which only "
-                "the embedded server (endpoint 'local') sends"
+                f"the autopilot drives with {EXPERT_ACTION!r}, which only the embedded server "
+                "sends (endpoint 'local', or an 'oasis-torchrl serve' server with "
+                "ground_truth=True)"
             )
-        truth = torch.stack([td.get((TRUTH, name))[:, -1] for name in TRUTH_FIELDS], dim=-1)
-        truth = truth.double().cpu().numpy()
-        prompts = _row_strings(td, "prompt")
-        seeds = td.get("episode_seed").reshape(-1).tolist()
-        chunks = np.zeros((len(prompts), CHUNK, 2), np.float32)
-        for row, (prompt, seed) in enumerate(zip(prompts, seeds, strict=True)):
-            if not np.isnan(truth[row]).any():  # NaN: no truth (inf is a valid distance)
-                fields = dict(zip(TRUTH_FIELDS, truth[row].tolist(), strict=True))
-                fields.update(collided=fields["collided"] > 0.5, off_road=fields["off_road"] > 0.5)
-                chunks[row] = self._pilot(row, prompt, int(seed)).act(FrameTruth(**fields))
-        return torch.from_numpy(chunks)
+        return torch.nan_to_num(expert, nan=0.0)
 
 
 # -- scripted driver ----------------------------------------------------------------------
@@ -254,6 +194,14 @@ def load_module(path: str | Path) -> torch.nn.Module:
     return module
 
 
+def _checkpoint_or_none(path: Path) -> dict | None:
+    """The PPO checkpoint at ``path``, or None if the file is something else (a module)."""
+    try:
+        return load_checkpoint(path)
+    except (ValueError, RuntimeError, pickle.UnpicklingError):
+        return None
+
+
 def _as_chunks(action: torch.Tensor, rows: int) -> torch.Tensor:
     """A policy output ``[N, 4, 2]``, ``[N, 8]`` or ``[N, 2]`` as ``[N, 4, 2]`` chunks."""
     action = action.detach().to("cpu", torch.float32)
@@ -296,15 +244,36 @@ class PolicyDriver(Driver):
         module: torch.nn.Module,
         in_keys: Sequence[str | tuple[str, ...]] | None = None,
         *,
+        image_size: tuple[int, int] | None = None,
         chunk_actions: bool = True,
     ) -> None:
         super().__init__(chunk_actions=chunk_actions)
         self.module = module.eval()
         self.in_keys = list(in_keys) if in_keys is not None else None
+        self.image_size = image_size
+
+    @classmethod
+    def of_network(cls, net: DrivingNet, **kwargs: object) -> PolicyDriver:
+        """The deterministic actor of a driving network, at the network's image size.
+
+        Example:
+            >>> PolicyDriver.of_network(DrivingNet()).image_size
+            (64, 96)
+        """
+        return cls(make_actor_critic(net).policy, image_size=tuple(net.config.image_size), **kwargs)
 
     @classmethod
     def load(cls, path: str | Path, **kwargs: object) -> PolicyDriver:
-        """Load a saved policy (see :func:`load_module`)."""
+        """Load a saved policy: a LeRobot policy folder or PPO checkpoint of the driving network,
+        or any TorchScript / ``torch.save``d module (see :func:`load_module`)."""
+        path = Path(path)
+        if path.is_dir():
+            return cls.of_network(load_net(path), **kwargs)
+        if not path.is_file():
+            raise FileNotFoundError(f"policy file {path} does not exist")
+        payload = _checkpoint_or_none(path)
+        if payload is not None:
+            return cls.of_network(net_from_checkpoint(payload), **kwargs)
         return cls(load_module(path), **kwargs)
 
     def _inputs(self, td: TensorDictBase) -> list[torch.Tensor]:
@@ -327,46 +296,70 @@ class PolicyDriver(Driver):
         return chunk
 
 
-# -- spec ---------------------------------------------------------------------------------
+# -- one grammar for naming a driver ---------------------------------------------------------
 
-DRIVER_KINDS = ("autopilot", "scripted", "policy")
+AUTOPILOT = "autopilot"
+SCRIPTED = ("scripted:", "constant:")
+GRAMMAR = (
+    "'autopilot', 'scripted:<script>' (or 'constant:<script>', e.g. "
+    "'constant:throttle=1.0,steering=0.0'), or the path of a saved policy (a LeRobot policy "
+    "folder, a PPO checkpoint, a TorchScript or torch.save file)"
+)
+
+
+def load_driver(
+    spec: str | Path, *, in_keys: Sequence[str | tuple[str, ...]] | None = None
+) -> Driver:
+    """The driver a spec names (:data:`GRAMMAR`), everywhere a driver or policy is named:
+    ``oasis-torchrl eval policy=``, ``record --driver``, the pipeline's references and learners.
+
+    Args:
+        spec: the driver's name.
+        in_keys: inputs of a plain saved module (see :class:`PolicyDriver`).
+
+    Example:
+        >>> type(load_driver("constant:throttle=1.0")).__name__
+        'ScriptedDriver'
+        >>> load_driver("nowhere.pt")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: driver 'nowhere.pt' is none of 'autopilot', 'scripted:<script>' ...
+    """
+    text = str(spec)
+    if text == AUTOPILOT:
+        return Autopilot()
+    for prefix in SCRIPTED:
+        if text.startswith(prefix):
+            return ScriptedDriver.from_spec(text.removeprefix(prefix))
+    if not Path(text).exists():
+        raise ValueError(f"driver {text!r} is none of {GRAMMAR}")
+    return PolicyDriver.load(text, in_keys=in_keys)
 
 
 @dataclass(frozen=True)
 class DriverSpec:
-    """A driver described by plain values: picklable and small, so it can be shipped (to a Ray
+    """A driver named by plain values: picklable and small, so it can be shipped (to a Ray
     worker, say) and built there by calling it.
 
     Args:
-        kind: ``autopilot``, ``scripted`` or ``policy``.
-        script: the scripted driver's spec (see :meth:`ScriptedDriver.from_spec`).
-        policy: the saved policy file (``kind="policy"``; read where the driver is built).
-        policy_in_keys: inputs of a plain policy module (see :class:`PolicyDriver`).
-        fps: world-model frame rate (the autopilot's time step is ``1 / fps``).
+        spec: the driver (:func:`load_driver`); a path is made absolute (a worker may run
+            elsewhere).
+        in_keys: inputs of a plain saved module (see :class:`PolicyDriver`).
 
     Example:
         >>> import pickle
-        >>> spec = pickle.loads(pickle.dumps(DriverSpec("scripted", script="throttle=0.3")))
+        >>> spec = pickle.loads(pickle.dumps(DriverSpec("scripted:throttle=0.3")))
         >>> type(spec()).__name__
         'ScriptedDriver'
     """
 
-    kind: str = "autopilot"
-    script: str = "throttle=0.5"
-    policy: Path | None = None
-    policy_in_keys: tuple[tuple[str, ...], ...] | None = None
-    fps: float = FPS
+    spec: str = AUTOPILOT
+    in_keys: tuple[tuple[str, ...], ...] | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in DRIVER_KINDS:
-            raise ValueError(f"driver kind must be one of {DRIVER_KINDS}, got {self.kind!r}")
-        if self.kind == "policy" and self.policy is None:
-            raise ValueError("a policy driver needs a policy file")
+        if Path(self.spec).exists():
+            object.__setattr__(self, "spec", str(Path(self.spec).absolute()))
 
     def __call__(self) -> Driver:
         """Build the driver."""
-        if self.kind == "autopilot":
-            return Autopilot(self.fps)
-        if self.kind == "scripted":
-            return ScriptedDriver.from_spec(self.script)
-        return PolicyDriver.load(self.policy, in_keys=self.policy_in_keys)
+        return load_driver(self.spec, in_keys=self.in_keys)

@@ -29,6 +29,9 @@ ACTION_NAMES: tuple[str, ...] = ("throttle", "steering")
 CAMERAS: tuple[str, ...] = ("left_forward", "front", "right_forward")
 """The streams the hosted model advertises, left to right."""
 
+HOSTED_FRAME_SIZE = (512, 768)
+"""``(height, width)`` of the hosted model's frames (it advertises 768 wide, 512 high)."""
+
 FPS = 20.0
 """Frames per second: the protocol has no field for it; the SDK's live preview treats 20 as
 real speed (one Infer = 0.2 s of world time)."""
@@ -58,7 +61,8 @@ SIM_SERVICE = "oasis_torchrl.sim.v1.SimService"
 
 
 class FrameFormat(enum.IntEnum):
-    """``decart.inference.common.FrameFormat`` as a Python enum (same values).
+    """``decart.inference.common.FrameFormat`` as a Python enum (same values), plus this
+    project's ``RAW_RGB24``.
 
     >>> FrameFormat.VP9.value
     3
@@ -70,3 +74,15 @@ class FrameFormat(enum.IntEnum):
     VP9 = 3
     VP8 = 4
     RAW_YUV420 = 5
+    RAW_RGB24 = 100
+    """Uncompressed RGB frames (3 bytes a pixel, row-major): this project's extension, which
+    its client offers only to a server on the same machine (frames that never leave the machine
+    need no codec). A value outside decart's enum, never offered to another server."""
+
+
+FORMAT_NAMES: dict[str, FrameFormat] = {
+    "raw": FrameFormat.RAW_RGB24,
+    "vp9": FrameFormat.VP9,
+    "jpeg": FrameFormat.JPEG,
+}
+"""Short names of the formats this project's server and client handle (flags and options)."""

@@ -7,8 +7,11 @@ scheme. As an extension ``tls`` may also be a ``grpc.ChannelCredentials`` (e.g. 
 
 from __future__ import annotations
 
+import functools
+import ipaddress
+import socket
 from dataclasses import dataclass
-from urllib.parse import urlparse
+from urllib.parse import urlparse, urlsplit
 
 import grpc
 
@@ -61,6 +64,33 @@ def parse_endpoint(endpoint: str, tls: TlsSetting = None) -> ChannelTarget:
     if not address:
         raise ValueError(f"Invalid endpoint: {endpoint!r}")
     return ChannelTarget(address, _credentials(scheme_secure, tls))
+
+
+def is_on_this_machine(endpoint: str) -> bool:
+    """Whether ``endpoint``'s host is this machine: a loopback address, ``localhost``, this
+    machine's name, or one of its addresses (names are never looked up).
+
+    >>> is_on_this_machine("http://127.0.0.1:50051"), is_on_this_machine("[::1]:5")
+    (True, True)
+    >>> is_on_this_machine("https://oasis-grpc.decart.ai")
+    False
+    """
+    host = urlsplit("//" + parse_endpoint(endpoint, tls=False).address).hostname or ""
+    if host == "localhost" or host in (socket.gethostname(), socket.getfqdn()):
+        return True
+    try:
+        ip = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return ip.is_loopback or ip.is_unspecified or host in _this_machines_addresses()
+
+
+@functools.cache
+def _this_machines_addresses() -> frozenset[str]:
+    try:
+        return frozenset(socket.gethostbyname_ex(socket.gethostname())[2])
+    except OSError:
+        return frozenset()
 
 
 def create_channel(endpoint: str, tls: TlsSetting = None) -> grpc.Channel:

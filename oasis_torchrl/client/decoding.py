@@ -1,4 +1,4 @@
-"""Per-stream frame decoders (VP9 and JPEG) that write RGB straight into caller-owned arrays.
+"""Per-stream frame decoders (VP9, JPEG, raw RGB) that write RGB straight into caller-owned arrays.
 
 A decoder turns one packet into one ``uint8`` RGB ``[H, W, 3]`` image written into ``out`` at
 ``out``'s size, so a resize happens during decoding, with no separate pass or full-size copy:
@@ -42,6 +42,8 @@ class FrameDecoder(Protocol):
     """Decodes one stream's packets in order into caller-provided RGB arrays."""
 
     stream: str
+    #: Whether decoding is slow enough to run on a thread (it releases the GIL).
+    threaded: bool
 
     def decode_into(self, packet: bytes, out: np.ndarray) -> None:
         """Decode ``packet`` into ``out`` (uint8 ``[H, W, 3]``), scaling to ``out``'s size."""
@@ -69,6 +71,8 @@ class Vp9Decoder:
     ...
     oasis_torchrl.client.errors.DecodeError: cannot decode stream 'front': ...
     """
+
+    threaded = True
 
     def __init__(self, stream: str, *, threads: int = 0) -> None:
         self.stream = stream
@@ -129,6 +133,8 @@ class JpegDecoder:
     True
     """
 
+    threaded = True
+
     def __init__(self, stream: str) -> None:
         self.stream = stream
 
@@ -153,19 +159,73 @@ class JpegDecoder:
             raise DecodeError(self.stream, f"invalid JPEG image: {error}") from error
 
 
-DECODABLE_FORMATS: tuple[FrameFormat, ...] = (FrameFormat.VP9, FrameFormat.JPEG)
+class RawRgbDecoder:
+    """Uncompressed RGB frames (``FrameFormat.RAW_RGB24``) of one stream of a known size: one
+    copy into ``out``, or one swscale pass when ``out`` is another size.
+
+    >>> import numpy as np
+    >>> out = np.empty((2, 3, 3), np.uint8)
+    >>> RawRgbDecoder("front", (2, 3)).decode_into(bytes(range(18)), out)
+    >>> out[1, 2].tolist()
+    [15, 16, 17]
+    """
+
+    threaded = False  # a copy: faster than a hop to a thread
+
+    def __init__(self, stream: str, size: tuple[int, int]) -> None:
+        self.stream = stream
+        self.size = size
+        self._reformatter = VideoReformatter()
+
+    def reset(self) -> None:
+        """Raw frames are independent: nothing to reset."""
+
+    def skip(self, packet: bytes) -> None:
+        """Raw frames are independent: a skipped frame needs no work."""
+
+    def decode_into(self, packet: bytes, out: np.ndarray) -> None:
+        """Copy (or scale) one frame into ``out``."""
+        height, width = self.size
+        if len(packet) != height * width * 3:
+            raise DecodeError(
+                self.stream,
+                f"raw RGB frame of {len(packet)} bytes, expected {height}x{width}x3",
+            )
+        frame = np.frombuffer(packet, np.uint8).reshape(height, width, 3)
+        if out.shape[:2] == (height, width):
+            np.copyto(out, frame)
+            return
+        scaled = self._reformatter.reformat(
+            av.VideoFrame.from_ndarray(frame, format="rgb24"),
+            width=out.shape[1],
+            height=out.shape[0],
+            format="rgb24",
+            interpolation=RESIZE_INTERPOLATION,
+        )
+        np.copyto(out, scaled.to_ndarray())
 
 
-def make_decoder(frame_format: int, stream: str, *, threads: int = 0) -> FrameDecoder:
-    """Create the decoder for ``frame_format`` (VP9 or JPEG) for one stream.
+DECODABLE_FORMATS: tuple[FrameFormat, ...] = (
+    FrameFormat.RAW_RGB24,
+    FrameFormat.VP9,
+    FrameFormat.JPEG,
+)
 
-    >>> type(make_decoder(FrameFormat.JPEG, "front")).__name__
+
+def make_decoder(
+    frame_format: int, stream: str, size: tuple[int, int], *, threads: int = 0
+) -> FrameDecoder:
+    """Create the decoder for ``frame_format`` for one stream of ``(height, width)`` pixels.
+
+    >>> type(make_decoder(FrameFormat.JPEG, "front", (64, 96))).__name__
     'JpegDecoder'
     """
     if frame_format == FrameFormat.VP9:
         return Vp9Decoder(stream, threads=threads)
     if frame_format == FrameFormat.JPEG:
         return JpegDecoder(stream)
+    if frame_format == FrameFormat.RAW_RGB24:
+        return RawRgbDecoder(stream, size)
     raise ValueError(
         f"frame_format must be one of {[f.name for f in DECODABLE_FORMATS]}, got {frame_format!r}"
     )

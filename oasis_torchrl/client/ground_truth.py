@@ -1,4 +1,4 @@
-"""What the embedded simulator tells beyond A2V: per-frame ground truth and depth maps.
+"""What the embedded simulator tells beyond A2V: ground truth, its expert's actions, depth.
 
 The hosted service sends none of it; every helper degrades clearly: ground truth is None when
 the server sends none, and a missing ``SimService`` raises :class:`UnsupportedFeatureError`.
@@ -14,7 +14,7 @@ import numpy as np
 
 from oasis_torchrl.client.errors import TransportError, UnsupportedFeatureError
 from oasis_torchrl.proto import sim_pb2
-from oasis_torchrl.protocol import SIM_SERVICE, TRUTH_METADATA
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK, SIM_SERVICE, TRUTH_METADATA
 
 TRUTH_FIELDS: tuple[str, ...] = tuple(
     field.name for field in sorted(sim_pb2.FrameTruth.DESCRIPTOR.fields, key=lambda f: f.number)
@@ -51,6 +51,19 @@ def truth_array(truth: sim_pb2.InferTruth) -> np.ndarray:
         [[getattr(frame, name) for name in TRUTH_FIELDS] for frame in truth.frames],
         dtype=np.float64,
     ).reshape(len(truth.frames), len(TRUTH_FIELDS))
+
+
+def expert_chunk(truth: sim_pb2.InferTruth | None) -> np.ndarray:
+    """The expert's next chunk in an InferTruth, float32 ``[4, 2]``; NaN when it has none.
+
+    >>> truth = sim_pb2.InferTruth(expert_actions=[0.5, -0.1] * 4)
+    >>> expert_chunk(truth)[0].tolist(), bool(np.isnan(expert_chunk(None)).all())
+    ([0.5, -0.10000000149011612], True)
+    """
+    actions = () if truth is None else truth.expert_actions
+    if len(actions) != CHUNK * ACTION_DIM:
+        return np.full((CHUNK, ACTION_DIM), np.nan, np.float32)
+    return np.array(actions, np.float32).reshape(CHUNK, ACTION_DIM)
 
 
 def depth_maps(response: sim_pb2.DepthResponse) -> dict[str, np.ndarray]:

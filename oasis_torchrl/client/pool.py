@@ -10,6 +10,8 @@ submits one coroutine per step to the loop and waits for it, so callers stay syn
 Decoding never runs on the loop: every (row, stream) chunk of 4 packets is decoded on a thread
 pool sized to the cores (PyAV releases the GIL while decoding and converting), in order, by that
 stream's own stateful decoder, straight into its slot of the step's preallocated output array.
+Raw frames (from a server on this machine) are only copied into their slots, on the loop: a hop
+to a thread would cost more than the copy.
 A row's next step only starts after its previous step returned, so each decoder sees its
 stream's packets in order.
 
@@ -58,6 +60,7 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.ground_truth import (
     TRUTH_FIELDS,
     depth_maps,
+    expert_chunk,
     raise_depth_error,
     truth_array,
 )
@@ -65,14 +68,13 @@ from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
 from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.types import (
-    JPEG,
-    VP9,
     PoolStep,
+    ServerHandle,
     SessionStatus,
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
-from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, API_KEY_ENV_VAR, CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
 
@@ -95,6 +97,7 @@ class _Outcome:
     error: Exception | None = None
     sequence_num: int = -1
     truth: np.ndarray | None = None
+    expert: np.ndarray | None = None
 
 
 class _Rpc:
@@ -184,28 +187,28 @@ class _PoolSession:
         """One Infer; decodes every selected stream into ``slots`` concurrently, off the loop."""
         response, call = await self._send(self.state.infer(actions))
         reply = self.state.on_infer(response, await call.trailing_metadata())
-        loop = asyncio.get_running_loop()
-        decoders = self.state.decoders
-        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
-        # or rewrite a slot that a still-running decode job is using.
-        decoded = await _gather(
-            [
-                loop.run_in_executor(
-                    self.executor,
-                    decode_chunk,
-                    decoders[name],
-                    reply.packets.get(name, ()),
-                    out,
-                    CHUNK,
-                )
-                for name, out in slots.items()
-            ]
-        )
-        _raise_any(decoded)
+        await self._decode(reply.packets, slots)
         return _Outcome(
             SessionStatus.OK,
             sequence_num=reply.sequence_num,
             truth=None if reply.truth is None else truth_array(reply.truth),
+            expert=expert_chunk(reply.truth),
+        )
+
+    async def _decode(self, packets: dict[str, Sequence[bytes]], slots: RowSlots) -> None:
+        """Decode every selected stream into its slot: on the decode threads, concurrently,
+        or right here when decoding is a mere copy (raw frames)."""
+        decoders = self.state.decoders
+        jobs = [(decoders[name], packets.get(name, ()), out, CHUNK) for name, out in slots.items()]
+        if not any(decoder.threaded for decoder, *_ in jobs):
+            for job in jobs:
+                decode_chunk(*job)
+            return
+        loop = asyncio.get_running_loop()
+        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
+        # or rewrite a slot that a still-running decode job is using.
+        _raise_any(
+            await _gather([loop.run_in_executor(self.executor, decode_chunk, *job) for job in jobs])
         )
 
     async def depth(self) -> dict[str, np.ndarray]:
@@ -268,6 +271,11 @@ class SessionPool:
     sessions. ``frames="last"`` returns only the last frame of each chunk (``[n, 1, H, W, 3]``):
     the other three are still decoded, so the streams stay in sync, but never converted to RGB.
 
+    ``endpoint`` is an A2V endpoint URL, or a :class:`ServerHandle` (such as the embedded
+    server's launcher): the pool starts that server when it starts, takes its endpoint and key,
+    and stops it when it closes. A pickled pool arrives unstarted (sessions, channels and a
+    started server never cross processes): the receiving process opens its own.
+
     >>> pool = SessionPool("http://127.0.0.1:1", num_sessions=4, api_key="secret")
     >>> import pickle
     >>> pickle.loads(pickle.dumps(pool)).num_sessions
@@ -278,14 +286,14 @@ class SessionPool:
 
     def __init__(
         self,
-        endpoint: str,
+        endpoint: str | ServerHandle,
         num_sessions: int,
         *,
         api_key: str | None = None,
         tls: TlsSetting = None,
         timeout: float | None = 120.0,
         retry: RetryPolicy | None = None,
-        accepted_formats: Sequence[int] = (VP9, JPEG),
+        accepted_formats: Sequence[int] | None = None,
         resize: tuple[int, int] | None = None,
         required_streams: Sequence[str] = CAMERAS,
         decode_threads: int | None = None,
@@ -300,19 +308,20 @@ class SessionPool:
             raise ValueError(
                 f"decode_threads must be a positive int or None, got {decode_threads!r}"
             )
-        self.endpoint = endpoint
+        self.server = None if isinstance(endpoint, str) else endpoint
+        self.endpoint = endpoint if isinstance(endpoint, str) else None
         self.api_key = api_key if api_key is not None else os.getenv(API_KEY_ENV_VAR)
         self.tls = tls
         self.timeout = timeout
         self.retry = RetryPolicy() if retry is None else retry
-        self.accepted_formats = wire.accepted_format_list(accepted_formats)
+        self.accepted_formats = wire.accepted_format_list(accepted_formats, self.endpoint)
         self.resize = validate_resize(resize)
         self.required_streams = tuple(required_streams)
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
         self.frames = frames
         self._num_sessions = num_sessions
-        self._target = parse_endpoint(endpoint, tls).address
+        self._target = None if self.endpoint is None else parse_endpoint(self.endpoint, tls).address
         self._streams: tuple[StreamInfo, ...] = ()
         self._runtime: _Runtime | None = None
         self._finalizer: weakref.finalize | None = None
@@ -358,12 +367,10 @@ class SessionPool:
         )
 
     def __getstate__(self) -> dict[str, Any]:
-        if self._runtime is not None:
-            raise TypeError(
-                "a started SessionPool cannot be pickled; pickle it before start() and let the "
-                "receiving process start it"
-            )
-        return dict(self.__dict__)
+        state = dict(self.__dict__, _runtime=None, _finalizer=None, _streams=())
+        if self.server is not None:  # the receiving process starts a server of its own
+            state.update(endpoint=None, _target=None)
+        return state
 
     def __enter__(self) -> SessionPool:
         try:
@@ -387,10 +394,8 @@ class SessionPool:
         """Connect and Initialize all sessions concurrently; idempotent. Returns the streams."""
         if self._streams:
             return self._streams
-        if not self.api_key:
-            raise wire.missing_api_key_error()
-        runtime = self._ensure_runtime()
         try:
+            runtime = self._ensure_runtime()
             infos = runtime.loop.run(self._start(runtime))
         except BaseException:
             self.close()
@@ -409,14 +414,18 @@ class SessionPool:
         """Finish all sessions (best effort, concurrently), close the channel, stop threads."""
         runtime, self._runtime = self._runtime, None
         self._streams = ()
-        if runtime is None:
-            return
-        if self._finalizer is not None:
-            self._finalizer.detach()
         try:
-            runtime.loop.run(self._finish_all(runtime.sessions))
+            if runtime is not None:
+                if self._finalizer is not None:
+                    self._finalizer.detach()
+                try:
+                    runtime.loop.run(self._finish_all(runtime.sessions))
+                finally:
+                    runtime.shutdown()
         finally:
-            runtime.shutdown()
+            if self.server is not None and self.endpoint is not None:
+                self.server.stop()
+                self.endpoint = self._target = None
 
     def ping(self) -> bool:
         """Whether the server's gRPC health service reports SERVING (False if unreachable)."""
@@ -617,6 +626,9 @@ class SessionPool:
 
     def _ensure_runtime(self) -> _Runtime:
         if self._runtime is None:
+            self._connect_server()
+            if not self.api_key:
+                raise wire.missing_api_key_error()
             loop = EventLoopThread(f"oasis-pool-{self._target}")
             channel = loop.run(_open_channel(self.endpoint, self.tls))
             rpc = _Rpc(channel, self.retry, self.timeout, self._target, self.api_key)
@@ -631,6 +643,14 @@ class SessionPool:
             self._runtime = runtime
             self._finalizer = weakref.finalize(self, runtime.shutdown)
         return self._runtime
+
+    def _connect_server(self) -> None:
+        """Start the pool's own server, if it has one, and take its endpoint and key."""
+        if self.server is None or self.endpoint is not None:
+            return
+        self.server.start()
+        self.endpoint, self.api_key = self.server.endpoint, self.server.api_key
+        self._target = parse_endpoint(self.endpoint, self.tls).address
 
     def _session_state(self) -> SessionState:
         return SessionState(
@@ -727,10 +747,15 @@ def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolSt
         for j, row_truth in enumerate(truths):
             if row_truth is not None:
                 truth[j, : len(row_truth)] = row_truth[:CHUNK]
+    expert = np.full((len(outcomes), CHUNK, ACTION_DIM), np.nan, np.float32)
+    for j, outcome in enumerate(outcomes):
+        if outcome.expert is not None:
+            expert[j] = outcome.expert
     return PoolStep(
         frames=frames,
         truth=truth,
         status=status,
         errors=[o.error for o in outcomes],
         sequence_nums=np.array([o.sequence_num for o in outcomes], np.int64),
+        expert=expert,
     )

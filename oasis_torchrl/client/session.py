@@ -120,7 +120,12 @@ class SessionState:
             info, accepted_formats=self.accepted_formats, required_streams=self.required_streams
         )
         self.decoders = {
-            stream.name: make_decoder(info.output_format, stream.name, threads=self.decoder_threads)
+            stream.name: make_decoder(
+                info.output_format,
+                stream.name,
+                (stream.height, stream.width),
+                threads=self.decoder_threads,
+            )
             for stream in info.streams
         }
         return info

@@ -7,9 +7,11 @@ Differences a caller can notice, all opt-in or strictly more robust:
   the server replays idempotently) are retried with the default :class:`RetryPolicy`; a final
   failure is a :class:`TransportError`, itself a ``grpc.RpcError`` like the official's.
   ``retry=RetryPolicy.never()`` restores the official single attempt.
-- VP9 and JPEG are both offered (``accepted_formats``); ``resize=(h, w)`` decodes straight to
-  that size; ``prompt(..., seed=)`` picks the world; ``last_truth`` and ``depth()`` reach the
-  embedded simulator's ground truth and depth, ``ping()`` the gRPC health service.
+- VP9 and JPEG are both offered (``accepted_formats``; add ``FrameFormat.RAW_RGB24`` for
+  uncompressed frames from the embedded server: by default this drop-in decodes what the
+  official client decodes); ``resize=(h, w)`` decodes straight to that size;
+  ``prompt(..., seed=)`` picks the world; ``last_truth`` and ``depth()`` reach the embedded
+  simulator's ground truth and depth, ``ping()`` the gRPC health service.
 - ``close()`` inside a failing ``with`` block never hides the block's exception, and a failed
   ``__enter__`` releases the channel. The API key is masked in ``repr`` and error messages.
 """
@@ -33,13 +35,7 @@ from oasis_torchrl.client.errors import MASK, DecartRoboticsError, TransportErro
 from oasis_torchrl.client.ground_truth import depth_maps, raise_depth_error
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
 from oasis_torchrl.client.session import Call, SessionState
-from oasis_torchrl.client.types import (
-    JPEG,
-    VP9,
-    A2VResult,
-    FrameConsumer,
-    StreamInfo,
-)
+from oasis_torchrl.client.types import JPEG, VP9, A2VResult, FrameConsumer, StreamInfo
 from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2, sim_pb2_grpc
 from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, DEFAULT_ENDPOINT, ENDPOINT_ENV_VAR
 
@@ -88,7 +84,7 @@ class A2VClient:
         self.tls = tls
         self.required_streams = tuple(required_streams)
         self.frame_consumer = frame_consumer
-        self.accepted_formats = wire.accepted_format_list(accepted_formats)
+        self.accepted_formats = wire.accepted_format_list(accepted_formats, endpoint)
         self.resize = validate_resize(resize)
         self.retry = RetryPolicy() if retry is None else retry
         self._target = parse_endpoint(endpoint, tls).address if endpoint else None

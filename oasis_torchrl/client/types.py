@@ -68,6 +68,26 @@ class FrameConsumer(Protocol):
         ...
 
 
+class ServerHandle(Protocol):
+    """A server a :class:`~oasis_torchrl.client.SessionPool` starts with itself and stops when it
+    closes (the embedded server's launchers are such handles). ``endpoint`` and ``api_key`` are
+    read after :meth:`start`; pickling a handle must drop any running server."""
+
+    @property
+    def endpoint(self) -> str:
+        """The endpoint URL clients dial."""
+
+    @property
+    def api_key(self) -> str:
+        """A key the server accepts."""
+
+    def start(self) -> object:
+        """Start serving (idempotent)."""
+
+    def stop(self) -> None:
+        """Stop serving (idempotent)."""
+
+
 class SessionStatus(enum.IntEnum):
     """What happened to one pool row during a step.
 
@@ -90,7 +110,8 @@ class PoolStep:
 
     >>> import numpy as np
     >>> step = PoolStep(frames={}, truth=None, status=np.zeros(2, np.int8), errors=[None, None],
-    ...                 sequence_nums=np.zeros(2, np.int64))
+    ...                 sequence_nums=np.zeros(2, np.int64),
+    ...                 expert=np.full((2, 4, 2), np.nan, np.float32))
     >>> step.status.tolist()
     [0, 0]
     """
@@ -106,3 +127,6 @@ class PoolStep:
     """Per row, the error behind RESTARTED or LOST (None when OK)."""
     sequence_nums: np.ndarray
     """int64 ``[n]`` sequence number of each row's returned chunk (-1 when LOST)."""
+    expert: np.ndarray
+    """float32 ``[n, 4, 2]``: the embedded server's expert's next chunk from each row's new
+    state (its autopilot's ``[throttle, steering]`` x 4); NaN where the server sends none."""

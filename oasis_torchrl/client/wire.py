@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from oasis_torchrl.client.channel import is_on_this_machine
 from oasis_torchrl.client.decoding import DECODABLE_FORMATS
 from oasis_torchrl.client.errors import DecartRoboticsError, a2v_error_from_proto
 from oasis_torchrl.client.types import FrameFormat, StreamInfo
@@ -107,12 +108,23 @@ def session_target_from(initial_metadata: Iterable[tuple[str, str | bytes]]) -> 
     return None
 
 
-def accepted_format_list(accepted_formats: Sequence[int]) -> tuple[FrameFormat, ...]:
-    """Validate the formats a client offers: non-empty, decodable, no duplicates.
+def accepted_format_list(
+    accepted_formats: Sequence[int] | None, endpoint: str | None
+) -> tuple[FrameFormat, ...]:
+    """Validate the formats a client offers: non-empty, decodable, no duplicates. None offers
+    raw RGB first to a server on this machine (no codec for frames that never leave it), then
+    VP9 and JPEG (only those to any other server). ``endpoint`` None is a server the client
+    starts itself, on this machine.
 
-    >>> accepted_format_list([3, 1])
+    >>> accepted_format_list([3, 1], "https://oasis-grpc.decart.ai")
     (<FrameFormat.VP9: 3>, <FrameFormat.JPEG: 1>)
+    >>> accepted_format_list(None, "http://127.0.0.1:50051")[0].name
+    'RAW_RGB24'
     """
+    if accepted_formats is None:
+        nearby = endpoint is None or is_on_this_machine(endpoint)
+        local = (FrameFormat.RAW_RGB24,) if nearby else ()
+        accepted_formats = (*local, FrameFormat.VP9, FrameFormat.JPEG)
     formats = tuple(FrameFormat(value) for value in accepted_formats)
     unsupported = [f.name for f in formats if f not in DECODABLE_FORMATS]
     if not formats or unsupported or len(set(formats)) != len(formats):

@@ -33,13 +33,13 @@ def run(cfg: DictConfig) -> int:
         >>> run(load_config("eval", ["policy=missing.pt"]))
         2
     """
+    from oasis_torchrl.drivers import load_driver
     from oasis_torchrl.train.evaluate import Evaluator
-    from oasis_torchrl.train.policy_source import load_policy
 
     try:
-        source = load_policy(cfg.policy)
-        with Evaluator(cfg.env, cfg, image_size=source.image_size) as evaluator:
-            report = evaluator.evaluate(source.policy)
+        driver = load_driver(cfg.policy)
+        with Evaluator(cfg.env, cfg, image_size=driver.image_size) as evaluator:
+            report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError) as error:
         logger.error("cannot evaluate: %s", error)
         return 2

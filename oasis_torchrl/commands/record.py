@@ -28,9 +28,11 @@ from oasis_torchrl.config import to_object
 from oasis_torchrl.config.recording import RecordConfig
 
 if TYPE_CHECKING:
+    from tensordict import TensorDictBase
+    from torchrl.envs import TransformedEnv
+
     from oasis_torchrl.distributed import RayRecording
     from oasis_torchrl.drivers import DriverSpec
-    from oasis_torchrl.envs import OasisEnv
 
 logger = logging.getLogger(__name__)
 
@@ -53,28 +55,7 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
     in_keys = None
     if cfg.policy_in_keys:
         in_keys = tuple(tuple(key.split(".")) for key in cfg.policy_in_keys.split(","))
-    return DriverSpec(
-        cfg.driver,
-        script=cfg.script,
-        policy=None if cfg.policy is None else Path(cfg.policy).absolute(),  # Ray: other cwd
-        policy_in_keys=in_keys,
-        fps=float(cfg.env.server.fps),
-    )
-
-
-def _env_kwargs(cfg: RecordConfig) -> dict[str, Any]:
-    """``OasisEnv`` arguments of every env of the run, whatever its width."""
-    from oasis_torchrl.envs.episodes import episode_prompts
-    from oasis_torchrl.sim.config import ServerConfig
-
-    server = cfg.env.server
-    return {
-        "endpoint": cfg.env.endpoint,
-        "prompts": episode_prompts(cfg.env.prompts),
-        "server": ServerConfig(width=server.width, height=server.height, fps=float(server.fps)),
-        "all_frames": cfg.rows == "frame",
-        "max_steps": cfg.env.max_steps,
-    }
+    return DriverSpec(cfg.driver_spec, in_keys=in_keys)
 
 
 def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
@@ -83,10 +64,10 @@ def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
     return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec}
 
 
-def _make_env(cfg: RecordConfig) -> OasisEnv:
-    from oasis_torchrl.envs import OasisEnv
+def _make_env(cfg: RecordConfig) -> TransformedEnv:
+    from oasis_torchrl.envs import make_env
 
-    env = OasisEnv(num_envs=cfg.env.num_envs, **_env_kwargs(cfg))
+    env = make_env(cfg.env, all_frames=cfg.rows == "frame")
     env.set_seed(cfg.seed)
     return env
 
@@ -97,6 +78,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from tqdm import tqdm
 
     from oasis_torchrl.data import LeRobotRecorder
+    from oasis_torchrl.train.driving import drive
 
     driver = driver_spec(cfg)()
     env = _make_env(cfg)
@@ -110,15 +92,14 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     )
     try:
         with recorder, tqdm(total=cfg.episodes, unit="episode", desc="recording") as bar:
-            td = env.reset()
-            while not recorder.full:
-                if stop.is_set():
+
+            def write(td: TensorDictBase) -> None:
+                if stop.is_set():  # a signal whose KeyboardInterrupt a library swallowed
                     raise KeyboardInterrupt
-                td, next_td = env.step_and_maybe_reset(driver(td))
-                completed = recorder.write(td.unsqueeze(-1))
+                bar.update(recorder.write(td.unsqueeze(-1)))
                 bar.set_postfix(rows=recorder.rows_written, refresh=False)
-                bar.update(completed)
-                td = next_td
+
+            drive(env, driver, write, until=lambda: recorder.full)
     finally:
         env.close()
     return recorder.episodes_written
@@ -129,7 +110,6 @@ def record_on_ray(cfg: RecordConfig) -> RayRecording:
     from tqdm import tqdm
 
     from oasis_torchrl import distributed
-    from oasis_torchrl.envs import OasisEnv
 
     ray = cfg.ray
     if ray.shard_root is None:  # beside the dataset, so a cluster's nodes share it too
@@ -137,7 +117,7 @@ def record_on_ray(cfg: RecordConfig) -> RayRecording:
         ray = replace(ray, shard_root=str(root.with_name(root.name + ".shards")))
     driver = driver_spec(cfg)
     driver()  # a bad script or policy file fails here, before any worker starts
-    create_env = distributed.oasis_env_factory(OasisEnv, ray, **_env_kwargs(cfg))
+    create_env = distributed.env_factory(cfg.env, ray, all_frames=cfg.rows == "frame")
     logger.info(
         "recording on Ray (%s): %d workers x %d sessions, shards in %s",
         ray.address,

@@ -38,8 +38,8 @@ class EvalConfig(EvaluationConfig):
 
     policy: str = option(
         "autopilot",
-        help="autopilot | constant:throttle=1.0,steering=0.0 (any scripted driver spec) | a PPO "
-        "checkpoint (.pt) | a LeRobot policy folder",
+        help="the driver: autopilot | scripted:<script> (or constant:throttle=1.0,steering=0.0) "
+        "| a saved policy (LeRobot policy folder, PPO checkpoint, TorchScript or torch.save file)",
     )
     output: str | None = option(None, help="JSON file (the report is also printed)")
     env: EnvConfig = option(

@@ -13,7 +13,6 @@ from oasis_torchrl.config.ray import RAY_ALIASES, RayCollectionConfig
 from oasis_torchrl.protocol import FPS
 
 _SIZE = re.compile(r"^(\d+)x(\d+)$")
-DRIVERS = ("autopilot", "scripted", "policy")
 ROWS = ("frame", "chunk")
 DEFAULT_VCODEC = "h264"
 
@@ -105,11 +104,23 @@ class RecordConfig(DatasetOutputConfig):
         default_factory=RayRecordingConfig, help="record on Ray workers, then merge"
     )
 
+    @property
+    def driver_spec(self) -> str:
+        """The driver in the one driver grammar (:func:`oasis_torchrl.drivers.load_driver`).
+
+        Example:
+            >>> RecordConfig(root="out", driver="scripted", script="throttle=1").driver_spec
+            'scripted:throttle=1'
+        """
+        if self.driver == "scripted":
+            return f"scripted:{self.script}"
+        if self.driver == "policy":
+            return str(self.policy)
+        return self.driver
+
     def __post_init__(self) -> None:
         if self.episodes < 1:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        if self.driver not in DRIVERS:
-            raise ValueError(f"driver must be one of {DRIVERS}, got {self.driver!r}")
         if self.driver == "policy" and self.policy is None:
             raise ValueError("--driver policy needs --policy FILE")
         if self.rows not in ROWS:

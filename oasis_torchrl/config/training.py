@@ -130,6 +130,11 @@ class PPOEvaluationConfig(EvaluationConfig):
         "evaluated on `seeds` at the end",
     )
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.selection_seeds is not None and not self.selection_seeds:
+            raise ValueError("eval.selection_seeds must be null or a non-empty list of integers")
+
 
 @dataclass
 class CheckpointConfig:

@@ -29,7 +29,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from lerobot.utils.constants import ACTION, DONE, OBS_IMAGES, OBS_STATE, REWARD
+from lerobot.utils.constants import (
+    ACTION,
+    DEFAULT_FEATURES,
+    DONE,
+    OBS_IMAGES,
+    OBS_STATE,
+    REWARD,
+)
 
 from oasis_torchrl.protocol import CHUNK
 
@@ -196,8 +203,6 @@ def user_features(features: Mapping[str, Feature]) -> dict[str, Feature]:
         >>> sorted(user_features({"action": {}, "frame_index": {}, "timestamp": {}}))
         ['action']
     """
-    from lerobot.datasets.utils import DEFAULT_FEATURES
-
     return {key: value for key, value in features.items() if key not in DEFAULT_FEATURES}
 
 

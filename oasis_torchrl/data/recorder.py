@@ -30,7 +30,7 @@ from oasis_torchrl.data.features import (
     build_features,
     check_columns,
 )
-from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, whole_fps, write_episode
 from oasis_torchrl.protocol import CHUNK, FPS
 
 if TYPE_CHECKING:
@@ -94,13 +94,9 @@ class LeRobotRecorder:
     ) -> None:
         if max_episodes is not None and max_episodes < 1:
             raise ValueError(f"max_episodes must be >= 1, got {max_episodes}")
-        if fps <= 0 or int(fps) != fps:
-            raise ValueError(
-                f"fps must be a positive whole number (LeRobot stores an int), got {fps}"
-            )
         self.root = Path(root)
         self.repo_id = repo_id
-        self.fps = int(fps)
+        self.fps = whole_fps(fps)
         self.image_size = image_size
         self.vcodec = vcodec
         self.append = append

@@ -2,28 +2,28 @@
 ``finalize``), shared by the rollout exporter and the recordings importer.
 
 Frames are streamed to LeRobot's per-camera encoder threads (``streaming_encoding=True``: no PNG
-round trip). That encoder was built for live cameras and drops a frame when its queue stays full
-for 0.1 s; replayed frames must all land, so :func:`write_episode` waits for queue room first and
-refuses to save an episode that lost a frame anyway.
+round trip), with the codec set through LeRobot's :class:`~lerobot.configs.video.RGBEncoderConfig`.
+That encoder was built for live cameras and drops a frame when its queue stays full for 0.1 s;
+replayed frames must all land, so :func:`write_episode` waits for queue room first and refuses
+to save an episode that lost a frame anyway (:mod:`oasis_torchrl.compat`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-import queue
 import signal
 import threading
-import time
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
 import av
 import numpy as np
+from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.utils import INFO_PATH
-from lerobot.datasets.video_utils import resolve_vcodec
 
+from oasis_torchrl.compat import dropped_video_frames, wait_for_encoder_room
 from oasis_torchrl.data.features import Feature, check_same_features
 from oasis_torchrl.data.loading import default_repo_id, default_video_backend
 
@@ -36,25 +36,46 @@ settings (crf 30, keyframe every 2 frames), somewhat lower quality (PSNR about 3
 ROBOT_TYPE = "oasis_car"
 
 
-def check_vcodec(vcodec: str) -> str:
-    """``vcodec`` if LeRobot accepts it and this PyAV build can encode it.
+def camera_encoder(vcodec: str) -> RGBEncoderConfig:
+    """LeRobot's encoder settings for the cameras: ``vcodec`` at LeRobot's defaults otherwise.
+
+    Raises:
+        ValueError: LeRobot does not know ``vcodec`` or this PyAV build cannot encode it.
 
     Example:
-        >>> check_vcodec("h264")
+        >>> camera_encoder("h264").vcodec
         'h264'
+        >>> camera_encoder("mjpeg")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: vcodec 'mjpeg': Invalid vcodec 'mjpeg'. Must be one of: ...
     """
-    resolved = resolve_vcodec(vcodec)
     try:
-        av.codec.Codec(resolved, "w")
-    except Exception as error:
-        raise ValueError(f"vcodec {vcodec!r}: this PyAV build has no such encoder") from error
-    return resolved
+        return RGBEncoderConfig(vcodec=vcodec)
+    except ValueError as error:
+        raise ValueError(f"vcodec {vcodec!r}: {error}") from error
+
+
+def whole_fps(fps: float) -> int:
+    """``fps`` as the int LeRobot stores, if it is a positive whole number.
+
+    Example:
+        >>> whole_fps(20.0)
+        20
+        >>> whole_fps(7.5)
+        Traceback (most recent call last):
+        ...
+        ValueError: fps must be a positive whole number (LeRobot stores an int), got 7.5
+    """
+    if fps <= 0 or int(fps) != fps:
+        raise ValueError(f"fps must be a positive whole number (LeRobot stores an int), got {fps}")
+    return int(fps)
 
 
 def open_dataset(
     root: str | Path,
     features: Mapping[str, Feature],
-    fps: int,
+    fps: float,
     *,
     repo_id: str | None = None,
     vcodec: str = DEFAULT_VCODEC,
@@ -64,24 +85,26 @@ def open_dataset(
 
     Raises:
         FileExistsError: ``root`` holds data and ``append`` is false.
-        ValueError: appending with another fps or other features (naming the key).
+        ValueError: ``fps`` is not a whole number (LeRobot stores an int); appending with
+            another fps or other features (naming the key).
 
     See :func:`write_episode` for an example.
     """
+    fps = whole_fps(fps)
     root = Path(root)
     repo_id = repo_id or default_repo_id(root)
-    vcodec = check_vcodec(vcodec)
+    encoder = camera_encoder(vcodec)
     # LeRobot's encoder threads hand FFmpeg its default stderr logger back when they finish;
     # without this, every episode prints the encoder's banner and statistics.
     av.logging.set_libav_level(av.logging.ERROR)
     if (root / INFO_PATH).exists():
         if not append:
             raise FileExistsError(f"{root} already holds a LeRobot dataset; append to add episodes")
-        dataset = LeRobotDataset(
+        dataset = LeRobotDataset.resume(
             repo_id,
             root=root,
             video_backend=default_video_backend(),
-            vcodec=vcodec,
+            rgb_encoder=encoder,
             streaming_encoding=True,
         )
         if dataset.fps != fps:
@@ -100,28 +123,13 @@ def open_dataset(
         robot_type=ROBOT_TYPE,
         use_videos=True,
         video_backend=default_video_backend(),
-        vcodec=vcodec,
+        rgb_encoder=encoder,
         streaming_encoding=True,
     )
 
 
-def _encoder_queues(dataset: LeRobotDataset) -> Iterator[tuple[queue.Queue, threading.Thread]]:
-    # LeRobot exposes no public hook for this; see the module docstring for why it is needed.
-    encoder = dataset._streaming_encoder
-    if encoder is None:
-        return iter(())
-    return ((frames, encoder._threads[key]) for key, frames in encoder._frame_queues.items())
-
-
-def _wait_for_encoder_room(dataset: LeRobotDataset) -> None:
-    for frames, thread in _encoder_queues(dataset):
-        while frames.full() and thread.is_alive():
-            time.sleep(0.001)
-
-
 def _check_no_dropped_frames(dataset: LeRobotDataset) -> None:
-    counts = getattr(dataset._streaming_encoder, "_dropped_frames", {})
-    dropped = {key: count for key, count in counts.items() if count}
+    dropped = dropped_video_frames(dataset)
     if dropped:
         raise RuntimeError(f"the video encoder dropped frames {dropped}; episode not saved")
 
@@ -172,14 +180,14 @@ def write_episode(
     count = 0
     try:
         for row in rows:
-            _wait_for_encoder_room(dataset)
+            wait_for_encoder_room(dataset)
             dataset.add_frame({**row, "task": task})
             count += 1
         if count == 0:
             raise ValueError("an episode needs at least one row")
         _check_no_dropped_frames(dataset)
     except BaseException:
-        if dataset.episode_buffer is not None and dataset.episode_buffer["size"]:
+        if dataset.has_pending_frames():
             dataset.clear_episode_buffer(delete_images=False)
         raise
     with _interrupts_deferred():

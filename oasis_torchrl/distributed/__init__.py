@@ -2,7 +2,7 @@
 
 - :class:`RayCollectionConfig`: the ``ray`` config section.
 - :class:`RayCollection`: the distributed collector over OasisEnvs, whose worker envs come
-  from :func:`oasis_env_factory` or :func:`training_env_factory`.
+  from :func:`env_factory`.
 - :class:`ShardRecorder`: one worker's LeRobot shard; :func:`merge_shards`: one dataset from all.
 - :func:`record_on_ray`: record a dataset on Ray workers and merge it (``record --ray``).
 """
@@ -12,8 +12,7 @@ from oasis_torchrl.distributed.merge import complete_shards, merge_shards
 from oasis_torchrl.distributed.ray_collection import (
     RayCollection,
     WorkerLostError,
-    oasis_env_factory,
-    training_env_factory,
+    env_factory,
 )
 from oasis_torchrl.distributed.ray_recording import RayRecording, record_on_ray
 from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER, ShardRecorder
@@ -26,8 +25,7 @@ __all__ = [
     "ShardRecorder",
     "WorkerLostError",
     "complete_shards",
+    "env_factory",
     "merge_shards",
-    "oasis_env_factory",
     "record_on_ray",
-    "training_env_factory",
 ]

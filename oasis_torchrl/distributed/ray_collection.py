@@ -17,7 +17,7 @@ import functools
 import logging
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -33,6 +33,8 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
+from oasis_torchrl.compat import drop_ray_collectors
+from oasis_torchrl.config.env import EnvConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.distributed.sharded_recording import ShardRecorder
 
@@ -46,46 +48,26 @@ class WorkerLostError(RuntimeError):
     """A Ray collector worker died and the run was stopped (``on_failure="stop"``)."""
 
 
-def oasis_env_factory(
-    make_env: Callable[..., EnvBase], config: RayCollectionConfig, **kwargs: Any
+def env_factory(
+    env: EnvConfig | DictConfig, config: RayCollectionConfig, **make_kwargs: Any
 ) -> functools.partial[EnvBase]:
-    """A picklable constructor of one worker env with ``sessions_per_env`` rows.
-
-    With ``server_address`` set, the env talks to that shared server (with ground truth on);
-    otherwise it keeps its own endpoint (``"local"``: an embedded server per env).
+    """A picklable constructor of one worker's env (:func:`~oasis_torchrl.envs.make_env` of the
+    ``env`` settings and ``make_kwargs``) with ``sessions_per_env`` rows; ``server_address``,
+    when set, replaces ``env.endpoint`` (with ground truth on: it is an embedded server).
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv
-        >>> make = oasis_env_factory(OasisEnv, RayCollectionConfig(sessions_per_env=2))
-        >>> make.keywords["num_envs"]
-        2
-    """
-    if config.server_address is not None:
-        kwargs = {**kwargs, "endpoint": config.server_address, "ground_truth": True}
-    return functools.partial(make_env, num_envs=config.sessions_per_env, **kwargs)
-
-
-def training_env_factory(
-    env_section: DictConfig, config: RayCollectionConfig, **build_kwargs: Any
-) -> functools.partial[EnvBase]:
-    """A picklable constructor of one worker's training env (the ``env`` section of a training
-    config and further ``build_kwargs`` such as ``privileged``, see
-    :func:`~oasis_torchrl.train.environment.build_env`) with ``sessions_per_env`` rows;
-    ``server_address`` replaces ``env.endpoint``.
-
-    Example:
-        >>> from oasis_torchrl.config import load_config
-        >>> make = training_env_factory(load_config("ppo").env, RayCollectionConfig())
+        >>> from oasis_torchrl.config import EnvConfig
+        >>> make = env_factory(EnvConfig(), RayCollectionConfig(sessions_per_env=2))
         >>> make().batch_size
-        torch.Size([4])
+        torch.Size([2])
     """
-    from oasis_torchrl.train.environment import build_env
+    from oasis_torchrl.envs.factory import make_env
 
-    kwargs = dict(build_kwargs)
+    settings = OmegaConf.to_object(env) if isinstance(env, DictConfig) else env
     if config.server_address is not None:
-        env_section = OmegaConf.merge(env_section, {"endpoint": config.server_address})
-        kwargs["ground_truth"] = True
-    return functools.partial(build_env, env_section, num_envs=config.sessions_per_env, **kwargs)
+        settings = replace(settings, endpoint=config.server_address)
+        make_kwargs = {**make_kwargs, "ground_truth": True}
+    return functools.partial(make_env, settings, num_envs=config.sessions_per_env, **make_kwargs)
 
 
 def worker_seeds(seed: int, workers: int) -> list[int]:
@@ -116,8 +98,7 @@ class SeededEnvFactory:
     """A picklable env constructor that seeds the env before the collector's first reset.
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv
-        >>> make = SeededEnvFactory(oasis_env_factory(OasisEnv, RayCollectionConfig()), seed=3)
+        >>> make = SeededEnvFactory(env_factory(EnvConfig(), RayCollectionConfig()), seed=3)
         >>> make.seed
         3
     """
@@ -140,7 +121,7 @@ class RayCollection:
 
     Args:
         config: where and how wide to run.
-        create_env: picklable env constructor (see :func:`oasis_env_factory`).
+        create_env: picklable env constructor (see :func:`env_factory`).
         policy: the policy (an ``nn.Module``: its weights are what workers receive); None
             with ``policy_factory``.
         frames_per_batch: env steps per yielded batch (all rows, all collectors).
@@ -159,9 +140,8 @@ class RayCollection:
         **collector_kwargs: further arguments of each remote TorchRL collector.
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv
         >>> config = RayCollectionConfig(num_collectors=2, sessions_per_env=2, num_cpus=2)
-        >>> with RayCollection(config, oasis_env_factory(OasisEnv, config), policy,
+        >>> with RayCollection(config, env_factory(EnvConfig(), config), policy,
         ...                    frames_per_batch=8, total_frames=16) as collection:
         ...     [batch.shape for batch in collection]  # doctest: +SKIP
         [torch.Size([2, 2, 2]), torch.Size([2, 2, 2])]
@@ -352,16 +332,9 @@ class RayCollection:
         return dead
 
     def _drop(self, lost: list[int]) -> None:
-        """Remove lost actors from the collector and its weight senders (TorchRL 0.13 layout:
-        RayCollector has no public way to shrink)."""
+        """Remove lost actors from the collector and its weight senders."""
         keep = [i for i, worker in enumerate(self._workers) if worker not in lost]
-        actors = [self.collector.remote_collectors[i] for i in keep]
-        self.collector._remote_collectors = actors
-        self.collector.num_collectors = len(actors)
-        self.collector._batches_since_weight_update = [0] * len(actors)
-        for scheme in (self.collector._weight_sync_schemes or {}).values():
-            scheme._remote_collectors = list(actors)
-            scheme._num_workers = len(actors)
+        drop_ray_collectors(self.collector, keep)
         self._workers = [self._workers[i] for i in keep]
 
     # -- closing -------------------------------------------------------------------------

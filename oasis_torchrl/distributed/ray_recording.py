@@ -106,7 +106,7 @@ def record_on_ray(
     Args:
         config: the Ray settings; ``shard_root`` is required and must be empty or absent.
         create_env: picklable constructor of one worker env (see
-            :func:`~oasis_torchrl.distributed.oasis_env_factory`).
+            :func:`~oasis_torchrl.distributed.env_factory`).
         driver: picklable factory of the driving policy, called in each worker.
         output: the merged dataset folder (must not exist).
         episodes: episodes to record, split evenly over the workers (episodes still running
@@ -120,11 +120,11 @@ def record_on_ray(
         progress: called with the episodes recorded so far after every batch.
 
     Example:
-        >>> from oasis_torchrl.distributed import oasis_env_factory
+        >>> from oasis_torchrl.config import EnvConfig
+        >>> from oasis_torchrl.distributed import env_factory
         >>> from oasis_torchrl.drivers import DriverSpec
-        >>> from oasis_torchrl.envs import OasisEnv
         >>> config = RayCollectionConfig(num_collectors=2, shard_root="drives.shards")
-        >>> record_on_ray(config, oasis_env_factory(OasisEnv, config, max_steps=8),
+        >>> record_on_ray(config, env_factory(EnvConfig(max_steps=8), config),
         ...               DriverSpec("autopilot"), "drives", episodes=16, batch_steps=8
         ...               ).episodes  # doctest: +SKIP
         16

@@ -1,8 +1,19 @@
 """TorchRL and Gymnasium environments over Oasis world-model sessions."""
 
 from oasis_torchrl.envs.episodes import EpisodePlanner
+from oasis_torchrl.envs.factory import make_env, make_reward
 from oasis_torchrl.envs.gym_adapter import OasisGymEnv
-from oasis_torchrl.envs.oasis_env import OasisEnv
-from oasis_torchrl.envs.transforms import make_training_env
+from oasis_torchrl.envs.oasis_env import OasisEnv, OasisWrapper, StreamLayout
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, PrivilegedState
 
-__all__ = ["EpisodePlanner", "OasisEnv", "OasisGymEnv", "make_training_env"]
+__all__ = [
+    "PRIVILEGED_FIELDS",
+    "EpisodePlanner",
+    "OasisEnv",
+    "OasisGymEnv",
+    "OasisWrapper",
+    "PrivilegedState",
+    "StreamLayout",
+    "make_env",
+    "make_reward",
+]

@@ -1,8 +1,10 @@
 """``OasisEnv``: N world-model sessions as one batched TorchRL environment.
 
-Each row of the batch is one A2V session on one gRPC channel; a step sends the N Infer calls
-concurrently through :class:`~oasis_torchrl.client.SessionPool` and returns the decoded frames as
-uint8 tensors (layout in :mod:`oasis_torchrl.envs.specs`).
+Two classes, as TorchRL's own library wrappers do: :class:`OasisWrapper` wraps a built
+:class:`~oasis_torchrl.client.SessionPool` (N sessions on one channel; a step sends the N Infer
+calls concurrently and returns the decoded frames as uint8 tensors, layout in
+:mod:`oasis_torchrl.envs.specs`), and :class:`OasisEnv` builds that pool from an endpoint (and,
+for ``endpoint="local"``, the embedded server it runs on) and wraps it.
 
 Episodes. A reset of a row (all rows, or those set in the ``"_reset"`` mask) re-prompts that
 session with its next prompt and seed (:class:`~oasis_torchrl.envs.episodes.EpisodePlanner`) and
@@ -12,21 +14,25 @@ and when a row's session was lost and re-opened mid-episode (counted in
 ``("info", "session_restarts")``); ``terminated`` comes from the reward module and, where the
 server reports ground truth, from a collision (the car cannot move again).
 
-Processes. The env is picklable and lazy: the channel (and, for ``endpoint="local"``, the embedded
-server) opens in the process that first resets or steps it, so ``ParallelEnv`` and multi-process
-collectors with the ``spawn`` start method each get their own.
+Processes. Constructing an env opens nothing: the specs come from the stream layout (given, or
+known without asking: the embedded server's settings, the hosted model's cameras and size, the
+decode-time ``frame_size``), and the channel, the sessions and an embedded server open in the
+process that first resets or steps the env, where the first Initialize checks the layout. The
+env pickles at any time (a copy arrives unopened), so ``ParallelEnv`` and multi-process
+collectors each get their own sessions.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import torch
 from tensordict import NonTensorStack, TensorDict, TensorDictBase
-from torchrl.envs import EnvBase
+from torchrl.envs.common import _EnvWrapper
 
 from oasis_torchrl.client import TRUTH_FIELDS, PoolStep, RetryPolicy, SessionPool, SessionStatus
 from oasis_torchrl.envs.episodes import EpisodePlanner, Prompts
@@ -37,116 +43,148 @@ from oasis_torchrl.envs.specs import (
     build_observation_spec,
     build_reward_spec,
 )
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.sim.launcher import LocalServer
+from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
 logger = logging.getLogger(__name__)
 
 LOCAL = "local"
+Reward = RewardModule | Callable[[TensorDictBase], torch.Tensor]
 
 
-class OasisEnv(EnvBase):
-    """A batched TorchRL env over ``num_envs`` concurrent Oasis (A2V) sessions.
+@dataclass(frozen=True)
+class StreamLayout:
+    """The cameras an env returns and the ``(height, width)`` of their frames.
+
+    Example:
+        >>> StreamLayout.hosted().frame_size
+        (512, 768)
+    """
+
+    cameras: tuple[str, ...]
+    frame_size: tuple[int, int]
+
+    @classmethod
+    def hosted(cls) -> StreamLayout:
+        """What the hosted Oasis model advertises."""
+        return cls(CAMERAS, HOSTED_FRAME_SIZE)
+
+    def check(self, pool: SessionPool) -> None:
+        """Raise if a started pool streams something else (naming both and the fix)."""
+        served = StreamLayout(tuple(pool.stream_names), tuple(pool.frame_size))
+        if served != self:
+            raise ValueError(
+                f"the server streams {served.cameras} at {served.frame_size}, the env was built "
+                f"for {self.cameras} at {self.frame_size}: pass frame_size=(height, width) to "
+                "decode to a size of your choice, or streams=StreamLayout(...) with the server's"
+            )
+
+
+class OasisWrapper(_EnvWrapper):
+    """A batched TorchRL env over a :class:`~oasis_torchrl.client.SessionPool`, one row per
+    session; the pool opens in the process that first resets or steps the env.
 
     Args:
-        endpoint: ``"local"`` (start the embedded simulator server on a free loopback port in
-            the stepping process, stop it on close), or any A2V endpoint such as
-            ``"https://oasis-grpc.decart.ai"`` or ``"http://127.0.0.1:50051"``.
-        num_envs: rows of the batch, one session each.
+        env: the pool (its ``resize`` and ``frames`` set the frame size and whether all 4
+            frames of a chunk are returned).
+        streams: the layout the server streams; default: the pool's ``required_streams`` at its
+            ``resize`` or, without one, the hosted model's size (checked at the first reset).
         prompts: one prompt, one per row, or a sampler ``sampler(row, rng) -> str`` called at
             every reset of a row.
-        api_key: key for a remote endpoint (defaults to ``DECART_API_KEY``); ignored for local.
-        tls: force TLS on or off (default: from the endpoint's scheme).
-        server: embedded-server settings for ``endpoint="local"`` (resolution, latency, ...).
-        frame_size: ``(height, width)`` to resize frames to while decoding; default: what the
-            server advertises.
-        all_frames: return all 4 frames of each chunk instead of the last one.
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
             default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
             elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
             reference depth reward).
-        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``;
-            default: only for ``endpoint="local"``. Set it for an ``oasis-torchrl serve`` server
-            started elsewhere (a server that sends none yields NaN).
+        ground_truth: expose the embedded simulator's ground truth as ``("truth", field)`` and
+            its expert's next chunk as ``"expert_action"`` (what
+            :class:`~oasis_torchrl.drivers.Autopilot` drives with); a server that sends none
+            yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
             server only), e.g. ``("front",)`` for ``GroundTruthDepth``.
         terminate_on_collision: end the episode when the ground truth reports a collision.
-        retry: transient-failure policy of the session pool.
-        timeout: per-call deadline in seconds.
+        fps: the world's frame rate (the protocol does not say; the hosted preview uses 20).
         device: device of the returned tensors.
 
     Example:
-        >>> from oasis_torchrl.envs import OasisEnv
-        >>> from oasis_torchrl.sim.config import ServerConfig
-        >>> env = OasisEnv("local", num_envs=2, prompts="urban street",
-        ...                server=ServerConfig(width=96, height=64))
-        >>> td = env.rollout(3)
-        >>> td["next", "pixels", "front"].shape
-        torch.Size([2, 3, 64, 96, 3])
-        >>> env.close()
+        >>> import pickle
+        >>> from oasis_torchrl.client import SessionPool
+        >>> env = OasisWrapper(SessionPool("http://127.0.0.1:1", 2, api_key="k", resize=(64, 96)))
+        >>> env.observation_spec["pixels", "front"].shape
+        torch.Size([2, 4, 64, 96, 3])
+        >>> pickle.loads(pickle.dumps(env)).batch_size  # nothing was opened
+        torch.Size([2])
     """
 
+    libname = "oasis_torchrl"
     batch_locked = True
 
     def __init__(
         self,
-        endpoint: str = LOCAL,
-        num_envs: int = 1,
-        prompts: Prompts = "urban street",
+        env: SessionPool | None = None,
         *,
-        api_key: str | None = None,
-        tls: bool | None = None,
-        server: ServerConfig | None = None,
-        frame_size: tuple[int, int] | None = None,
-        all_frames: bool = False,
+        streams: StreamLayout | None = None,
+        prompts: Prompts = "urban street",
         chunk_actions: bool = True,
         max_steps: int = 512,
-        reward: RewardModule | Callable[[TensorDictBase], torch.Tensor] | None = None,
-        ground_truth: bool | None = None,
+        reward: Reward | None = None,
+        ground_truth: bool = False,
         depth_cameras: Sequence[str] = (),
         terminate_on_collision: bool = True,
-        retry: RetryPolicy | None = None,
-        timeout: float = 120.0,
+        fps: float = FPS,
         device: torch.device | str = "cpu",
     ) -> None:
-        super().__init__(device=device, batch_size=torch.Size([num_envs]))
+        if env is None:
+            raise TypeError("OasisWrapper wraps a SessionPool; build one with OasisEnv(endpoint)")
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-        self.endpoint = endpoint
+        num_envs = env.num_sessions
         self.num_envs = num_envs
         self.max_steps = max_steps
-        self.all_frames = all_frames
+        self.all_frames = env.frames == "all"
         self.chunk_actions = chunk_actions
         self.terminate_on_collision = terminate_on_collision
-        self.timeout = timeout
-        self.retry = retry
-        self._tls = tls
-        self._api_key = api_key
-        self._server_config = server if server is not None else ServerConfig()
-        # The A2V protocol does not advertise a frame rate; the hosted model's preview uses 20.
-        self.fps = self._server_config.fps if self.is_local else FPS
+        self.ground_truth = ground_truth
+        self.fps = fps
+        self.streams = streams or StreamLayout(
+            tuple(env.required_streams), env.resize or HOSTED_FRAME_SIZE
+        )
         self._planner = EpisodePlanner(prompts, num_envs)
-        self.ground_truth = self.is_local if ground_truth is None else ground_truth
-        self._reward = _resolve_reward(reward, self.ground_truth)
-        self._server: LocalServer | None = None
-        self._pool: SessionPool | None = None
-        self._frame_size = frame_size
-        cameras, advertised = self._discover_streams()
-        unknown = set(depth_cameras) - set(cameras)
+        self._reward = _resolve_reward(reward, ground_truth)
+        self._depth_cameras = tuple(depth_cameras)
+        super().__init__(env=env, device=device, batch_size=torch.Size([num_envs]))
+        self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._prompts = [""] * num_envs
+        self._seeds = torch.zeros(num_envs, 1, dtype=torch.int64)
+        self._restarts = torch.zeros(num_envs, 1, dtype=torch.int64)
+        self._last_obs: TensorDictBase | None = None
+
+    # -- the _EnvWrapper hooks -------------------------------------------------------------
+
+    def _check_kwargs(self, kwargs: dict[str, Any]) -> None:
+        if not isinstance(kwargs.get("env"), SessionPool):
+            raise TypeError(f"env must be a SessionPool, got {type(kwargs.get('env')).__name__}")
+
+    def _build_env(self, env: SessionPool) -> SessionPool:
+        unknown = set(self._depth_cameras) - set(self.streams.cameras)
         if unknown:
-            raise ValueError(f"depth_cameras {sorted(unknown)} are not streams of {cameras}")
+            raise ValueError(
+                f"depth_cameras {sorted(unknown)} are not streams of {self.streams.cameras}"
+            )
+        return env
+
+    def _make_specs(self, env: SessionPool) -> None:
         self.layout = EnvLayout(
-            num_envs=num_envs,
-            cameras=cameras,
-            frame_size=frame_size or advertised,
-            all_frames=all_frames,
-            chunk_actions=chunk_actions,
+            num_envs=self.num_envs,
+            cameras=self.streams.cameras,
+            frame_size=self.streams.frame_size,
+            all_frames=self.all_frames,
+            chunk_actions=self.chunk_actions,
             truth_fields=TRUTH_FIELDS if self.ground_truth else (),
-            depth_cameras=tuple(depth_cameras),
+            depth_cameras=self._depth_cameras,
             reward_terms=tuple(getattr(self._reward, "terms", ())),
             device=self.device,
         )
@@ -154,77 +192,31 @@ class OasisEnv(EnvBase):
         self.action_spec = build_action_spec(self.layout)
         self.reward_spec = build_reward_spec(self.layout)
         self.full_done_spec = build_done_spec(self.layout)
-        self._steps = np.zeros(num_envs, dtype=np.int64)
-        self._prompts = [""] * num_envs
-        self._seeds = torch.zeros(num_envs, 1, dtype=torch.int64)
-        self._restarts = torch.zeros(num_envs, 1, dtype=torch.int64)
-        self._last_obs: TensorDictBase | None = None
 
-    @property
-    def is_local(self) -> bool:
-        """Whether this env runs on its own embedded simulator server."""
-        return self.endpoint == LOCAL
-
-    @property
-    def pool(self) -> SessionPool:
-        """The session pool, opened on first use in the calling process."""
-        if self._pool is None:
-            self._pool = self._open_pool()
-        return self._pool
+    def _init_env(self) -> None:
+        return None
 
     # -- lifecycle -------------------------------------------------------------------------
 
-    def _discover_streams(self) -> tuple[tuple[str, ...], tuple[int, int]]:
-        if self.is_local:
-            cfg = self._server_config
-            return CAMERAS, (cfg.height, cfg.width)
-        pool = self.pool  # a remote server must be asked what it streams
-        return tuple(pool.stream_names), tuple(pool.frame_size)
-
-    def _open_pool(self) -> SessionPool:
-        endpoint, api_key = self.endpoint, self._api_key
-        if self.is_local:
-            self._server = LocalServer(self._server_config)
-            self._server.start()
-            endpoint, api_key = self._server.endpoint, self._server.api_key
-        pool = SessionPool(
-            endpoint,
-            self.num_envs,
-            api_key=api_key,
-            tls=self._tls,
-            timeout=self.timeout,
-            retry=self.retry,
-            resize=self._frame_size,
-            frames="all" if self.all_frames else "last",
-        )
-        try:
+    @property
+    def pool(self) -> SessionPool:
+        """The session pool, started (and its layout checked) on first use in this process."""
+        pool: SessionPool = self._env
+        if not pool.streams:
             pool.start()
-        except BaseException:
-            pool.close()
-            self._stop_server()
-            raise
+            try:
+                self.streams.check(pool)
+            except ValueError:
+                pool.close()
+                raise
         return pool
 
-    def _stop_server(self) -> None:
-        if self._server is not None:
-            self._server.stop()
-            self._server = None
-
     def close(self, *, raise_if_closed: bool = True) -> None:
-        """Finish every session, close the channel and stop the embedded server."""
+        """Finish every session, close the channel and stop the pool's server, if it has one."""
         try:
-            if self._pool is not None:
-                self._pool.close()
+            self._env.close()
         finally:
-            self._pool = None
-            self._stop_server()
-            super().close(raise_if_closed=raise_if_closed)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_pool"] = None  # sockets and threads never cross processes; reopened lazily
-        state["_server"] = None
-        return state
+            self.is_closed = True
 
     def _set_seed(self, seed: int | None) -> None:
         self._planner.set_seed(0 if seed is None else seed)
@@ -317,6 +309,7 @@ class OasisEnv(EnvBase):
             truth = torch.from_numpy(_truth_or_nan(step, len(rows))).to(torch.float32)
             for k, name in enumerate(self.layout.truth_fields):
                 fresh["truth", name] = truth[..., k]
+            fresh["expert_action"] = torch.from_numpy(step.expert)
         if self.layout.depth_cameras:
             depth = self.pool.depth(rows)
             for camera in self.layout.depth_cameras:
@@ -329,6 +322,123 @@ class OasisEnv(EnvBase):
         full = self._last_obs.clone()
         full[torch.as_tensor(rows)] = fresh
         return full.to(self.device)
+
+
+class OasisEnv(OasisWrapper):
+    """The batched TorchRL env over ``num_envs`` concurrent Oasis (A2V) sessions of an endpoint.
+
+    Args:
+        endpoint: ``"local"`` (the embedded simulator server, started on a free loopback port
+            by the process that steps the env and stopped on close), or any A2V endpoint such
+            as ``"https://oasis-grpc.decart.ai"`` or ``"http://127.0.0.1:50051"``.
+        num_envs: rows of the batch, one session each.
+        prompts: see :class:`OasisWrapper`.
+        api_key: key for a remote endpoint (defaults to ``DECART_API_KEY``); ignored for local.
+        tls: force TLS on or off (default: from the endpoint's scheme).
+        server: embedded-server settings for ``endpoint="local"`` (resolution, latency, ...).
+            Its ``processes`` (default: one per core) is capped at ``num_envs``;
+            ``processes=0`` runs the server and the worlds inside the stepping process
+            instead, which is slower but easier to debug.
+        frame_size: ``(height, width)`` to resize frames to while decoding; default: the
+            embedded server's size, or the hosted model's (another server's size: pass it here
+            or as ``streams``).
+        streams: the layout a remote server streams, when it is not the hosted model's.
+        frame_format: how frames travel: ``"raw"`` (uncompressed RGB, for a server on this
+            machine), ``"vp9"`` (what the hosted model sends: train on its compression
+            artefacts) or ``"jpeg"``; default: raw on this machine, else VP9.
+        all_frames: return all 4 frames of each chunk instead of the last one.
+        ground_truth: see :class:`OasisWrapper`; default: only for ``endpoint="local"`` (set it
+            for an ``oasis-torchrl serve`` server started elsewhere).
+        retry: transient-failure policy of the session pool.
+        timeout: per-call deadline in seconds.
+        **kwargs: the other :class:`OasisWrapper` arguments (``chunk_actions``, ``max_steps``,
+            ``reward``, ``depth_cameras``, ``terminate_on_collision``, ``device``).
+
+    Example:
+        >>> from oasis_torchrl.envs import OasisEnv
+        >>> from oasis_torchrl.sim.config import ServerConfig
+        >>> env = OasisEnv("local", num_envs=2, prompts="urban street",
+        ...                server=ServerConfig(width=96, height=64))
+        >>> td = env.rollout(3)
+        >>> td["next", "pixels", "front"].shape
+        torch.Size([2, 3, 64, 96, 3])
+        >>> env.close()
+    """
+
+    def __init__(
+        self,
+        endpoint: str = LOCAL,
+        num_envs: int = 1,
+        prompts: Prompts = "urban street",
+        *,
+        api_key: str | None = None,
+        tls: bool | None = None,
+        server: ServerConfig | None = None,
+        frame_size: tuple[int, int] | None = None,
+        streams: StreamLayout | None = None,
+        frame_format: str | None = None,
+        all_frames: bool = False,
+        ground_truth: bool | None = None,
+        retry: RetryPolicy | None = None,
+        timeout: float = 120.0,
+        **kwargs: Any,
+    ) -> None:
+        if frame_format is not None and frame_format not in FORMAT_NAMES:
+            raise ValueError(
+                f"frame_format must be None or one of {sorted(FORMAT_NAMES)}, got {frame_format!r}"
+            )
+        self.endpoint = endpoint
+        self.frame_format = frame_format
+        local = endpoint == LOCAL
+        if local:
+            config = server if server is not None else ServerConfig()
+            streams = StreamLayout(CAMERAS, frame_size or (config.height, config.width))
+        formats = {} if frame_format is None else {"accepted_formats": [FORMAT_NAMES[frame_format]]}
+        pool = SessionPool(
+            embedded_server(config, num_envs) if local else endpoint,
+            num_envs,
+            api_key=api_key,
+            tls=tls,
+            timeout=timeout,
+            retry=retry,
+            resize=frame_size,
+            frames="all" if all_frames else "last",
+            **formats,
+        )
+        super().__init__(
+            pool,
+            streams=streams,
+            prompts=prompts,
+            ground_truth=local if ground_truth is None else ground_truth,
+            fps=config.fps if local else FPS,
+            **kwargs,
+        )
+
+    @property
+    def is_local(self) -> bool:
+        """Whether this env runs on its own embedded simulator server."""
+        return self.endpoint == LOCAL
+
+    @property
+    def server(self) -> LocalServer | ServerProcess | None:
+        """The embedded server of ``endpoint="local"`` (started with the env's sessions)."""
+        return self._env.server
+
+
+def embedded_server(config: ServerConfig, num_envs: int) -> LocalServer | ServerProcess:
+    """The embedded server of a local env: a process of its own (its workers at most one per
+    row), or, with ``processes=0``, inside the stepping process. Unstarted: the env's pool
+    starts it.
+
+    Example:
+        >>> type(embedded_server(ServerConfig(processes=0), 2)).__name__
+        'LocalServer'
+        >>> embedded_server(ServerConfig(), 1).config.processes
+        1
+    """
+    if config.resolved_processes == 0:
+        return LocalServer(config)
+    return ServerProcess(replace(config, processes=min(config.resolved_processes, num_envs)))
 
 
 def _truth_or_nan(step: PoolStep, n: int) -> np.ndarray:

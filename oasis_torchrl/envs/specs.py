@@ -14,6 +14,9 @@ key                           dtype / shape              meaning
 ``"episode_seed"``            int64 ``[N, 1]``           the seed of the row's episode
 ``("truth", <field>)``        float32 ``[N, 4]``         embedded-server ground truth per frame
                                                          of the chunk (see ``TRUTH_FIELDS``)
+``"expert_action"``           float32 ``[N, 4, 2]``      with ground truth: the embedded
+                                                         server's expert's next chunk from the
+                                                         row's state (NaN where none was sent)
 ``("depth", <camera>)``       float32 ``[N, H, W]``      metric depth of the last frame (opt-in)
 ``("reward_terms", <term>)``  float32 ``[N, 1]``         every term of the reward, for logging
 ``("info", "session_restarts")`` int64 ``[N, 1]``        sessions this row lost and re-opened
@@ -32,7 +35,7 @@ from dataclasses import dataclass
 import torch
 from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 
-from oasis_torchrl.protocol import CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 
 """Actions per Infer call and frames per stream in every response."""
 
@@ -88,6 +91,7 @@ def build_observation_spec(layout: EnvLayout) -> Composite:
         spec["truth"] = _group(
             layout, layout.truth_fields, lambda: Unbounded((n, CHUNK), device=device)
         )
+        spec["expert_action"] = Unbounded((n, CHUNK, ACTION_DIM), device=device)
     if layout.depth_cameras:
         height, width = layout.frame_size
         spec["depth"] = _group(

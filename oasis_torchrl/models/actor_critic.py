@@ -2,9 +2,10 @@
 
 Keys in: each camera's frames and ``"state"`` ``[*B, 2]``. Frames are read from
 ``("pixels", <camera>)`` by default: the env's uint8 ``[*B, 4, H, W, 3]`` (``all_frames=True``,
-as :func:`oasis_torchrl.train.environment.build_env` makes it) or ``[*B, H, W, 3]``, converted
-to float by the encoder, so rollouts store compact uint8 frames; ``image_key="images"`` reads
-float ``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (:func:`oasis_torchrl.envs.make_training_env`).
+as :func:`oasis_torchrl.envs.make_env` makes it) or ``[*B, H, W, 3]``, converted to float by
+the encoder, so rollouts store compact uint8 frames; ``image_key="images"`` reads float
+``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (e.g. TorchRL's ``ToTensorImage`` writing
+``("images", <camera>)``).
 With ``critic_inputs`` configured, the critic also reads ``"critic_inputs"`` ``[*B, k]``.
 Keys out: ``"features"`` (shared), the chunk distribution's parameters (``"loc"``,
 ``"scale"``, and ``"logits"`` for the mixture head), ``"action"`` ``[*B, 4, 2]``,

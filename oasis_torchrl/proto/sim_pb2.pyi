@@ -37,14 +37,16 @@ class FrameTruth(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., heading: _Optional[float] = ..., speed: _Optional[float] = ..., distance: _Optional[float] = ..., progress: _Optional[float] = ..., lateral_offset: _Optional[float] = ..., heading_error: _Optional[float] = ..., collided: _Optional[bool] = ..., obstacle_distance: _Optional[float] = ..., off_road: _Optional[bool] = ..., obstacle_distance_left: _Optional[float] = ..., obstacle_distance_right: _Optional[float] = ...) -> None: ...
 
 class InferTruth(_message.Message):
-    __slots__ = ("sequence_num", "seed", "frames")
+    __slots__ = ("sequence_num", "seed", "frames", "expert_actions")
     SEQUENCE_NUM_FIELD_NUMBER: _ClassVar[int]
     SEED_FIELD_NUMBER: _ClassVar[int]
     FRAMES_FIELD_NUMBER: _ClassVar[int]
+    EXPERT_ACTIONS_FIELD_NUMBER: _ClassVar[int]
     sequence_num: int
     seed: int
     frames: _containers.RepeatedCompositeFieldContainer[FrameTruth]
-    def __init__(self, sequence_num: _Optional[int] = ..., seed: _Optional[int] = ..., frames: _Optional[_Iterable[_Union[FrameTruth, _Mapping]]] = ...) -> None: ...
+    expert_actions: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, sequence_num: _Optional[int] = ..., seed: _Optional[int] = ..., frames: _Optional[_Iterable[_Union[FrameTruth, _Mapping]]] = ..., expert_actions: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class DepthRequest(_message.Message):
     __slots__ = ("session_id",)

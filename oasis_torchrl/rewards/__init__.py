@@ -21,7 +21,6 @@ from oasis_torchrl.rewards.depth_collision import (
     straightness_penalty,
 )
 from oasis_torchrl.rewards.depth_sources import (
-    CAMERAS,
     DEFAULT_DEPTH_MODEL,
     CallableDepth,
     DepthPreprocess,
@@ -30,12 +29,13 @@ from oasis_torchrl.rewards.depth_sources import (
     MonocularDepth,
 )
 from oasis_torchrl.rewards.ground_truth import GroundTruthReward
+from oasis_torchrl.rewards.shaping import ClearanceShaping
 
 __all__ = [
-    "CAMERAS",
     "DEFAULT_DEPTH_MODEL",
     "CallableDepth",
     "CallableReward",
+    "ClearanceShaping",
     "DepthCollisionConfig",
     "DepthCollisionReward",
     "DepthPreprocess",

@@ -16,10 +16,10 @@ Same semantics and constants as the reference SDK, per row:
 
 Reading of the reference SDK's details kept here: the strip starts at row
 ``min(max(1, round(H * (1 - fraction))), H - 1)`` (Python rounding), a zero fraction scores the
-whole image and uses it as the strip too, a constant map normalises to zeros. One difference: the
-reference SDK's transformers pipeline quantises the model output to 8 bits before normalising; here the
-float map is used. Non-finite nearness (only possible from a custom source) normalises to 1 for
-+inf (nearest) and 0 otherwise.
+whole image and uses it as the strip too, a constant map normalises to zeros. One difference:
+the reference SDK's transformers pipeline quantises the model output to 8 bits before
+normalising; here the float map is used. Non-finite nearness (only possible from a custom
+source) normalises to 1 for +inf (nearest) and 0 otherwise.
 """
 
 from __future__ import annotations
@@ -169,9 +169,10 @@ def straightness_penalty(heading: torch.Tensor, config: DepthCollisionConfig) ->
 class DepthCollisionReward:
     """The reference SDK's reward as a batched :class:`~oasis_torchrl.rewards.base.RewardModule`.
 
-    ``depth_source`` defaults to the reference SDK's model (:class:`MonocularDepth`, loaded on the first
-    call). Output terms (:attr:`terms`): ``forward``, ``straightness_penalty``, ``heading``,
-    ``collision_risk``, ``near_fraction``; ``reset(mask)`` zeroes the heading of masked rows.
+    ``depth_source`` defaults to the reference SDK's model (:class:`MonocularDepth`, loaded on
+    the first call). Output terms (:attr:`terms`): ``forward``, ``straightness_penalty``,
+    ``heading``, ``collision_risk``, ``near_fraction``; ``reset(mask)`` zeroes the heading of
+    masked rows.
 
     >>> from oasis_torchrl.rewards.depth_sources import GroundTruthDepth
     >>> reward = DepthCollisionReward(GroundTruthDepth())

@@ -149,7 +149,7 @@ class DepthPreprocess:
     def from_processor(
         cls, processor: BaseImageProcessor, input_size: InputSize | None = None
     ) -> DepthPreprocess:
-        """Read a (fast or slow) DPT processor's settings; ``input_size`` overrides its size."""
+        """Read a DPT processor's settings (either backend); ``input_size`` overrides its size."""
         size = processor.size
         target = input_size if input_size is not None else (size["height"], size["width"])
         return cls(
@@ -253,7 +253,7 @@ class MonocularDepth:
 
             logger.info("loading depth model %s", self.source)
             self._model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
-            processor = AutoImageProcessor.from_pretrained(self.source, use_fast=False)
+            processor = AutoImageProcessor.from_pretrained(self.source)
             self._preprocess = DepthPreprocess.from_processor(processor, self.input_size)
         return self._model, self._preprocess
 

@@ -1,4 +1,4 @@
-"""A privileged driver for the embedded simulator (reads the scene and the car's true state).
+"""The embedded simulator's privileged expert driver (it reads the scene and the car's true state).
 
 Lane keeping is pure pursuit on the centre line of a target lane; speed follows the layout's
 speed cap, slowed for curves ahead. Obstacles in the target lane within braking range make it
@@ -21,7 +21,7 @@ import numpy as np
 from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.sim.scene import Scene
 from oasis_torchrl.sim.simulator import Simulator
-from oasis_torchrl.sim.vehicle import VehicleState, step_vehicle
+from oasis_torchrl.sim.vehicle import VehicleState, clamp, step_vehicle
 
 #: Fraction of the layout's speed cap the autopilot cruises at.
 CRUISE_FRACTION = 0.85
@@ -63,9 +63,11 @@ def _stopping_speed(distance: float, gap: float) -> float:
 class Autopilot:
     """Lane following and obstacle avoidance with full knowledge of the simulator's world.
 
+    The embedded server runs one per session (restarted at every Prompt) and sends its next
+    chunk with the ground truth of every Infer.
+
     Args:
         simulator: A reset :class:`~oasis_torchrl.sim.simulator.Simulator`.
-        target_speed: Cruise speed in m/s (default: 85% of the layout's speed cap).
 
     Example:
         >>> simulator = Simulator(64, 48)
@@ -77,11 +79,8 @@ class Autopilot:
         True
     """
 
-    def __init__(self, simulator: Simulator, target_speed: float | None = None) -> None:
-        if target_speed is not None and not target_speed > 0:
-            raise ValueError(f"target_speed must be positive, got {target_speed}")
+    def __init__(self, simulator: Simulator) -> None:
         self._simulator = simulator
-        self._target_speed = target_speed
         self._scene: Scene | None = None
         self._lane = 0
 
@@ -119,26 +118,26 @@ class Autopilot:
         if ahead is not None:
             floor = CRAWL_SPEED if blocked is None else 0.0
             limits.append(max(_stopping_speed(ahead, MIN_GAP), floor))
-        throttle = float(np.clip(SPEED_GAIN * (min(limits) - state.speed), -1.0, 1.0))
+        throttle = clamp(SPEED_GAIN * (min(limits) - state.speed), -1.0, 1.0)
         return throttle, self._steering(state, s)
 
     def _steering(self, state: VehicleState, s: float) -> float:
         """Pure pursuit towards the target lane's centre line."""
         scene = self._require_scene()
         params = self._simulator.world.params
-        look_ahead = float(np.clip(PURSUIT_TIME * abs(state.speed) + 5.0, 6.0, 25.0))
+        look_ahead = clamp(PURSUIT_TIME * abs(state.speed) + 5.0, 6.0, 25.0)
         goal_x, goal_y, _ = scene.road.pose_at(s + look_ahead, scene.style.lane_offset(self._lane))
         dx, dy = float(goal_x) - state.x, float(goal_y) - state.y
         cos, sin = math.cos(state.heading), math.sin(state.heading)
         forward, left = dx * cos + dy * sin, -dx * sin + dy * cos
         curvature = 2.0 * left / max(forward * forward + left * left, 1e-6)
         steer_angle = math.atan(params.wheelbase * curvature)
-        return float(np.clip(-steer_angle / params.max_steer, -1.0, 1.0))
+        return clamp(-steer_angle / params.max_steer, -1.0, 1.0)
 
     def _cruise_speed(self) -> float:
         """The speed to hold on clear, straight road."""
         scene = self._require_scene()
-        return self._target_speed or CRUISE_FRACTION * scene.style.speed_limit
+        return CRUISE_FRACTION * scene.style.speed_limit
 
     def _curve_speed(self, s: float, speed: float) -> float:
         """The speed that keeps lateral acceleration bounded on the road ahead."""

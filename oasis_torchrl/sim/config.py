@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from oasis_torchrl.config.fields import option
-from oasis_torchrl.protocol import FPS, SERVER_API_KEYS_ENV_VAR
+from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 
 # Keys travel as gRPC metadata (printable ASCII) and in a comma-separated variable.
@@ -18,21 +18,19 @@ _API_KEY_PATTERN = re.compile(r"[\x21-\x2b\x2d-\x7e]{1,256}")
 
 
 def parse_formats(text: str) -> tuple[int, ...]:
-    """``"vp9,jpeg"`` -> frame format values, in the given order.
+    """``"vp9,jpeg"`` -> frame format values, in the given order (names: ``FORMAT_NAMES``).
 
     Example:
         >>> parse_formats("vp9, jpeg")  # FrameFormat.VP9, FrameFormat.JPEG
         (3, 1)
     """
-    names = [name.strip().upper() for name in text.split(",") if name.strip()]
-    known = {format_name(value).removeprefix("FRAME_FORMAT_"): value for value in SUPPORTED_FORMATS}
-    unknown = [name.lower() for name in names if name not in known]
+    names = [name.strip().lower() for name in text.split(",") if name.strip()]
+    unknown = [name for name in names if name not in FORMAT_NAMES]
     if unknown or not names:
         raise ValueError(
-            f"formats must be a comma-separated list of {', '.join(k.lower() for k in known)}, "
-            f"got {text!r}"
+            f"formats must be a comma-separated list of {', '.join(FORMAT_NAMES)}, got {text!r}"
         )
-    return tuple(int(known[name]) for name in names)
+    return tuple(int(FORMAT_NAMES[name]) for name in names)
 
 
 def keys_from_env(environ: dict[str, str] | None = None) -> tuple[str, ...]:
@@ -83,12 +81,15 @@ class ServerConfig:
     tls_cert: str | None = option(None, help="PEM certificate chain (with tls_key)")
     tls_key: str | None = option(None, help="PEM private key (with tls_cert)")
     workers: int = option(32, help="gRPC handler threads")
-    encode_workers: int = option(
-        0, help="threads encoding streams, shared by all sessions (0: automatic)"
+    processes: int | None = option(
+        None,
+        help="worker processes running the sessions (null: one per core; 0: all in the "
+        "server's process)",
     )
+    encode_workers: int = option(0, help="threads encoding streams per process (0: automatic)")
     formats: tuple[int, ...] = option(
-        SUPPORTED_FORMATS,
-        help="allowed frame formats in preference order, e.g. vp9,jpeg",
+        tuple(int(value) for value in SUPPORTED_FORMATS),
+        help="allowed frame formats in preference order, e.g. raw,vp9,jpeg",
         parse=parse_formats,
         metavar="FORMATS",
     )
@@ -134,6 +135,17 @@ class ServerConfig:
             'http://127.0.0.1:50051'
         """
         return f"{'https' if self.tls_enabled else 'http'}://{self.client_address(port)}"
+
+    @property
+    def resolved_processes(self) -> int:
+        """Worker processes to run: the configured number, or one per core (0: none, the
+        sessions run in the server's own process).
+
+        Example:
+            >>> ServerConfig(processes=0, api_keys=("k",)).resolved_processes
+            0
+        """
+        return os.cpu_count() or 1 if self.processes is None else self.processes
 
     @property
     def resolved_encode_workers(self) -> int:
@@ -190,6 +202,8 @@ class ServerConfig:
             raise ValueError("host must be a non-empty host name or address")
         _require_int("port", self.port, 0, 65535)
         _require_int("workers", self.workers, 1, 1024)
+        if self.processes is not None:
+            _require_int("processes", self.processes, 0, 1024)
         _require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
         if (self.tls_cert is None) != (self.tls_key is None):
             raise ValueError(

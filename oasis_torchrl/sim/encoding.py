@@ -19,11 +19,12 @@ import numpy as np
 from PIL import Image
 
 from oasis_torchrl.proto import common_pb2
+from oasis_torchrl.protocol import FrameFormat
 
 logger = logging.getLogger(__name__)
 
-#: Formats the embedded server can produce, in its order of preference.
-SUPPORTED_FORMATS: tuple[int, ...] = (common_pb2.FRAME_FORMAT_VP9, common_pb2.FRAME_FORMAT_JPEG)
+#: Formats the embedded server can produce (a client's order of preference decides).
+SUPPORTED_FORMATS: tuple[int, ...] = (FrameFormat.RAW_RGB24, FrameFormat.VP9, FrameFormat.JPEG)
 
 # libvpx treats the GOP length as the maximum key-frame distance; key frames are only wanted
 # after a restart, so the distance is effectively unbounded.
@@ -41,6 +42,9 @@ class FrameEncoder(Protocol):
         >>> isinstance(encoder.encode(np.zeros((16, 16, 3), np.uint8)), bytes)
         True
     """
+
+    #: Whether encoding is slow enough to run on a thread per stream (it releases the GIL).
+    threaded: bool
 
     def encode(self, rgb: np.ndarray) -> bytes:
         """Encode one uint8 RGB frame ``[H, W, 3]`` into exactly one packet."""
@@ -80,6 +84,8 @@ class Vp9Encoder:
         >>> len(packets), Vp9Encoder.is_key_frame(packets[0]), Vp9Encoder.is_key_frame(packets[1])
         (3, True, False)
     """
+
+    threaded = True
 
     def __init__(
         self,
@@ -166,6 +172,8 @@ class JpegEncoder:
         b'\\xff\\xd8'
     """
 
+    threaded = True
+
     def __init__(self, quality: int = 90) -> None:
         self.quality = quality
 
@@ -180,6 +188,25 @@ class JpegEncoder:
         return buffer.getvalue()
 
 
+class RawRgbEncoder:
+    """Frames as they are: 3 bytes a pixel, row-major (``FrameFormat.RAW_RGB24``).
+
+    Example:
+        >>> len(RawRgbEncoder().encode(np.zeros((48, 64, 3), np.uint8)))
+        9216
+    """
+
+    threaded = False  # a copy: faster than handing it to a thread
+
+    def restart(self) -> None:
+        """No state to reset: every raw frame stands on its own."""
+
+    def encode(self, rgb: np.ndarray) -> bytes:
+        """The frame's bytes."""
+        _check_frame(rgb)
+        return rgb.tobytes()
+
+
 def format_name(frame_format: int) -> str:
     """Human-readable name of a ``FrameFormat`` value, tolerant of unknown numbers.
 
@@ -188,7 +215,7 @@ def format_name(frame_format: int) -> str:
         ('FRAME_FORMAT_VP9', 'FrameFormat(42)')
     """
     try:
-        return common_pb2.FrameFormat.Name(frame_format)
+        return f"FRAME_FORMAT_{FrameFormat(frame_format).name}"
     except ValueError:
         return f"FrameFormat({frame_format})"
 
@@ -217,6 +244,8 @@ def make_encoder(
         )
     if frame_format == common_pb2.FRAME_FORMAT_JPEG:
         return JpegEncoder(quality=jpeg_quality)
+    if frame_format == FrameFormat.RAW_RGB24:
+        return RawRgbEncoder()
     supported = ", ".join(format_name(f) for f in SUPPORTED_FORMATS)
     raise ValueError(
         f"frame_format {format_name(frame_format)} is not supported; expected one of {supported}"

@@ -88,9 +88,19 @@ class LocalServer:
         return self.config.client_address(self.port)
 
     @property
+    def worker_pids(self) -> list[int]:
+        """Process ids of the server's worker processes (empty without workers)."""
+        if self._server is None:
+            raise RuntimeError("LocalServer is not started; call start() first")
+        return self._server.worker_pids
+
+    @property
     def endpoint(self) -> str:
         """Endpoint URL for clients, e.g. ``http://127.0.0.1:50051``."""
         return self.config.endpoint(self.port)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return dict(self.__dict__, _server=None)  # a running server stays in its process
 
     def start(self) -> LocalServer:
         """Start serving (idempotent); returns ``self``."""
@@ -154,6 +164,10 @@ class ServerProcess:
         self.port: int | None = None
         self._process: subprocess.Popen[bytes] | None = None
         self._workdir: Path | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A running child stays with the process that started it.
+        return dict(self.__dict__, _process=None, port=None, _workdir=None)
 
     @property
     def api_key(self) -> str:

@@ -248,9 +248,10 @@ class Road:
         self.y = self._integrate(np.tan(headings))
         self.s = self._integrate(1.0 / np.cos(headings))
         self.curvature = np.gradient(headings, self.s)
-        columns = (self.y, np.cos(headings), np.sin(headings), self.s)
-        # Each value with its forward difference: two gathers serve a linear interpolation.
-        self._table = tuple((column, np.append(np.diff(column), 0.0)) for column in columns)
+        columns = np.stack([self.y, np.cos(headings), np.sin(headings), self.s])
+        # The four columns, then their forward differences: one gather serves the linear
+        # interpolation of all four.
+        self._table = np.concatenate([columns, np.diff(columns, append=columns[:, -1:])])
 
     def _integrate(self, derivative: np.ndarray) -> np.ndarray:
         """Trapezoidal integral of ``derivative`` over x, zero at x = 0."""
@@ -268,7 +269,8 @@ class Road:
         position = (x - self.x0) * (1.0 / self.step)
         index = np.clip(position.astype(np.int64), 0, self.x.size - 2)
         fraction = position - index
-        return tuple(value.take(index) + fraction * step.take(index) for value, step in self._table)
+        gathered = self._table.take(index, axis=1)
+        return tuple(gathered[:4] + fraction * gathered[4:])
 
     def locate(
         self, x: np.ndarray, y: np.ndarray, iterations: int = 1

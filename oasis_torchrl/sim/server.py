@@ -25,9 +25,11 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import grpc
+from google.protobuf import message_factory
+from google.protobuf.descriptor import ServiceDescriptor
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
-from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc, common_pb2, sim_pb2, sim_pb2_grpc
+from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import (
     API_KEY_METADATA,
     CAMERAS,
@@ -39,7 +41,8 @@ from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.errors import RequestError, StatusError
 from oasis_torchrl.sim.faults import FailureInjector
-from oasis_torchrl.sim.sessions import Session, SessionRegistry, SimulatorFactory
+from oasis_torchrl.sim.session_world import LocalWorlds, SimulatorFactory, WorldHost
+from oasis_torchrl.sim.sessions import Session, SessionRegistry
 from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.validation import (
     actions_to_array,
@@ -48,11 +51,12 @@ from oasis_torchrl.sim.validation import (
     negotiate_format,
     parse_seed,
 )
+from oasis_torchrl.sim.worker_pool import WorkerPool
 
 logger = logging.getLogger(__name__)
 
-A2V_SERVICE_NAME = a2v_pb2.DESCRIPTOR.services_by_name["A2VService"].full_name
-SIM_SERVICE_NAME = sim_pb2.DESCRIPTOR.services_by_name["SimService"].full_name
+A2V_SERVICE = a2v_pb2.DESCRIPTOR.services_by_name["A2VService"]
+SIM_SERVICE = sim_pb2.DESCRIPTOR.services_by_name["SimService"]
 
 _Response = TypeVar("_Response")
 _SIM_STATUS = {
@@ -124,32 +128,26 @@ class _Gate:
         return self.registry.use(session_id, key_digest, target)
 
 
-class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
+class A2VServicer:
     """``decart.inference.a2v.A2VService`` backed by the procedural simulator.
 
     Example:
-        >>> from concurrent.futures import ThreadPoolExecutor
+        >>> from oasis_torchrl.sim.session_world import LocalWorlds
         >>> config = ServerConfig(width=64, height=48, api_keys=("k",))
-        >>> registry = SessionRegistry(config)
-        >>> servicer = A2VServicer(config, registry, ApiKeyAuthority(config.api_keys),
-        ...                        ThreadPoolExecutor(3))
+        >>> registry = SessionRegistry(config, LocalWorlds(config))
+        >>> servicer = A2VServicer(config, registry, ApiKeyAuthority(config.api_keys))
         >>> [info.name for info in servicer.stream_infos]
         ['left_forward', 'front', 'right_forward']
     """
 
     def __init__(
-        self,
-        config: ServerConfig,
-        registry: SessionRegistry,
-        authority: ApiKeyAuthority,
-        encode_pool: ThreadPoolExecutor,
+        self, config: ServerConfig, registry: SessionRegistry, authority: ApiKeyAuthority
     ) -> None:
         self._config = config
         self._registry = registry
         self._gate = _Gate(
             registry, authority, FailureInjector(config.failure_rate, config.failure_seed)
         )
-        self._encode_pool = encode_pool
         self.stream_infos = [
             a2v_pb2.StreamInfo(
                 name=name, type=a2v_pb2.SENSOR_TYPE_RGB, width=config.width, height=config.height
@@ -230,7 +228,7 @@ class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
         with self._gate.use("Prompt", request.session_id, context) as session:
             check_prompt(request.prompt, self._config.max_prompt_chars)
             seed = parse_seed(_metadata(context, SEED_METADATA))
-            session.prompt(request.prompt, seed)
+            session.world.prompt(request.prompt, seed)
         return a2v_pb2.PromptResponse()
 
     def _infer(
@@ -241,9 +239,9 @@ class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
             # Only this session waits: its lock serialises its own calls, like one GPU stream.
             if self._config.latency_ms:
                 time.sleep(self._config.latency_ms / 1000.0)
-            record = session.infer(request.sequence_num, actions, self._encode_pool)
+            record = session.world.infer(request.sequence_num, actions)
         context.set_trailing_metadata(((TRUTH_METADATA, record.truth),))
-        return record.response
+        return record.response  # serialised already (see _serialise)
 
     def _finish(
         self, request: a2v_pb2.FinishRequest, context: grpc.ServicerContext
@@ -253,14 +251,16 @@ class A2VServicer(a2v_pb2_grpc.A2VServiceServicer):
         return a2v_pb2.FinishResponse()
 
 
-class SimServicer(sim_pb2_grpc.SimServiceServicer):
+class SimServicer:
     """``oasis_torchrl.sim.v1.SimService``: depth and scene of a session, for local analysis.
 
     Same authentication and session pinning as A2V calls; no injected failures.
 
     Example:
+        >>> from oasis_torchrl.sim.session_world import LocalWorlds
         >>> config = ServerConfig(api_keys=("k",))
-        >>> servicer = SimServicer(SessionRegistry(config), ApiKeyAuthority(config.api_keys))
+        >>> registry = SessionRegistry(config, LocalWorlds(config))
+        >>> servicer = SimServicer(registry, ApiKeyAuthority(config.api_keys))
         >>> callable(servicer.GetDepth) and callable(servicer.GetScene)
         True
     """
@@ -272,13 +272,13 @@ class SimServicer(sim_pb2_grpc.SimServiceServicer):
         self, request: sim_pb2.DepthRequest, context: grpc.ServicerContext
     ) -> sim_pb2.DepthResponse:
         """Float16 depth of the last frame of each stream."""
-        return self._query("GetDepth", request.session_id, context, lambda s: s.depth())
+        return self._query("GetDepth", request.session_id, context, lambda s: s.world.depth())
 
     def GetScene(
         self, request: sim_pb2.SceneRequest, context: grpc.ServicerContext
     ) -> sim_pb2.SceneResponse:
         """The static world of the session's current scene."""
-        return self._query("GetScene", request.session_id, context, lambda s: s.scene())
+        return self._query("GetScene", request.session_id, context, lambda s: s.world.scene())
 
     def _query(
         self,
@@ -303,12 +303,17 @@ class SimServicer(sim_pb2_grpc.SimServiceServicer):
 
 
 class A2VServer:
-    """The embedded A2V server: gRPC server, services, sessions, encoder threads.
+    """The embedded A2V server: gRPC server, services, sessions and where their worlds run.
+
+    With ``config.processes`` worker processes (default: one per core) the sessions' worlds run
+    in those workers (:mod:`~oasis_torchrl.sim.worker_pool`), one worker per session for its
+    life; with ``processes=0`` they run in this process.
 
     Args:
         config: Server settings; it must name API keys or set ``allow_any_key``.
         simulator_factory: Builds one world per session from ``width=, height=, fps=``
-            (default: the procedural :class:`~oasis_torchrl.sim.simulator.Simulator`).
+            (default: the procedural :class:`~oasis_torchrl.sim.simulator.Simulator`); with
+            worker processes it must pickle.
 
     Example:
         >>> server = A2VServer(ServerConfig(width=96, height=64, api_keys=("secret",)))
@@ -322,11 +327,20 @@ class A2VServer:
         self, config: ServerConfig, *, simulator_factory: SimulatorFactory | None = None
     ) -> None:
         self.config = config
+        simulator_factory = simulator_factory or Simulator
         self._authority = ApiKeyAuthority(config.api_keys, allow_any_key=config.allow_any_key)
-        self._registry = SessionRegistry(config, simulator_factory or Simulator)
-        self._encode_pool = ThreadPoolExecutor(
-            config.resolved_encode_workers, thread_name_prefix="oasis-encode"
-        )
+        self._workers: WorkerPool | None = None
+        if config.resolved_processes:
+            self._workers = WorkerPool(
+                config,
+                config.resolved_processes,
+                on_lost=self._sessions_lost,
+                simulator_factory=simulator_factory,
+            )
+            self._worlds: WorldHost = self._workers
+        else:
+            self._worlds = LocalWorlds(config, simulator_factory)
+        self._registry = SessionRegistry(config, self._worlds)
         self._health = health.HealthServicer()
         self._handler_pool = ThreadPoolExecutor(config.workers, thread_name_prefix="oasis-grpc")
         self._server = grpc.server(
@@ -336,14 +350,16 @@ class A2VServer:
                 ("grpc.so_reuseport", 0),
             ],
         )
-        a2v_pb2_grpc.add_A2VServiceServicer_to_server(
-            A2VServicer(config, self._registry, self._authority, self._encode_pool), self._server
-        )
-        sim_pb2_grpc.add_SimServiceServicer_to_server(
-            SimServicer(self._registry, self._authority), self._server
-        )
+        a2v = A2VServicer(config, self._registry, self._authority)
+        add_service(self._server, A2V_SERVICE, a2v)
+        add_service(self._server, SIM_SERVICE, SimServicer(self._registry, self._authority))
         health_pb2_grpc.add_HealthServicer_to_server(self._health, self._server)
         self.port: int | None = None
+
+    @property
+    def worker_pids(self) -> list[int]:
+        """Process ids of the worker processes, by worker index (empty without workers)."""
+        return [] if self._workers is None else self._workers.pids
 
     @property
     def address(self) -> str:
@@ -369,9 +385,10 @@ class A2VServer:
             self.port = self._server.add_secure_port(self.config.address_to_bind, credentials)
         else:
             self.port = self._server.add_insecure_port(self.config.address_to_bind)
+        self._worlds.start()
         self._server.start()
         self._registry.start_reaper()
-        for service in ("", A2V_SERVICE_NAME, SIM_SERVICE_NAME):
+        for service in ("", A2V_SERVICE.full_name, SIM_SERVICE.full_name):
             self._health.set(service, health_pb2.HealthCheckResponse.SERVING)
         logger.info("A2V server listening on %s (TLS %s)", self.address, self.config.tls_enabled)
         return self.port
@@ -381,10 +398,33 @@ class A2VServer:
         self._health.enter_graceful_shutdown()
         self._server.stop(grace).wait()
         self._registry.close()
-        self._encode_pool.shutdown(wait=True)
+        self._worlds.close()
         self._handler_pool.shutdown(wait=False)
         logger.info("A2V server on port %s stopped", self.port)
+
+    def _sessions_lost(self, session_ids: list[str], cause: str) -> None:
+        self._registry.lose(session_ids, cause)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the server stops (or ``timeout``); True if it stopped."""
         return self._server.wait_for_termination(timeout)
+
+
+def _serialise(response: Any) -> bytes:
+    """A response message as bytes; worlds answer with bytes already (no second encoding)."""
+    return response if isinstance(response, bytes) else response.SerializeToString()
+
+
+def add_service(server: grpc.Server, service: ServiceDescriptor, servicer: object) -> None:
+    """Serve every method of ``service`` (e.g. :data:`A2V_SERVICE`) with the same-named method
+    of ``servicer``, whose answers may be messages or bytes already serialised."""
+    handlers = {
+        method.name: grpc.unary_unary_rpc_method_handler(
+            getattr(servicer, method.name),
+            request_deserializer=message_factory.GetMessageClass(method.input_type).FromString,
+            response_serializer=_serialise,
+        )
+        for method in service.methods
+    }
+    generic = grpc.method_handlers_generic_handler(service.full_name, handlers)
+    server.add_generic_rpc_handlers((generic,))

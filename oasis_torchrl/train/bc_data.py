@@ -16,10 +16,13 @@ import logging
 from typing import Any
 
 import torch
+from lerobot.datasets.feature_utils import get_delta_indices
 from lerobot.datasets.video_utils import decode_video_frames
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.utils.data import Dataset
 from tqdm import tqdm
+
+from oasis_torchrl.data.loading import default_video_backend
 
 logger = logging.getLogger(__name__)
 
@@ -31,7 +34,7 @@ class InMemoryBCDataset(Dataset):
     ``action``).
 
     Args:
-        dataset: the LeRobot dataset (its ``delta_indices`` say which action rows to stack).
+        dataset: the LeRobot dataset (its ``delta_timestamps`` say which action rows to stack).
         progress: show a progress bar while decoding.
 
     Example:
@@ -41,12 +44,13 @@ class InMemoryBCDataset(Dataset):
     """
 
     def __init__(self, dataset: Any, *, progress: bool = True) -> None:
-        if not dataset.delta_indices or ACTION not in dataset.delta_indices:
+        if not dataset.delta_timestamps or ACTION not in dataset.delta_timestamps:
             raise ValueError(
                 "open the dataset with delta_timestamps for 'action' (an action chunk)"
             )
         self.camera_keys = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
-        self.deltas = {key: torch.tensor(d) for key, d in dataset.delta_indices.items()}
+        delta_indices = get_delta_indices(dataset.delta_timestamps, dataset.fps)
+        self.deltas = {key: torch.tensor(d) for key, d in delta_indices.items()}
         columns = dataset.hf_dataset.with_format("torch", columns=list(_COLUMNS))[:]
         self.columns = {key: torch.as_tensor(columns[key]) for key in _COLUMNS}
         # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
@@ -78,11 +82,16 @@ class InMemoryBCDataset(Dataset):
                 timestamps = (start + self.columns["timestamp"][rows].double()).tolist()
                 path = dataset.root / dataset.meta.get_video_file_path(ep, key)
                 frames = decode_video_frames(
-                    path, timestamps, dataset.tolerance_s, dataset.video_backend
+                    path,
+                    timestamps,
+                    dataset.tolerance_s,
+                    default_video_backend(),
+                    return_uint8=True,
                 )
             else:
-                frames = torch.stack([dataset[int(row)][key] for row in rows])
-            chunks.append((frames * 255).round_().to(torch.uint8))
+                images = torch.stack([dataset[int(row)][key] for row in rows])
+                frames = (images * 255).round_().to(torch.uint8)
+            chunks.append(frames)
         return torch.cat(chunks)
 
     def __len__(self) -> int:

@@ -25,13 +25,16 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 from tensordict import TensorDictBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 from tqdm import tqdm
 
 from oasis_torchrl.drivers import Autopilot
-from oasis_torchrl.train.environment import build_env
+from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
+
+LABEL = "label"
+"""Key of the autopilot's clean action, stored as the row's action in place of the executed one."""
 
 
 @dataclass(frozen=True)
@@ -118,34 +121,33 @@ def record_demonstrations(
     """
     from oasis_torchrl.data import LeRobotRecorder
 
-    env = build_env(env_cfg)
+    env = make_env(env_cfg)
     env.set_seed(seed)
     rows = int(env.batch_size[0])
     expert = Autopilot()
     process = NoiseProcess(noise, rows, seed)
     append = (Path(root) / "meta" / "info.json").exists()
     recorder = LeRobotRecorder(root, max_episodes=episodes, keep_unfinished=False, append=append)
+
+    def act(td: TensorDictBase) -> TensorDictBase:
+        label = expert(td.clone(False)).get("action")
+        driven = label if learner is None else learner(td.clone(False)).get("action")
+        td.set(LABEL, label)
+        return td.set("action", (driven + process.step().unsqueeze(1)).clamp(-1.0, 1.0))
+
     try:
         with (
             recorder,
             tqdm(total=episodes, desc="recording", unit="episode", disable=not progress) as bar,
         ):
-            td = env.reset()
-            while not recorder.full:
-                clean = expert(td).get("action").clone()
-                driven = clean if learner is None else _act(learner, td)
-                executed = (driven + process.step().unsqueeze(1)).clamp(-1.0, 1.0)
-                td, next_td = env.step_and_maybe_reset(td.set("action", executed))
-                bar.update(recorder.write(td.set("action", clean).unsqueeze(-1)))
+
+            def write(td: TensorDictBase) -> None:
+                labelled = td.set("action", td.get(LABEL)).exclude(LABEL)
+                bar.update(recorder.write(labelled.unsqueeze(-1)))
                 process.reset(td.get(("next", "done")).reshape(rows))
-                td = next_td
+
+            drive(env, act, write, until=lambda: recorder.full)
     finally:
         env.close()
     logger.info("recorded %d episodes into %s", recorder.episodes_written, root)
     return Path(root)
-
-
-def _act(policy: Callable[[TensorDictBase], TensorDictBase], td: TensorDictBase) -> torch.Tensor:
-    """The policy's deterministic action for ``td`` (``td`` itself is left unchanged)."""
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-        return policy(td.clone(False)).get("action")

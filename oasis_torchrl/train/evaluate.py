@@ -27,11 +27,11 @@ import torch
 from omegaconf import DictConfig
 from tensordict import NonTensorData, TensorDictBase
 from torchrl.envs import EnvBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from tqdm import tqdm
 
+from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import PIXELS
-from oasis_torchrl.train.environment import build_env
+from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
 
@@ -129,29 +129,31 @@ def rollout_episodes(
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
         >>> from oasis_torchrl.config import load_config
-        >>> env = build_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
+        >>> env = make_env(load_config("eval").env, num_envs=2, prompts="urban", max_steps=3)
         >>> rollout = rollout_episodes(env, ScriptedDriver.from_spec("throttle=1"), 3)
         >>> env.close()
         >>> rollout.batch_size, ("next", "pixels") in rollout.keys(True)
         (torch.Size([2, 3]), False)
     """
     dropped = () if keep_pixels else (PIXELS, (NEXT, PIXELS))
-    rows = int(env.batch_size[0])
-    ended = torch.zeros(rows, dtype=torch.bool)
-    steps = []
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-        td = env.reset()
-        if on_reset is not None:
-            on_reset(td)
-        for _ in range(max_steps):
-            td = env.step(policy(td))
-            if on_step is not None:
-                on_step(td)
-            steps.append(td.exclude(*dropped))
-            ended |= td.get((NEXT, "done")).reshape(rows).cpu()
-            if ended.all():
-                break
-            td = step_mdp(td)
+    ended = torch.zeros(int(env.batch_size[0]), dtype=torch.bool)
+    steps: list[TensorDictBase] = []
+
+    def keep(td: TensorDictBase) -> None:
+        if on_step is not None:
+            on_step(td)
+        steps.append(td.exclude(*dropped))
+        ended.logical_or_(td.get((NEXT, "done")).reshape(ended.shape).cpu())
+
+    drive(
+        env,
+        policy,
+        keep,
+        until=lambda: bool(ended.all()),
+        max_steps=max_steps,
+        reset_finished=False,
+        on_reset=on_reset,
+    )
     return torch.stack(steps, dim=1)
 
 
@@ -277,7 +279,7 @@ class Evaluator:
         self.cfg = eval_cfg
         self.progress = progress
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
-        self.env = build_env(
+        self.env = make_env(
             env_cfg,
             num_envs=len(row_prompts),
             prompts=row_prompts,

@@ -35,10 +35,10 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
+from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
-from oasis_torchrl.train.policy_source import AUTOPILOT, CONSTANT, load_policy
 
 logger = logging.getLogger(__name__)
 
@@ -70,7 +70,7 @@ class PipelineResult:
 
     def rows(self) -> list[PolicyRow]:
         """The evaluations compared with the autopilot and the best constant action."""
-        constants = [name for name in self.evaluations if name.startswith(CONSTANT)]
+        constants = [name for name in self.evaluations if name.startswith(SCRIPTED)]
         return comparison(self.evaluations, autopilot=AUTOPILOT, constants=constants)
 
     def table(self) -> str:
@@ -165,8 +165,7 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     if round_:
         values["init_from"] = str(out / f"round_{round_ - 1}" / "policy")
         values["train"] = {"steps": cfg.dagger.steps}
-    # The stage settings as plain values: a structured BCSettings does not merge into BCConfig.
-    return OmegaConf.merge(load_config("bc"), OmegaConf.to_container(cfg.bc), values)
+    return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)
 
 
 def ppo_config(
@@ -189,8 +188,13 @@ def ppo_config(
         "env": cfg.env,
         "eval": {key: cfg.eval[key] for key in SHARED_EVAL_KEYS},
     }
-    stage = OmegaConf.to_container(cfg.ppo) if fine_tune else {}
-    return OmegaConf.merge(load_config("ppo"), stage, values)
+    return OmegaConf.merge(load_config("ppo"), _plain(cfg.ppo) if fine_tune else {}, values)
+
+
+def _plain(stage: DictConfig) -> dict[str, Any]:
+    """A stage's settings as plain values, to merge into the stand-alone config that holds them
+    (a typed section only merges into a config of its own type)."""
+    return OmegaConf.to_container(stage, resolve=True)
 
 
 def clone(cfg: DictConfig, dataset: Path) -> Path:
@@ -216,7 +220,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
                 episodes=cfg.dagger.episodes,
                 seed=cfg.record.seed + 1000 * round_,
                 noise=ActionNoise(**cfg.dagger.noise),
-                learner=load_policy(bc_cfg.init_from).policy,
+                learner=load_driver(bc_cfg.init_from),
                 progress=cfg.progress,
             )
         train_bc(bc_cfg)
@@ -237,12 +241,12 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     results = {}
     names = list(policies)
     for name in names:
-        source = load_policy(policies[name])
+        driver = load_driver(policies[name])
         eval_cfg = cfg.eval if name == names[-1] else plain
         with Evaluator(
-            cfg.env, eval_cfg, image_size=source.image_size, progress=cfg.progress
+            cfg.env, eval_cfg, image_size=driver.image_size, progress=cfg.progress
         ) as evaluator:
-            report = evaluator.evaluate(source.policy)
+            report = evaluator.evaluate(driver)
         results[name] = report.to_dict()
         logger.info("%s: %s", name, report.summary())
     return results
@@ -267,7 +271,7 @@ def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
     Example:
         >>> stage = run_ppo(ppo_config(load_config("demo"), None))  # doctest: +SKIP
     """
-    from oasis_torchrl.train.checkpoint import LATEST, load_checkpoint
+    from oasis_torchrl.models.checkpoint import LATEST, load_checkpoint
     from oasis_torchrl.train.ppo import train_ppo
 
     out = Path(ppo_cfg.output_dir)

@@ -30,9 +30,10 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
-from oasis_torchrl.protocol import ACTION_NAMES
-from oasis_torchrl.train.checkpoint import (
+from oasis_torchrl.models.checkpoint import (
     BEST,
     LATEST,
     export_lerobot,
@@ -41,7 +42,7 @@ from oasis_torchrl.train.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
-from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
+from oasis_torchrl.protocol import ACTION_NAMES
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
@@ -161,7 +162,6 @@ class PPOTrainer:
         target_kl = cfg.optim.get("target_kl")
         if target_kl is not None and not target_kl > 0:
             raise ValueError(f"optim.target_kl must be positive or null, got {target_kl}")
-        _check_selection_seeds(cfg.eval.get("selection_seeds"))
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
@@ -171,7 +171,7 @@ class PPOTrainer:
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
         self.best_selection: float | None = resumed.get("best_selection")
-        self.env = build_env(cfg.env, privileged=uses_ground_truth(cfg))
+        self.env = make_env(cfg.env, privileged=uses_ground_truth(cfg))
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
@@ -316,12 +316,12 @@ class PPOTrainer:
         cfg = self.cfg
         if cfg.ray.enabled:
             from oasis_torchrl.config.ray import RayCollectionConfig
-            from oasis_torchrl.distributed import RayCollection, training_env_factory
+            from oasis_torchrl.distributed import RayCollection, env_factory
 
             ray_cfg = section(cfg.ray, RayCollectionConfig)
             return RayCollection(
                 ray_cfg,
-                training_env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
+                env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
                 self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
@@ -557,22 +557,6 @@ def evaluated_checkpoint_name(frames: int) -> str:
         'frames_10240.pt'
     """
     return f"frames_{frames}.pt"
-
-
-def _check_selection_seeds(seeds: Any) -> None:
-    """Refuse ``eval.selection_seeds`` other than null or a non-empty list of integers, before
-    a run that would only fail at its first evaluation."""
-    if seeds is None:
-        return
-    if (
-        isinstance(seeds, (str, bytes))
-        or not isinstance(seeds, Sequence)
-        or not seeds
-        or not all(isinstance(seed, int) and not isinstance(seed, bool) for seed in seeds)
-    ):
-        raise ValueError(
-            f"eval.selection_seeds must be null or a non-empty list of integers, got {seeds!r}"
-        )
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:

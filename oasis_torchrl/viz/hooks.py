@@ -75,7 +75,7 @@ class RerunFrameConsumer:
         >>> import tempfile, os
         >>> from oasis_torchrl.viz import RolloutLogger
         >>> rerun_logger = RolloutLogger(os.path.join(tempfile.mkdtemp(), "client.rrd"))
-        >>> consumer = rerun_logger.frame_consumer(row=0)
+        >>> consumer = RerunFrameConsumer(rerun_logger, row=0)
         >>> consumer.new_clip()
         >>> consumer.submit({"front": [np.zeros((64, 96, 3), np.uint8)] * 4})
         >>> rerun_logger.close()

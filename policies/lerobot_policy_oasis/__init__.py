@@ -1,6 +1,6 @@
 """LeRobot policy plugin ``lerobot_policy_oasis``: the oasis driving policy, type ``oasis``.
 
-LeRobot 0.4 imports every installed distribution named ``lerobot_policy_*`` before parsing
+LeRobot imports every installed distribution named ``lerobot_policy_*`` before parsing
 ``lerobot-train`` flags; importing this package registers ``--policy.type=oasis``.
 
 >>> from lerobot.configs.policies import PreTrainedConfig

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from oasis_torchrl.client import A2VClient, RetryPolicy
+from oasis_torchrl.client import A2VClient, FrameFormat, RetryPolicy
 from oasis_torchrl.sim.launcher import LocalServer
 
 PROMPT = "a sunny two-lane road"
@@ -22,7 +22,12 @@ def action_chunks(steps: int, rows: int, seed: int = 0) -> np.ndarray:
 def sync_rollout(
     server: LocalServer, seed: int, chunks: np.ndarray, **client_kwargs: object
 ) -> list[dict[str, np.ndarray]]:
-    """Frames of prompt(seed) + one Infer per chunk, by the sync client: stream -> [4, H, W, 3]."""
+    """Frames of prompt(seed) + one Infer per chunk, by the sync client: stream -> [4, H, W, 3].
+
+    Frames travel raw unless ``accepted_formats`` says otherwise: what a pool negotiates on
+    this machine, so the two compare frame for frame.
+    """
+    client_kwargs = {"accepted_formats": (FrameFormat.RAW_RGB24,), **client_kwargs}
     with A2VClient(server.endpoint, api_key=server.api_key, **client_kwargs) as client:
         client.prompt(PROMPT, seed=seed)
         return [

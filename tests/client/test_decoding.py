@@ -102,10 +102,24 @@ def test_jpeg_full_size_and_draft_resize() -> None:
         JpegDecoder("front").decode_into(b"not a jpeg", full)
 
 
+def test_raw_frames_copy_exactly_and_scale_in_one_pass() -> None:
+    image = scene(0)
+    decoder = make_decoder(FrameFormat.RAW_RGB24, "front", (HEIGHT, WIDTH))
+    out = np.empty_like(image)
+    decoder.decode_into(image.tobytes(), out)
+    assert np.array_equal(out, image)  # no codec, no loss
+    small = np.empty((HEIGHT // 4, WIDTH // 4, 3), np.uint8)
+    decoder.decode_into(image.tobytes(), small)
+    reference = image.reshape(HEIGHT // 4, 4, WIDTH // 4, 4, 3).astype(np.float32).mean((1, 3))
+    assert np.abs(small.astype(np.float32) - reference).mean() < 3.0
+    with pytest.raises(DecodeError, match="expected 128x192x3"):
+        decoder.decode_into(image.tobytes()[:-3], out)
+
+
 def test_make_decoder_and_resize_validation() -> None:
-    assert isinstance(make_decoder(FrameFormat.VP9, "front"), Vp9Decoder)
+    assert isinstance(make_decoder(FrameFormat.VP9, "front", (HEIGHT, WIDTH)), Vp9Decoder)
     with pytest.raises(ValueError, match="frame_format"):
-        make_decoder(FrameFormat.H264, "front")
+        make_decoder(FrameFormat.H264, "front", (HEIGHT, WIDTH))
     assert validate_resize(None) is None
     for bad in ((0, 10), (10,), (1.5, 2), "ab"):
         with pytest.raises(ValueError, match="resize"):

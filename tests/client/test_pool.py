@@ -11,11 +11,13 @@ from oasis_torchrl.client import (
     JPEG,
     TRUTH_FIELDS,
     ErrorCode,
+    FrameFormat,
     PermanentA2VError,
     SessionPool,
     SessionStatus,
 )
 from oasis_torchrl.sim.launcher import LocalServer
+from oasis_torchrl.sim.simulator import Simulator
 
 from ._helpers import PROMPT, action_chunks, sync_rollout
 
@@ -148,12 +150,27 @@ def test_permanent_errors_name_the_row(local_server: LocalServer, pool: SessionP
     assert wrong_key.session_ids == (None, None)  # start is all or nothing
 
 
-def test_pool_pickles_before_start_only(local_server: LocalServer) -> None:
+def test_a_pool_pickles_unstarted(local_server: LocalServer) -> None:
     pool = SessionPool(local_server.endpoint, 2, api_key=local_server.api_key, resize=(32, 48))
     clone = pickle.loads(pickle.dumps(pool))
     with clone:
         assert clone.start() == clone.streams  # idempotent
         assert clone.reset(None, [PROMPT] * 2).frames["front"].shape == (2, 4, 32, 48, 3)
-        with pytest.raises(TypeError, match="pickle it before start"):
-            pickle.dumps(clone)
+        copy = pickle.loads(pickle.dumps(clone))  # a started pool arrives unstarted
+        assert (copy.streams, copy.session_ids) == ((), (None, None))
     assert clone.session_ids == (None, None)
+
+
+def test_on_this_machine_frames_travel_raw_exactly_as_rendered(local_server: LocalServer) -> None:
+    chunks = action_chunks(2, 1)
+    with SessionPool(local_server.endpoint, 1, api_key=local_server.api_key) as raw_pool:
+        assert raw_pool.accepted_formats[0] == FrameFormat.RAW_RGB24
+        raw_pool.reset(None, [PROMPT], seeds=[7])  # the Prompt and one all-zero chunk
+        steps = [raw_pool.infer(chunk) for chunk in chunks]
+    simulator = Simulator(96, 64)
+    simulator.reset(PROMPT, 7)
+    simulator.step(np.zeros((4, 2), np.float32))
+    for chunk, step in zip(chunks, steps, strict=True):
+        rendered = simulator.step(chunk[0]).rgb
+        for name in STREAMS:  # no codec between the renderer and the pool: no loss
+            np.testing.assert_array_equal(step.frames[name][0], rendered[name])

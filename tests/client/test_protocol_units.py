@@ -34,9 +34,9 @@ def test_enums_mirror_the_protocol() -> None:
     assert {f"ERROR_CODE_{c.name}": c.value for c in ErrorCode} == dict(
         common_pb2.ErrorCode.items()
     )
-    assert {f"FRAME_FORMAT_{f.name}": f.value for f in FrameFormat} == dict(
-        common_pb2.FrameFormat.items()
-    )
+    ours = {f"FRAME_FORMAT_{f.name}": f.value for f in FrameFormat if f != FrameFormat.RAW_RGB24}
+    assert ours == dict(common_pb2.FrameFormat.items())
+    assert FrameFormat.RAW_RGB24 not in common_pb2.FrameFormat.values()  # our extension
 
 
 @pytest.mark.parametrize(
@@ -237,7 +237,15 @@ def test_seeds_metadata_and_formats() -> None:
     assert wire.call_metadata(None) == ()
     for bad in ((), (FrameFormat.H264,), (FrameFormat.VP9, FrameFormat.VP9)):
         with pytest.raises(ValueError, match="accepted_formats"):
-            wire.accepted_format_list(bad)
+            wire.accepted_format_list(bad, "http://127.0.0.1:1")
+    # Raw RGB (our extension) is offered first to a server on this machine, never to another.
+    local, remote = "http://127.0.0.1:1", "https://oasis-grpc.decart.ai"
+    assert wire.accepted_format_list(None, local) == (
+        FrameFormat.RAW_RGB24,
+        FrameFormat.VP9,
+        FrameFormat.JPEG,
+    )
+    assert wire.accepted_format_list(None, remote) == (FrameFormat.VP9, FrameFormat.JPEG)
 
 
 def test_session_parsing_and_checks() -> None:

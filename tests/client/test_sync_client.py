@@ -30,11 +30,12 @@ from oasis_torchrl.client import (
     TransportError,
     UnsupportedFeatureError,
 )
-from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc
+from oasis_torchrl.proto import a2v_pb2
 from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
-from oasis_torchrl.sim.server import A2VServicer
+from oasis_torchrl.sim.server import A2V_SERVICE, A2VServicer, add_service
+from oasis_torchrl.sim.session_world import LocalWorlds
 from oasis_torchrl.sim.sessions import SessionRegistry
 
 from ._helpers import PROMPT, action_chunks, sync_rollout
@@ -54,17 +55,15 @@ def dead_endpoint() -> str:
 def a2v_only_endpoint(server_keys: tuple[str, str]) -> Iterator[str]:
     """A real gRPC server with the A2V service alone: no health service, no SimService."""
     config = ServerConfig(width=96, height=64, api_keys=server_keys)
-    encode_pool = ThreadPoolExecutor(3)
+    worlds = LocalWorlds(config)
     server = grpc.server(ThreadPoolExecutor(4))
-    servicer = A2VServicer(
-        config, SessionRegistry(config), ApiKeyAuthority(server_keys), encode_pool
-    )
-    a2v_pb2_grpc.add_A2VServiceServicer_to_server(servicer, server)
+    servicer = A2VServicer(config, SessionRegistry(config, worlds), ApiKeyAuthority(server_keys))
+    add_service(server, A2V_SERVICE, servicer)
     port = server.add_insecure_port("127.0.0.1:0")
     server.start()
     yield f"http://127.0.0.1:{port}"
     server.stop(0).wait()
-    encode_pool.shutdown()
+    worlds.close()
 
 
 def area_downscale(image: np.ndarray, factor: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Drivers of ``oasis-torchrl record``: autopilot from TensorDicts, scripts, saved policies."""
+"""Drivers of ``oasis-torchrl record``: the server's expert, scripts, saved policies."""
 
 from __future__ import annotations
 
@@ -7,54 +7,38 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from tensordict import NonTensorStack, TensorDict
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from oasis_torchrl.client import TRUTH_FIELDS
-from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, cached_scene
-from oasis_torchrl.sim.world import World
-
-WORLDS = [("urban street", 4), ("highway", 1), ("rural road", 2), ("city at night", 0)]
-
-
-def _observation(worlds: list[World], chunks: list[list]) -> TensorDict:
-    """The env's observation keys for these worlds: truth of each chunk, prompt, seed."""
-    truth = {
-        name: torch.tensor([[float(getattr(t, name)) for t in chunk] for chunk in chunks])
-        for name in TRUTH_FIELDS
-    }
-    return TensorDict(
-        truth=truth,
-        prompt=NonTensorStack(*(prompt for prompt, _ in WORLDS)),
-        episode_seed=torch.tensor([[seed] for _, seed in WORLDS]),
-        batch_size=[len(worlds)],
-    )
+from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, load_driver
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig
+from oasis_torchrl.models.checkpoint import export_lerobot, save_checkpoint
+from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.sim.config import ServerConfig
 
 
-def test_autopilot_drives_from_the_tensordict_alone() -> None:
-    worlds = [World(cached_scene(prompt, seed), dt=0.05) for prompt, seed in WORLDS]
-    chunks = [[world.advance(0.0, 0.0) for _ in range(4)] for world in worlds]  # the reset
-    autopilot = Autopilot()
-    for _ in range(100):  # 20 s of driving
-        actions = autopilot(_observation(worlds, chunks))["action"]
-        assert actions.shape == (len(worlds), 4, 2)
-        chunks = [
-            [world.advance(*actions[row, k].tolist()) for k in range(4)]
-            for row, world in enumerate(worlds)
-        ]
-    for world in worlds:
-        assert not world.truth.collided and world.truth.progress > 120.0, world.truth
+def test_autopilot_drives_with_the_servers_expert() -> None:
+    prompts = ["urban street", "highway", "rural road"]
+    env = OasisEnv("local", 3, prompts, server=ServerConfig(width=64, height=48), max_steps=60)
+    env.set_seed(4)
+    try:
+        rollout = env.rollout(60, Autopilot())
+    finally:
+        env.close()
+    assert torch.equal(rollout["action"], rollout["expert_action"])
+    truth = rollout["next", "truth"]
+    assert not truth["collided"].any()
+    assert (truth["progress"][:, -1, -1] > 60.0).all()  # 12 s of driving in every scene
 
 
-def test_autopilot_needs_ground_truth_and_skips_rows_without_it() -> None:
-    worlds = [World(cached_scene(prompt, seed), dt=0.05) for prompt, seed in WORLDS]
-    td = _observation(worlds, [[world.truth] * 4 for world in worlds])
-    td["truth", "speed"][1] = float("nan")  # a row whose session was lost
-    actions = Autopilot(chunk_actions=False)(td)["action"]
-    assert actions.shape == (4, 2) and actions[1].tolist() == [0.0, 0.0] and actions[0, 0] > 0
-    del td["truth"]
-    with pytest.raises(KeyError, match="embedded server"):
-        Autopilot()(td)
+def test_autopilot_needs_the_expert_and_stops_rows_without_one() -> None:
+    expert = torch.full((3, 4, 2), 0.5)
+    expert[1] = float("nan")  # a row whose session was lost
+    actions = Autopilot(chunk_actions=False)(TensorDict(expert_action=expert, batch_size=[3]))
+    assert actions["action"].tolist() == [[0.5, 0.5], [0.0, 0.0], [0.5, 0.5]]
+    with pytest.raises(KeyError, match="only the embedded server"):
+        Autopilot()(TensorDict(truth=TensorDict(speed=torch.zeros(3, 4)), batch_size=[3]))
 
 
 def test_scripted_driver_follows_its_spec() -> None:
@@ -102,8 +86,27 @@ def test_saved_policies_drive(tmp_path: Path) -> None:
         PolicyDriver.load(tmp_path / "missing.pt")
 
 
-def test_record_command_offers_every_driver_kind() -> None:
-    from oasis_torchrl.config.recording import DRIVERS
-    from oasis_torchrl.drivers import DRIVER_KINDS
-
-    assert DRIVERS == DRIVER_KINDS
+def test_one_grammar_names_every_driver(tmp_path: Path) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+    checkpoint = save_checkpoint(tmp_path / "ppo.pt", net)
+    folder = export_lerobot(net, tmp_path / "bc_policy")
+    scripted = tmp_path / "linear.pt"
+    torch.jit.save(torch.jit.script(torch.nn.Linear(2, 8)), scripted)
+    assert type(load_driver("autopilot")).__name__ == "Autopilot"
+    assert load_driver("constant:throttle=1").image_size is None
+    assert (
+        load_driver("scripted:steering=0.2")(TensorDict(batch_size=[1]))["action"][0, 0, 1] == 0.2
+    )
+    for saved in (checkpoint, folder):  # the driving network: deterministic, at its size
+        driver = load_driver(saved)
+        assert driver.image_size == (32, 48)
+        frames = torch.randint(0, 255, (2, 4, 32, 48, 3), dtype=torch.uint8)
+        pixels = {camera: frames for camera in CAMERAS}
+        observation = TensorDict(pixels=pixels, state=torch.zeros(2, 2), batch_size=[2])
+        first, second = (driver(observation.clone())["action"] for _ in range(2))
+        assert torch.equal(first, second)
+    assert isinstance(load_driver(scripted, in_keys=["state"]), PolicyDriver)
+    with pytest.raises(ValueError, match="is none of 'autopilot', 'scripted:<script>'"):
+        load_driver("autopilt")
+    with pytest.raises(ValueError, match="bad driver spec item"):
+        load_driver("scripted:speed=1")

@@ -14,20 +14,20 @@ from torch import nn
 
 ray = pytest.importorskip("ray")
 
+from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig  # noqa: E402
 from oasis_torchrl.distributed import (  # noqa: E402
     RayCollection,
     RayCollectionConfig,
     WorkerLostError,
     complete_shards,
+    env_factory,
     merge_shards,
-    oasis_env_factory,
 )
-from oasis_torchrl.envs import OasisEnv  # noqa: E402
-from oasis_torchrl.sim.config import ServerConfig  # noqa: E402
 
 WORKERS, SESSIONS, STEPS = 2, 2, 2
 FRAMES_PER_BATCH = WORKERS * SESSIONS * STEPS
 HEIGHT, WIDTH = 48, 64
+SERVER = EmbeddedServerConfig(width=WIDTH, height=HEIGHT)
 
 
 def constant_policy(value: float) -> TensorDictModule:
@@ -50,13 +50,7 @@ def make_collection(tmp_path: Path | None = None, **overrides) -> tuple[RayColle
         shard_root=None if tmp_path is None else str(tmp_path / "shards"),
         **overrides,
     )
-    create_env = oasis_env_factory(
-        OasisEnv,
-        config,
-        server=ServerConfig(width=WIDTH, height=HEIGHT),
-        all_frames=True,
-        max_steps=STEPS,
-    )
+    create_env = env_factory(EnvConfig(max_steps=STEPS, image_size=None, server=SERVER), config)
     policy = constant_policy(0.0)
     collection = RayCollection(
         config,
@@ -144,7 +138,7 @@ def test_a_killed_worker_stops_the_run_cleanly(tmp_path: Path, caplog) -> None:
 
 def test_ppo_trains_on_ray_workers(tmp_path: Path) -> None:
     from oasis_torchrl.config import load_config
-    from oasis_torchrl.train.checkpoint import load_checkpoint
+    from oasis_torchrl.models.checkpoint import load_checkpoint
     from oasis_torchrl.train.ppo import PPOTrainer
 
     cfg = load_config(

@@ -14,10 +14,9 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from tensordict import TensorDict
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.distributed import RayCollectionConfig, oasis_env_factory, record_on_ray
+from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
+from oasis_torchrl.distributed import RayCollectionConfig, env_factory, record_on_ray
 from oasis_torchrl.drivers import DriverSpec, PolicyDriver
-from oasis_torchrl.envs import OasisEnv
-from oasis_torchrl.sim.config import ServerConfig
 
 EPISODES, SESSIONS, STEPS = 5, 2, 2
 SMALL = ["--width", "96", "--height", "64", "--max-steps", str(STEPS)]
@@ -45,8 +44,6 @@ def test_record_on_two_ray_workers_merges_one_dataset(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("flags", "named"),
     [
-        (["--collectors", "2"], "--collectors"),
-        (["--ray", "--num-envs", "3"], "--num-envs"),
         (["--ray", "--append"], "--append"),
         (["--ray", "--server-address", "http://127.0.0.1:1", "--endpoint", "x:1"], "--endpoint"),
         (["--ray", "--driver", "policy"], "--policy"),
@@ -69,9 +66,7 @@ def test_bad_ray_flags_are_refused_before_ray_runs(
 def test_a_torchscript_policy_driver_travels_as_its_spec(tmp_path: Path) -> None:
     path = tmp_path / "policy.pt"
     torch.jit.save(torch.jit.script(torch.nn.Linear(2, 8)), path)
-    spec = pickle.loads(
-        pickle.dumps(DriverSpec("policy", policy=path, policy_in_keys=(("state",),)))
-    )
+    spec = pickle.loads(pickle.dumps(DriverSpec(str(path), in_keys=(("state",),))))
     driver = spec()
     assert isinstance(driver, PolicyDriver)
     action = driver(TensorDict(state=torch.ones(3, 2), batch_size=[3]))["action"]
@@ -117,9 +112,8 @@ def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
     config = RayCollectionConfig(
         num_collectors=2, sessions_per_env=SESSIONS, shard_root=str(shard_root), part_batches=1
     )
-    create_env = oasis_env_factory(
-        OasisEnv, config, server=ServerConfig(width=96, height=64), all_frames=True, max_steps=STEPS
-    )
+    server = EmbeddedServerConfig(width=96, height=64)
+    create_env = env_factory(EnvConfig(max_steps=STEPS, image_size=None, server=server), config)
     killed: list[int] = []
 
     def kill_once(episodes: int) -> None:
@@ -131,7 +125,7 @@ def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
         result = record_on_ray(
             config,
             create_env,
-            DriverSpec("scripted", script="throttle=0.5"),
+            DriverSpec("scripted:throttle=0.5"),
             tmp_path / "drives",
             episodes=4 * SESSIONS,
             batch_steps=STEPS,

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import os
 import pickle
+import signal
+from pathlib import Path
 
 import pytest
 import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from oasis_torchrl.envs import OasisEnv, make_training_env
+from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.sim.launcher import LocalServer
 
 SMALL = ServerConfig(width=64, height=48)
 CAMERAS = ("left_forward", "front", "right_forward")
@@ -115,23 +119,51 @@ def test_single_action_mode_and_all_frames() -> None:
         env.close()
 
 
-def test_env_is_picklable_and_lazy(env: OasisEnv) -> None:
+def test_env_opens_nothing_until_used_and_pickles_unopened(env: OasisEnv) -> None:
+    remote = OasisEnv("http://127.0.0.1:1", num_envs=2)  # nothing listens there
+    assert pickle.loads(pickle.dumps(remote)).observation_spec["pixels", "front"].shape == (
+        2, 512, 768, 3,
+    )  # fmt: skip
     env.reset()
     clone = pickle.loads(pickle.dumps(env))
-    assert clone._pool is None
+    assert clone._env.streams == ()  # the copy arrives unopened and opens its own sessions
     try:
         assert clone.reset()["pixels", "front"].shape == (3, 48, 64, 3)
     finally:
         clone.close()
 
 
-def test_training_env_helper() -> None:
-    env = make_training_env(num_envs=2, image_size=(24, 32), server=SMALL, max_steps=3)
+def test_a_server_streaming_another_layout_is_named_at_the_first_reset() -> None:
+    with LocalServer(SMALL) as server:
+        env = OasisEnv(server.endpoint, 1, api_key=server.api_key)  # built for the hosted size
+        with pytest.raises(ValueError, match=r"streams .* at \(48, 64\).*pass frame_size"):
+            env.reset()
+        sized = OasisEnv(server.endpoint, 1, api_key=server.api_key, frame_size=(24, 32))
+        try:
+            assert sized.reset()["pixels", "front"].shape == (1, 24, 32, 3)
+        finally:
+            sized.close()
+
+
+def test_local_world_runs_out_of_process_and_a_dead_worker_restarts_only_its_rows() -> None:
+    server = ServerConfig(width=96, height=64, processes=2)
+    env = OasisEnv("local", num_envs=4, prompts="urban street", server=server)
     try:
-        td = env.rollout(3)
-        assert td["next", "images", "front"].shape == (2, 3, 3, 24, 32)
-        assert td["next", "images", "front"].dtype == torch.float32
-        assert "episode_reward" in td["next"].keys()
-        assert td["next", "step_count"][:, -1].eq(3).all()
+        env.set_seed(0)
+        td = env.reset()
+        assert env.server is not None and env.server.pid != os.getpid()  # the world runs apart
+        children = Path(f"/proc/{env.server.pid}/task/{env.server.pid}/children").read_text()
+        workers = [int(pid) for pid in children.split()]
+        assert len(workers) == 2
+        zero = torch.zeros(4, 4, 2)
+        td = env.step(td.set("action", zero))["next"]
+        os.kill(workers[0], signal.SIGKILL)  # during the rollout
+        td = env.step(td.set("action", zero))["next"]
+        restarts = td["info", "session_restarts"].flatten()
+        assert sorted(restarts.tolist()) == [0, 0, 1, 1]  # only the dead worker's two rows
+        assert torch.equal(td["truncated"].flatten(), restarts.bool())
+        for _ in range(3):  # every row keeps stepping
+            td = env.step(td.set("action", zero))["next"]
+        assert torch.equal(td["info", "session_restarts"].flatten(), restarts)
     finally:
         env.close()

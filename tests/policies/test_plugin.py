@@ -14,8 +14,6 @@ from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
 
-from oasis_torchrl.data.loading import default_video_backend
-
 CAMERAS = ("left_forward", "front", "right_forward")
 SIZE = (32, 48)
 VENV_BIN = Path(sys.executable).parent
@@ -177,8 +175,6 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
         "--save_freq=2",
         f"--output_dir={output}",
     ]
-    if default_video_backend() == "pyav":  # torchcodec installed but its FFmpeg cannot load
-        command.append("--dataset.video_backend=pyav")
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
     done = subprocess.run(command, capture_output=True, text=True, timeout=180, env=env)
     assert done.returncode == 0, done.stderr[-3000:]

@@ -9,6 +9,7 @@ import pytest
 from PIL import Image
 
 from oasis_torchrl.proto import common_pb2
+from oasis_torchrl.protocol import FrameFormat
 from oasis_torchrl.sim.encoding import (
     SUPPORTED_FORMATS,
     JpegEncoder,
@@ -92,7 +93,12 @@ def test_bad_frames_are_rejected_with_the_problem_named(
 
 
 def test_make_encoder_and_supported_formats() -> None:
-    assert SUPPORTED_FORMATS == (common_pb2.FRAME_FORMAT_VP9, common_pb2.FRAME_FORMAT_JPEG)
+    assert SUPPORTED_FORMATS == (FrameFormat.RAW_RGB24, FrameFormat.VP9, FrameFormat.JPEG)
+    frame = (
+        np.arange(HEIGHT * WIDTH * 3, dtype=np.uint32).astype(np.uint8).reshape(HEIGHT, WIDTH, 3)
+    )
+    raw = make_encoder(FrameFormat.RAW_RGB24, WIDTH, HEIGHT, 20.0)
+    assert raw.encode(frame) == frame.tobytes()  # the frame as it is, no codec
     vp9 = make_encoder(common_pb2.FRAME_FORMAT_VP9, WIDTH, HEIGHT, 20.0, vp9_cpu_used=6)
     assert isinstance(vp9, Vp9Encoder) and vp9.cpu_used == 6
     jpeg = make_encoder(common_pb2.FRAME_FORMAT_JPEG, WIDTH, HEIGHT, 20.0, jpeg_quality=70)

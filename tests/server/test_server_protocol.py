@@ -15,8 +15,10 @@ from grpc_health.v1 import health_pb2
 
 from oasis_torchrl.proto import a2v_pb2, common_pb2, sim_pb2
 from oasis_torchrl.protocol import CAMERAS as CAMERA_NAMES
+from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.encoding import Vp9Encoder
 from oasis_torchrl.sim.launcher import LocalServer
+from oasis_torchrl.sim.simulator import Simulator
 
 from ._vp9 import sdk_decode
 
@@ -255,6 +257,26 @@ def test_infer_returns_decodable_frames_and_ground_truth(stubs: RawStubs) -> Non
     for stream_packets in decoders.values():
         frames = sdk_decode(stream_packets)
         assert len(frames) == 12 and frames[0].shape == (64, 96, 3)
+
+
+def test_ground_truth_carries_the_experts_next_chunk(stubs: RawStubs) -> None:
+    # The server's expert is the simulator's autopilot, one per session, restarted at a Prompt.
+    def expert_of(call: object) -> np.ndarray:
+        truth = sim_pb2.InferTruth.FromString(dict(call.trailing_metadata())["x-oasis-truth-bin"])
+        return np.array(truth.expert_actions, np.float32).reshape(4, 2)
+
+    for prompt, seed in (("urban street", 5), ("highway", 2)):
+        session = stubs.open_session(prompt=prompt, seed=seed)
+        simulator = Simulator(96, 64)
+        simulator.reset(prompt, seed)
+        chunk, pilot = np.zeros((4, 2), np.float32), None
+        for sequence_num in range(6):
+            _, call = stubs.infer(session, sequence_num, [tuple(action) for action in chunk])
+            simulator.step(chunk, render=False)
+            pilot = pilot or Autopilot(simulator)
+            chunk = pilot.act()
+            np.testing.assert_array_equal(expert_of(call), chunk)
+        assert chunk[:, 0].mean() > 0.1  # it drives
 
 
 def test_sequence_numbers_replay_and_restart_after_prompt(stubs: RawStubs) -> None:

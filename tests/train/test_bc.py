@@ -8,9 +8,9 @@ import torch
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.models.checkpoint import load_net
 from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
-from oasis_torchrl.train.checkpoint import load_net
 
 
 def _bc_config(dataset: Path, output: Path, *extra: str):

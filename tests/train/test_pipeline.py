@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import pytest
-import rerun as rr
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from viz._readback import Readback
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.train.checkpoint import load_checkpoint
+from oasis_torchrl.models.checkpoint import load_checkpoint
 
 from .conftest import TINY_ENV
 
@@ -52,8 +52,7 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     assert (paths["ppo_policy"] / "model.safetensors").exists()
     assert load_checkpoint(paths["ppo_checkpoint"])["frames"] == 12
     assert paths["recording"] == tmp_path / "eval.rrd"
-    columns = rr.dataframe.load_recording(str(paths["recording"])).schema().component_columns()
-    assert any("front" in column.entity_path for column in columns)
+    assert any("front" in entity for entity in Readback(paths["recording"]).entities())
 
 
 def test_demo_command_rejects_a_bad_key_before_writing(tmp_path: Path) -> None:

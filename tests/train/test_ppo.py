@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -12,9 +13,9 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
-from oasis_torchrl.train.checkpoint import export_lerobot, load_checkpoint, load_net
-from oasis_torchrl.train.environment import PRIVILEGED_FIELDS
+from oasis_torchrl.models.checkpoint import export_lerobot, load_checkpoint, load_net
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 
 from .conftest import TINY_ENV
@@ -142,9 +143,11 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
         kept["net_state"]["actor.2.bias"], latest["net_state"]["actor.2.bias"]
     )
 
-    for bad in ("[]", "2000", "[a]"):  # refused by the settings' types, or by the trainer
-        with pytest.raises(ValueError, match=r"eval\.selection_seeds"):
-            PPOTrainer(_ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}"))
+    with pytest.raises(ValueError, match=r"eval\.selection_seeds must be null or a non-empty"):
+        _ppo_config(tmp_path, 48, "eval.selection_seeds=[]")
+    for bad in ("2000", "[a]"):  # a typed setting: refused where it is set, naming it
+        with pytest.raises(ValueError, match=rf"eval\.selection_seeds={re.escape(bad)}: "):
+            _ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}")
 
 
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:

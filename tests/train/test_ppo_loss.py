@@ -10,9 +10,10 @@ from tensordict import TensorDict
 from torchrl.objectives import ClipPPOLoss
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.config import HEADS, TANH_NORMAL
-from oasis_torchrl.train.environment import PRIVILEGED_FIELDS, build_env
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
 from .conftest import TINY_ENV
@@ -27,7 +28,7 @@ PPO_KWARGS = {"clip_epsilon": 0.2, "entropy_coeff": 0.0, "normalize_advantage": 
 def rollout() -> TensorDict:
     """Six steps of two rows on the embedded server, as a collector stores them (with the
     acting pass's features, detached); advantages and targets are random."""
-    env = build_env(load_config("ppo", TINY_ENV).env, num_envs=2, privileged=True)
+    env = make_env(load_config("ppo", TINY_ENV).env, num_envs=2, privileged=True)
     net = DrivingNet(DrivingNetConfig(image_size=SIZE, critic_inputs=PRIVILEGED))
     try:
         steps = env.rollout(6, make_actor_critic(net).policy, break_when_any_done=False)

@@ -259,10 +259,11 @@ def test_live_viewer_over_grpc(tmp_path: Path) -> None:
         _wait_for_port(port)
         with RolloutLogger(f"rerun+http://127.0.0.1:{port}/proxy") as rerun_logger:
             rerun_logger.log_rollout(rollout(2, 2))
-        readback = _wait_for_entities(received, "env/1/camera/front", count=3)
+        _wait_for_entities(received, "env/1/camera/front", count=3)
     finally:
         os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=10)
+    readback = Readback(received)  # complete once the server has stopped
     expected = [reward(1, t) for t in range(2)]
     assert readback.scalars("env/1/reward/total")[1] == pytest.approx(expected)
 
@@ -280,16 +281,15 @@ def _wait_for_port(port: int, timeout: float = 20.0) -> None:
     raise AssertionError(f"rerun server did not listen on port {port}")
 
 
-def _wait_for_entities(path: Path, entity: str, count: int, timeout: float = 20.0) -> Readback:
+def _wait_for_entities(path: Path, entity: str, count: int, timeout: float = 20.0) -> None:
     import time
 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if path.exists():
             try:
-                readback = Readback(path)
-                if len(readback.images(entity)[0]) == count:
-                    return readback
+                if len(Readback(path).images(entity)[0]) == count:
+                    return
             except Exception:  # the file is still being written
                 pass
         time.sleep(0.2)

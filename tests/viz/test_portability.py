@@ -1,10 +1,10 @@
-"""The portable-API rule: our rerun code runs on rerun-sdk 0.26 (LeRobot's pin) and the newest.
+"""The portable-API rule: our rerun code runs on rerun-sdk 0.26 up to the newest LeRobot allows.
 
 Checked on the source (AST) of every module that talks to rerun: no deprecated or removed name,
 no module-level logging function (they write to rerun's global recording), and only the
-``RecordingStream`` methods that exist in both versions. A newer rerun-sdk can be tried for real:
-``pip install --target /tmp/rerun-new rerun-sdk`` then
-``OASIS_RERUN_NEWEST_PATH=/tmp/rerun-new pytest tests/viz/test_portability.py``.
+``RecordingStream`` methods that exist in all of them. Another rerun-sdk than the installed one
+can be tried for real: ``pip install --target /tmp/rerun-other "rerun-sdk==0.26.*"`` then
+``OASIS_RERUN_NEWEST_PATH=/tmp/rerun-other pytest tests/viz/test_portability.py``.
 """
 
 from __future__ import annotations
@@ -128,18 +128,22 @@ sys.path.insert(0, {tests!r})
 import rerun
 from viz._rollouts import rollout
 from oasis_torchrl.viz import LogOptions, RolloutLogger
-assert rerun.__version__ != "0.26.2", rerun.__file__
+assert rerun.__version__ != {installed!r}, rerun.__file__
 with RolloutLogger({out!r}, LogOptions(rows=(0, 1))) as rerun_logger:
     rerun_logger.log_rollout(rollout(2, 3, {{1: [1]}}))
 print(rerun.__version__)
 """
 
 
-@pytest.mark.skipif(NEWEST is None, reason="set OASIS_RERUN_NEWEST_PATH to a newer rerun-sdk")
+@pytest.mark.skipif(NEWEST is None, reason="set OASIS_RERUN_NEWEST_PATH to another rerun-sdk")
 def test_logging_runs_on_a_newer_rerun(tmp_path: Path) -> None:
     out = tmp_path / "newest.rrd"
-    env = {**os.environ, "PYTHONPATH": str(NEWEST)}
-    script = textwrap.dedent(_SCRIPT).format(tests=str(Path(__file__).parents[1]), out=str(out))
+    # rerun-sdk's wheel keeps the package under rerun_sdk/ (a .pth file adds it to the path).
+    paths = [str(Path(NEWEST) / "rerun_sdk"), NEWEST, os.environ.get("PYTHONPATH", "")]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path for path in paths if path)}
+    script = textwrap.dedent(_SCRIPT).format(
+        tests=str(Path(__file__).parents[1]), out=str(out), installed=rr.__version__
+    )
     run = subprocess.run(
         [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120
     )

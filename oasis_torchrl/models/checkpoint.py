@@ -21,7 +21,8 @@ from typing import Any
 
 import torch
 
-from oasis_torchrl.models import DrivingNet, DrivingNetConfig
+from oasis_torchrl.models.config import DrivingNetConfig
+from oasis_torchrl.models.network import DrivingNet
 
 logger = logging.getLogger(__name__)
 

@@ -13,8 +13,7 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict, TensorDictBase
 
-from oasis_torchrl.rewards import RewardModule
-from oasis_torchrl.rewards.base import get_entry
+from oasis_torchrl.rewards.base import RewardModule, get_entry
 
 
 class ClearanceShaping:

@@ -1,0 +1,112 @@
+"""One env factory: the transformed :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` settings
+section (:class:`~oasis_torchrl.config.EnvConfig`), shared by training, evaluation, recording
+and Ray workers.
+
+The env decodes frames straight to ``env.image_size`` (the policy's input size; ``null``: the
+server's) and by default returns all 4 frames of each chunk as uint8 ``("pixels", <camera>)``
+``[N, 4, H, W, 3]``: the policy modules convert the frames they use
+(:mod:`oasis_torchrl.models.actor_critic`), so collector batches stay compact, and recorded
+episodes get one row per frame. A reward sum (``"episode_reward"``) and a step count are added,
+and on request :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (``"critic_inputs"``:
+ground truth for an asymmetric critic).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from omegaconf import DictConfig
+from torchrl.envs import Compose, RewardSum, StepCounter, TransformedEnv
+
+from oasis_torchrl.config.env import LOCAL, REWARD_KINDS, EnvConfig, RewardConfig
+from oasis_torchrl.envs.episodes import Prompts, episode_prompts
+from oasis_torchrl.envs.oasis_env import OasisEnv
+from oasis_torchrl.envs.transforms import PrivilegedState
+from oasis_torchrl.rewards import (
+    ClearanceShaping,
+    DepthCollisionReward,
+    GroundTruthReward,
+    RewardModule,
+)
+from oasis_torchrl.sim.config import ServerConfig
+
+Settings = EnvConfig | DictConfig
+
+
+def make_reward(cfg: RewardConfig | DictConfig) -> RewardModule:
+    """The reward module of ``env.reward``.
+
+    Example:
+        >>> type(make_reward(RewardConfig())).__name__
+        'GroundTruthReward'
+        >>> type(make_reward(RewardConfig(clearance_weight=0.2))).__name__
+        'ClearanceShaping'
+    """
+    if cfg.kind == "depth":
+        return DepthCollisionReward()
+    if cfg.kind != "ground_truth":
+        raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {cfg.kind!r}")
+    reward = GroundTruthReward(
+        progress_scale=cfg.progress_scale,
+        collision_penalty=cfg.collision_penalty,
+        lane_penalty=cfg.lane_penalty,
+    )
+    if not cfg.clearance_weight:
+        return reward
+    return ClearanceShaping(reward, cfg.clearance_weight, cfg.clearance_horizon)
+
+
+def make_env(
+    cfg: Settings,
+    *,
+    num_envs: int | None = None,
+    prompts: Prompts | None = None,
+    max_steps: int | None = None,
+    image_size: Sequence[int] | None = None,
+    all_frames: bool = True,
+    privileged: bool = False,
+    **env_kwargs: Any,
+) -> TransformedEnv:
+    """The :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` settings section, transformed.
+
+    Args:
+        cfg: the ``env`` section.
+        num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
+            uses one row per episode, fixed per-row prompts and the policy's image size).
+        all_frames: all 4 frames of each chunk (one dataset row per frame), or the last.
+        privileged: add :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (needs ground
+            truth: the embedded server).
+        **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
+
+    Example:
+        >>> env = make_env(EnvConfig(num_envs=2, max_steps=3))
+        >>> td = env.rollout(3)
+        >>> env.close()
+        >>> td["next", "pixels", "front"].shape, td["next", "step_count"][0, -1].item()
+        (torch.Size([2, 3, 4, 64, 96, 3]), 3)
+    """
+    if privileged and not env_kwargs.get("ground_truth", cfg.endpoint == LOCAL):
+        raise ValueError(
+            "privileged state (privileged_critic, loss.aux_coeff) needs ground truth, which "
+            "only the embedded server sends (endpoint 'local', or its address with "
+            f"ground_truth=True); got endpoint {cfg.endpoint!r}: set privileged_critic=false "
+            "loss.aux_coeff=0"
+        )
+    size = image_size if image_size is not None else cfg.image_size
+    server = cfg.server
+    env = OasisEnv(
+        cfg.endpoint,
+        num_envs or cfg.num_envs,
+        prompts if prompts is not None else episode_prompts(cfg.prompts),
+        server=ServerConfig(width=server.width, height=server.height, fps=float(server.fps)),
+        frame_size=None if size is None else (int(size[0]), int(size[1])),
+        all_frames=all_frames,
+        max_steps=max_steps or cfg.max_steps,
+        reward=make_reward(cfg.reward),
+        **env_kwargs,
+    )
+    transforms = [RewardSum(), StepCounter()]
+    if privileged:
+        transforms.append(PrivilegedState())
+    return TransformedEnv(env, Compose(*transforms))
