@@ -213,10 +213,19 @@ class BCPolicyConfig:
     use_state: bool = option(
         False, help="the previous action as an input (off: a clone would copy it)"
     )
-    loss: str = option("l1", help="l1 | mse")
+    head: str = option(
+        "mixture",
+        help="action head: mixture (commits to one manoeuvre) | tanh_normal (unimodal)",
+    )
+    components: int = option(3, help="mixture components")
+    loss: str = option(
+        "nll",
+        help="nll (likelihood of the demonstrated chunk) | l1 | mse (regression of the chunk)",
+    )
     action_loss_weights: list[float] = option(
         default_factory=lambda: [1.0, 5.0],
-        help="[throttle, steering] loss weights: steering varies ~5x less (not normalised)",
+        help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
+        "normalised)",
     )
     optimizer_lr: float = option(1.0e-3, help="learning rate")
     optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
