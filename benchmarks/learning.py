@@ -6,43 +6,49 @@ images), fixed evaluation seeds, one episode per env row of up to ``--max-steps`
 1. references: the autopilot (privileged expert) and constant actions (straight ahead, a sweep
    of throttles; the best one is "the best constant action");
 2. behaviour cloning on autopilot demonstrations (recorded with noise injected into the
-   executed actions, then DAgger rounds); target: at least 70% of the autopilot's mean distance
-   before collision;
-3. PPO from scratch for ``--ppo-frames`` env steps; target: at least 1.5x the best constant
-   action's mean distance;
-4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning alone.
+   executed actions): without DAgger, target at least 80% of the autopilot's mean distance
+   before collision; then ``--dagger-rounds`` DAgger rounds, target at least 90%;
+3. PPO from scratch for ``--ppo-frames`` env steps; targets: at least 1.5x the best constant
+   action's mean distance with the policy chosen within the first ``--ppo-early-frames``, and
+   1.9x with the one chosen within the whole budget;
+4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning by more than 2
+   standard errors of the paired per-episode difference (the same scenes, episode by episode);
+5. held-out scenes: the references and every trained policy on prompts no stage trained on
+   (night, highway, rural, rain) and a seed no config uses, reported beside (no target).
 
 Each PPO stage keeps the policy its periodic evaluations on ``--selection-seeds`` rate best
 (early stopping), then evaluates that one on the evaluation seeds, which no choice has seen.
 
-Prints JSON (every evaluation, the targets and whether they are met, the exact settings and
-wall times) and writes it with a PNG of the learning curves to ``--results``. Stages cache
-their outputs under ``--work`` (a rerun reuses finished stages). Budgets are stated in env
-steps: one env step is one chunk of 4 world-model frames (so frames = 4 x steps).
+Prints JSON (every evaluation with its episodes, the targets and whether they are met, the
+exact settings and wall times) and writes it with a PNG (learning curves and the action scale
+of the PPO stages) to ``--results``. Stages cache their outputs under ``--work`` (a rerun reuses
+finished stages). Budgets are stated in env steps: one env step is one chunk of 4 world-model
+frames (so frames = 4 x steps).
 
-Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 61440]``
-(about two and a half hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO
-from scratch in one process (``--stages ppo_scratch``) and the rest in another; a last run
-with every stage then assembles the report from the cache. A partial run writes what it ran,
-with the targets its stages allow, to ``learning_<stages>.json`` and ``.png`` beside the full
-report.
+Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 204800]``
+(several hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO from scratch in
+one process (``--stages ppo_scratch``) and the rest in another; a last run with every stage then
+assembles the report from the cache. A partial run writes what it ran, with the targets its
+stages allow, to ``learning_<stages>.json`` and ``.png`` beside the full report.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import logging
-from collections.abc import Iterator
+import math
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
-from PIL import Image, ImageDraw
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.train.pipeline import (
+    bc_config,
     clone,
     demonstrations,
     evaluate_all,
@@ -50,6 +56,7 @@ from oasis_torchrl.train.pipeline import (
     run_ppo,
     timed_stage,
 )
+from oasis_torchrl.train.ppo import evaluated_checkpoint_name
 
 logger = logging.getLogger("benchmarks.learning")
 
@@ -59,19 +66,31 @@ REFERENCES = {
     **{f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES},
 }
 """The reference policies: the privileged expert and straight drives at constant throttles."""
+HELD_OUT_PROMPTS = ("urban street at night", "highway", "rural road", "urban street in the rain")
+HELD_OUT_SEED = 7919
+"""Scenes no stage trains or selects on: other prompts, and a seed no config uses."""
 # PPO iterations between evaluations: 20 x 512 env steps (an evaluation of 32 episodes of up to
 # 150 chunks costs about as many env steps as 10 iterations).
 EVAL_EVERY = 20
-STAGES = ("references", "bc", "bc_ppo", "ppo_scratch")
+STAGES = ("references", "bc", "bc_dagger", "bc_ppo", "ppo_scratch", "held_out")
+CLONE_STAGES = {"bc", "bc_dagger", "bc_ppo", "held_out"}
 COLORS = {
-    "autopilot": (40, 40, 40),
-    "best constant": (150, 150, 150),
-    "bc": (31, 119, 180),
-    "ppo (scratch)": (214, 39, 40),
-    "bc + ppo": (44, 160, 44),
-    "ppo (scratch), kept": (214, 39, 40),
-    "bc + ppo, kept": (44, 160, 44),
+    "autopilot": "0.2",
+    "best constant": "0.6",
+    "bc": "tab:cyan",
+    "bc + dagger": "tab:blue",
+    "ppo (scratch)": "tab:red",
+    "bc + ppo": "tab:green",
 }
+PPO_STAGES = {"ppo_scratch": "ppo (scratch)", "bc_ppo": "bc + ppo"}
+ACTION_NAMES = ("throttle", "steering")
+TARGETS = {
+    "bc_over_autopilot": 0.8,
+    "bc_dagger_over_autopilot": 0.9,
+    "ppo_scratch_early_over_best_constant": 1.5,
+    "ppo_scratch_over_best_constant": 1.9,
+}
+"""Each ratio's target (met when the ratio reaches it)."""
 
 
 class StageCache:
@@ -82,21 +101,22 @@ class StageCache:
     def __init__(self, path: Path) -> None:
         self.path = path
         saved = json.loads(path.read_text()) if path.exists() else {}
-        self.evaluations: dict[str, dict[str, float]] = saved.get("evaluations", {})
+        self.evaluations: dict[str, dict[str, Any]] = saved.get("evaluations", {})
         self.seconds: dict[str, float] = saved.get("seconds", {})
 
-    def evaluate(self, cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, float]]:
+    def evaluate(self, cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, Any]]:
         """``evaluate_all`` of the policies not evaluated yet with these settings."""
         settings = (
-            f"episodes={cfg.eval.episodes} seeds={list(cfg.eval.seeds)} steps={cfg.eval.max_steps}"
+            f"prompts={list(cfg.eval.prompts)} episodes={cfg.eval.episodes} "
+            f"seeds={list(cfg.eval.seeds)} steps={cfg.eval.max_steps}"
         )
         keys = {name: f"{name} {spec} {settings}" for name, spec in policies.items()}
         missing = {
             name: spec for name, spec in policies.items() if keys[name] not in self.evaluations
         }
         if missing:
-            for name, summary in evaluate_all(cfg, missing).items():
-                self.evaluations[keys[name]] = summary
+            for name, evaluation in evaluate_all(cfg, missing).items():
+                self.evaluations[keys[name]] = evaluation
             self._save()
         return {name: self.evaluations[keys[name]] for name in policies}
 
@@ -143,6 +163,16 @@ def benchmark_config(args: argparse.Namespace) -> DictConfig:
     )
 
 
+def held_out_config(cfg: DictConfig, episodes_per_prompt: int) -> DictConfig:
+    """``cfg`` evaluating on the held-out prompts and seed instead."""
+    scenes = {
+        "prompts": list(HELD_OUT_PROMPTS),
+        "episodes": episodes_per_prompt,
+        "seeds": [HELD_OUT_SEED],
+    }
+    return OmegaConf.merge(cfg, {"eval": scenes})
+
+
 def ppo_stage(
     cfg: DictConfig,
     init_from: Path | None,
@@ -151,64 +181,47 @@ def ppo_stage(
     args: argparse.Namespace,
 ) -> DictConfig:
     """A PPO stage of the benchmark: its own folder, budget and evaluations on the selection
-    seeds every ``EVAL_EVERY`` batches; fine-tuning (``init_from`` set) takes the demo's ``ppo``
-    overrides, PPO from scratch the :class:`~oasis_torchrl.config.PPOConfig` defaults;
-    ``args.ppo_overrides`` (``KEY=VALUE``) last."""
+    seeds every ``EVAL_EVERY`` batches, each evaluated policy kept (to choose within a smaller
+    budget); fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from
+    scratch the :class:`~oasis_torchrl.config.PPOConfig` defaults; ``args.ppo_overrides``
+    (``KEY=VALUE``) last."""
     stage = ppo_config(cfg, init_from, name, fine_tune=init_from is not None)
     evaluations = {
         "every": EVAL_EVERY,
         "episodes": cfg.eval.episodes,
         "selection_seeds": list(args.selection_seeds),
     }
-    budget = {"collector": {"total_frames": frames}, "eval": evaluations}
+    budget = {
+        "collector": {"total_frames": frames},
+        "eval": evaluations,
+        "checkpoint": {"keep_evaluated": True},
+    }
     return OmegaConf.merge(stage, budget, OmegaConf.from_dotlist(args.ppo_overrides))
 
 
-def plot(
-    curves: dict[str, list[tuple[float, float]]], levels: dict[str, float], path: Path
-) -> None:
-    """Eval distance vs env steps (lines) and reference levels (horizontal), as a PNG."""
-    width, height, margin = 900, 520, 70
-    image = Image.new("RGB", (width, height), "white")
-    draw = ImageDraw.Draw(image)
-    points = [point for curve in curves.values() for point in curve]
-    x_max = max((x for x, _ in points), default=1.0) or 1.0
-    y_max = 1.1 * max([y for _, y in points] + list(levels.values()) + [1.0])
+def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, Any]:
+    """The periodic evaluation (on the selection seeds) that rates best among the policies
+    trained for at most ``budget`` env steps (the first of equals, as the trainer keeps)."""
+    *periodic, _ = history
+    within = [entry for entry in periodic if entry["policy_frames"] <= budget]
+    if not within:
+        raise ValueError(f"no PPO evaluation within {budget} env steps")
+    return max(within, key=lambda entry: entry["mean_distance"])
 
-    def to_pixel(x: float, y: float) -> tuple[float, float]:
-        return (
-            margin + (width - 2 * margin) * x / x_max,
-            height - margin - (height - 2 * margin) * y / y_max,
-        )
 
-    draw.rectangle([margin, margin, width - margin, height - margin], outline="black")
-    for k in range(6):
-        y = y_max * k / 5
-        draw.text((8, to_pixel(0, y)[1] - 6), f"{y:.0f} m", fill="black")
-        x = x_max * k / 5
-        draw.text((to_pixel(x, 0)[0] - 15, height - margin + 8), f"{x:.0f}", fill="black")
-    draw.text((width / 2 - 90, height - 30), "env steps (4 frames each)", fill="black")
-    title = "mean distance before collision (PPO curves: selection seeds; levels: eval seeds)"
-    draw.text((margin, 20), title, fill="black")
-    legend_y = margin + 8
-    for name, level in levels.items():
-        color = COLORS.get(name, (0, 0, 0))
-        y = to_pixel(0, level)[1]
-        for x in range(margin, width - margin, 12):
-            draw.line([x, y, x + 6, y], fill=color, width=2)
-        draw.text((width - margin - 170, legend_y), f"- - {name} {level:.0f} m", fill=color)
-        legend_y += 16
-    for name, curve in curves.items():
-        color = COLORS.get(name, (0, 0, 0))
-        pixels = [to_pixel(x, y) for x, y in curve]
-        if len(pixels) > 1:
-            draw.line(pixels, fill=color, width=3)
-        for px, py in pixels:
-            draw.ellipse([px - 3, py - 3, px + 3, py + 3], fill=color)
-        draw.text((width - margin - 170, legend_y), f"--- {name}", fill=color)
-        legend_y += 16
-    path.parent.mkdir(parents=True, exist_ok=True)
-    image.save(path)
+def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, float]:
+    """Mean and standard error of the per-episode distance differences ``treated -
+    baseline`` over the episodes both ran (matched by prompt and episode seed)."""
+    before = {(e["prompt"], e["episode_seed"]): e["distance"] for e in baseline["per_episode"]}
+    differences = [
+        episode["distance"] - before[(episode["prompt"], episode["episode_seed"])]
+        for episode in treated["per_episode"]
+        if (episode["prompt"], episode["episode_seed"]) in before
+    ]
+    count = len(differences)
+    mean = sum(differences) / count
+    variance = sum((d - mean) ** 2 for d in differences) / (count - 1)
+    return {"mean": mean, "stderr": math.sqrt(variance / count), "episodes": float(count)}
 
 
 def main() -> None:
@@ -225,12 +238,21 @@ def main() -> None:
         default=[2000],
         help="seeds of PPO's periodic evaluations, which pick the policy each PPO stage keeps",
     )
+    parser.add_argument("--held-out-episodes", type=int, default=8, help="per held-out prompt")
     parser.add_argument("--demo-episodes", type=int, default=64)
     parser.add_argument("--bc-steps", type=int, default=3000)
-    parser.add_argument("--dagger-rounds", type=int, default=6)
+    parser.add_argument("--dagger-rounds", type=int, default=3)
     parser.add_argument("--dagger-episodes", type=int, default=32)
     parser.add_argument("--dagger-steps", type=int, default=1000)
-    parser.add_argument("--ppo-frames", type=int, default=61440, help="PPO from scratch, env steps")
+    parser.add_argument(
+        "--ppo-frames", type=int, default=204800, help="PPO from scratch, env steps"
+    )
+    parser.add_argument(
+        "--ppo-early-frames",
+        type=int,
+        default=102400,
+        help="the smaller budget PPO from scratch is also rated within",
+    )
     parser.add_argument(
         "--stages",
         nargs="+",
@@ -258,89 +280,183 @@ def main() -> None:
         "config": OmegaConf.to_container(cfg),
     }
     # A partial run (e.g. one stage on its own) leaves what it ran beside the full report.
-    name = "learning" if set(results) == set(STAGES) else f"learning_{'_'.join(results)}"
+    ran = [stage for stage in STAGES if stage in results]
+    name = "learning" if ran == list(STAGES) else f"learning_{'_'.join(ran)}"
     report = {**settings, **summarise(results), "seconds": cache.seconds}
     write_json(args.results / f"{name}.json", report)
-    plot_report(report, args.results / f"{name}.png")
+    plot_report(report, scale_curves(args.work, results), args.results / f"{name}.png")
     if name != "learning":
-        logger.info("ran %s; the full report needs every stage", list(results))
+        logger.info("ran %s; the full report needs every stage", ran)
 
 
 def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> dict[str, Any]:
     """Run (or reuse) the stages of ``args.stages``; their results, by stage, in stage order."""
     stages = set(args.stages)
+    work = Path(cfg.output_dir)
     results: dict[str, Any] = {}
+    trained: dict[str, str] = {}
     if "references" in stages:
         with cache.timed("references"):
             results["references"] = cache.evaluate(cfg, REFERENCES)
-    if stages & {"bc", "bc_ppo"}:
+    if stages & CLONE_STAGES:
         with cache.timed("record"):
-            dataset = demonstrations(cfg, Path(cfg.output_dir) / "demos")
+            dataset = demonstrations(cfg, work / "demos")
         with cache.timed("bc"):
-            bc_policy = clone(cfg, dataset)
-        if "bc" in stages:
-            results["bc"] = cache.evaluate(cfg, {"bc": str(bc_policy)})["bc"]
-    if "bc_ppo" in stages:
+            dagger_policy = clone(cfg, dataset)
+        trained["bc"] = str(Path(bc_config(cfg, dataset, 0).output_dir) / "policy")
+        trained["bc_dagger"] = str(dagger_policy)
+    for stage in ("bc", "bc_dagger"):
+        if stage in stages:
+            results[stage] = cache.evaluate(cfg, {stage: trained[stage]})[stage]
+    if stages & {"bc_ppo", "held_out"}:
         with cache.timed("bc_ppo"):
-            finetune = ppo_stage(cfg, bc_policy, "bc_ppo", args.finetune_frames, args)
-            results["bc_ppo"] = run_ppo(finetune).history
-    if "ppo_scratch" in stages:
+            finetune = ppo_stage(cfg, dagger_policy, "bc_ppo", args.finetune_frames, args)
+            history = run_ppo(finetune).history
+        trained["bc_ppo"] = str(work / "bc_ppo" / "policy")
+        if "bc_ppo" in stages:
+            results["bc_ppo"] = history
+            results["bc_ppo_start"] = cache.evaluate(cfg, {"bc_dagger": trained["bc_dagger"]})
+    if stages & {"ppo_scratch", "held_out"}:
         with cache.timed("ppo_scratch"):
             scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args)
-            results["ppo_scratch"] = run_ppo(scratch).history
+            history = run_ppo(scratch).history
+        trained["ppo_scratch"] = str(work / "ppo_scratch" / "policy")
+        early = chosen_within(history, args.ppo_early_frames)
+        checkpoints = work / "ppo_scratch" / "checkpoints"
+        trained["ppo_scratch_early"] = str(checkpoints / evaluated_checkpoint_name(early["frames"]))
+        if "ppo_scratch" in stages:
+            results["ppo_scratch"] = history
+            results["ppo_scratch_early"] = {
+                "policy_frames": early["policy_frames"],
+                **cache.evaluate(cfg, {"ppo_scratch_early": trained["ppo_scratch_early"]})[
+                    "ppo_scratch_early"
+                ],
+            }
+    if "held_out" in stages:
+        with cache.timed("held_out"):
+            policies = {"autopilot": "autopilot", "constant 1.0": REFERENCES["constant 1.0"]}
+            held_out = held_out_config(cfg, args.held_out_episodes)
+            results["held_out"] = cache.evaluate(held_out, {**policies, **trained})
     return results
 
 
-def summarise(results: dict[str, Any]) -> dict[str, Any]:
-    """The stages' results with the best constant action and every target their stages allow
-    (each met or not): BC needs the references, PPO from scratch the references, BC + PPO the
-    clone."""
-    report = dict(results)
-    targets: dict[str, float | bool] = {}
-    bc = results["bc"]["mean_distance"] if "bc" in results else None
-    if "references" in results:
-        references = results["references"]
-        report["best_constant"] = best_constant(references)
-        autopilot = references["autopilot"]["mean_distance"]
-        constant = references[report["best_constant"]]["mean_distance"]
-        if bc is not None:
-            targets["bc_over_autopilot"] = bc / autopilot
-            targets["bc_target_met"] = bc >= 0.7 * autopilot
-        if "ppo_scratch" in results:
-            scratch = results["ppo_scratch"][-1]["mean_distance"]
-            targets["ppo_scratch_over_best_constant"] = scratch / constant
-            targets["ppo_scratch_target_met"] = scratch >= 1.5 * constant
-    if bc is not None and "bc_ppo" in results:
-        finetune = results["bc_ppo"][-1]["mean_distance"]
-        targets["bc_ppo_over_bc"] = finetune / bc
-        targets["bc_ppo_target_met"] = finetune > bc
-    report["targets"] = targets
-    return report
-
-
-def best_constant(references: dict[str, dict[str, float]]) -> str:
+def best_constant(references: dict[str, dict[str, Any]]) -> str:
     """The name of the constant action that drives furthest."""
     constants = [name for name in REFERENCES if name.startswith("constant")]
     return max(constants, key=lambda name: references[name]["mean_distance"])
 
 
-def plot_report(report: dict[str, Any], path: Path) -> None:
-    """The PPO stages' curves (their last point, the kept policy, as a level) against the
-    reference and BC levels of whichever stages the report holds, as a PNG."""
-    curves: dict[str, list[tuple[float, float]]] = {}
+def summarise(results: dict[str, Any]) -> dict[str, Any]:
+    """The stages' results with the best constant action and every target their stages allow
+    (each ratio, and whether it is met)."""
+    report = dict(results)
+    ratios: dict[str, float] = {}
+    if "references" in results:
+        references = results["references"]
+        report["best_constant"] = best_constant(references)
+        autopilot = references["autopilot"]["mean_distance"]
+        constant = references[report["best_constant"]]["mean_distance"]
+        for stage in ("bc", "bc_dagger"):
+            if stage in results:
+                ratios[f"{stage}_over_autopilot"] = results[stage]["mean_distance"] / autopilot
+        if "ppo_scratch" in results:
+            early = results["ppo_scratch_early"]["mean_distance"]
+            ratios["ppo_scratch_early_over_best_constant"] = early / constant
+            final = results["ppo_scratch"][-1]["mean_distance"]
+            ratios["ppo_scratch_over_best_constant"] = final / constant
+    targets: dict[str, dict[str, Any]] = {
+        name: {"value": ratio, "target": TARGETS[name], "met": ratio >= TARGETS[name]}
+        for name, ratio in ratios.items()
+    }
+    if "bc_ppo" in results:
+        start = results["bc_ppo_start"]["bc_dagger"]
+        difference = paired_difference(results["bc_ppo"][-1], start)
+        met = difference["mean"] > 2 * difference["stderr"]
+        targets["bc_ppo_minus_bc"] = {**difference, "target": "> 2 stderr", "met": met}
+    report["targets"] = targets
+    return report
+
+
+def scale_curves(work: Path, results: dict[str, Any]) -> dict[str, dict[str, list[list[float]]]]:
+    """Each PPO stage's action scale per action number (``[env steps, scale]`` pairs) from its
+    training log."""
+    curves: dict[str, dict[str, list[list[float]]]] = {}
+    for stage, name in PPO_STAGES.items():
+        folder = work / stage / "logs" / "ppo" / "scalars" / "policy"
+        if stage not in results or not folder.is_dir():
+            continue
+        curves[name] = {
+            action: [[float(step), float(value)] for step, value in csv.reader(path.open())]
+            for action in ACTION_NAMES
+            if (path := folder / f"scale_{action}.csv").exists()
+        }
+    return curves
+
+
+def plot_report(
+    report: dict[str, Any], scales: dict[str, dict[str, list[list[float]]]], path: Path
+) -> None:
+    """Two panels: the PPO stages' distance curves on the selection seeds against the levels of
+    the references and the clones on the evaluation seeds (each kept PPO policy as a marker at
+    its env steps); and the PPO stages' action scale per action number."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(10, 8), layout="constrained")
+    distances, scale_axes = figure.subplots(2, 1, sharex=True, height_ratios=(3, 2))
     levels: dict[str, float] = {}
     if "references" in report:
         references = report["references"]
         levels["autopilot"] = references["autopilot"]["mean_distance"]
         levels["best constant"] = references[report["best_constant"]]["mean_distance"]
-    if "bc" in report:
-        levels["bc"] = report["bc"]["mean_distance"]
-    for stage, name in (("ppo_scratch", "ppo (scratch)"), ("bc_ppo", "bc + ppo")):
+    for stage, name in (("bc", "bc"), ("bc_dagger", "bc + dagger")):
         if stage in report:
-            *periodic, kept = report[stage]
-            curves[name] = [(entry["frames"], entry["mean_distance"]) for entry in periodic]
-            levels[f"{name}, kept"] = kept["mean_distance"]
-    plot(curves, levels, path)
+            levels[name] = report[stage]["mean_distance"]
+    for name, level in levels.items():
+        distances.axhline(level, color=COLORS[name], linestyle="--", label=f"{name}: {level:.0f} m")
+    for stage, name in PPO_STAGES.items():
+        if stage not in report:
+            continue
+        *periodic, kept = report[stage]
+        steps = [entry["frames"] for entry in periodic]
+        distances.plot(
+            steps,
+            [entry["mean_distance"] for entry in periodic],
+            "o-",
+            color=COLORS[name],
+            label=f"{name} (selection seeds)",
+        )
+        kept_policies = [(kept, "*", "kept")]
+        if stage == "ppo_scratch" and "ppo_scratch_early" in report:
+            early = report["ppo_scratch_early"]
+            kept_policies.append((early, "P", f"kept within {early['policy_frames']}"))
+        for entry, marker, what in kept_policies:
+            distances.plot(
+                entry["policy_frames"],
+                entry["mean_distance"],
+                marker,
+                markersize=13,
+                color=COLORS[name],
+                markeredgecolor="black",
+                label=f"{name}, {what}: {entry['mean_distance']:.0f} m",
+            )
+    distances.set_ylabel("mean distance before collision (m)")
+    distances.set_title(
+        "PPO curves on the selection seeds; levels and kept policies on the evaluation seeds"
+    )
+    distances.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    for name, curves in scales.items():
+        for action, style in zip(ACTION_NAMES, ("-", ":"), strict=True):
+            points = curves.get(action, [])
+            if points:
+                steps, values = zip(*points, strict=True)
+                scale_axes.plot(steps, values, style, color=COLORS[name], label=f"{name}: {action}")
+    scale_axes.set_yscale("log")
+    scale_axes.set_ylabel("action scale (before tanh)")
+    scale_axes.set_xlabel("env steps (4 frames each)")
+    if scales:
+        scale_axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
 
 
 def write_json(path: Path, report: dict[str, Any]) -> None:

@@ -2,8 +2,9 @@
 
 Records autopilot demonstrations as a LeRobot dataset, behaviour-clones a policy on them,
 fine-tunes it with TorchRL PPO in the world model, evaluates the references, the clone and the
-fine-tuned policy on fixed seeds, and prints where everything is (settings:
-:class:`~oasis_torchrl.config.DemoConfig`; :func:`oasis_torchrl.train.pipeline.run_pipeline`).
+fine-tuned policy on fixed seeds, and prints their comparison as a table and where everything
+is (settings: :class:`~oasis_torchrl.config.DemoConfig`;
+:func:`oasis_torchrl.train.pipeline.run_pipeline`).
 Any setting can be given as ``key=value``, e.g. ``oasis-torchrl demo output_dir=outputs/demo2
 ppo.collector.total_frames=8192``. Finished stages are reused, so running the same command
 again after an interruption continues where it stopped.
@@ -11,7 +12,6 @@ again after an interruption continues where it stopped.
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 
@@ -27,8 +27,8 @@ CONFIG = DemoConfig
 
 
 def run(cfg: DictConfig) -> int:
-    """Run the pipeline and print its summary (paths, evaluations, timings) as JSON; exit code
-    2 on bad settings, 130 when interrupted.
+    """Run the pipeline and print its comparison table (the summary with paths, evaluations and
+    timings is its ``summary.json``); exit code 2 on bad settings, 130 when interrupted.
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -45,5 +45,5 @@ def run(cfg: DictConfig) -> int:
     except KeyboardInterrupt:
         logger.warning("interrupted: run the same command again to continue where it stopped")
         return 130
-    sys.stdout.write(json.dumps(result.to_dict(), indent=2) + "\n")
+    sys.stdout.write(result.table() + "\n")
     return 0

@@ -53,7 +53,21 @@ class NetworkConfig:
         default_factory=lambda: [0.5, 0.0],
         help="a fresh actor's mean [throttle, steering]: drive, don't stand",
     )
-    init_scale: float = option(0.5, help="initial scale of the TanhNormal (before the tanh)")
+    head: str = option(
+        "mixture",
+        help="action head: mixture (a mixture of tanh-normals over the chunk, commits to one "
+        "manoeuvre) | tanh_normal (one tanh-normal, unimodal)",
+    )
+    components: int = option(3, help="mixture components")
+    init_spread: list[float] = option(
+        default_factory=lambda: [0.0, 0.3],
+        help="a fresh mixture's components spread this far around init_action (keep, left, "
+        "right), the middle one most likely",
+    )
+    init_scale: list[float] = option(
+        default_factory=lambda: [0.5, 0.1],
+        help="initial scale (before the tanh) of [throttle, steering]",
+    )
 
 
 @dataclass
@@ -92,6 +106,10 @@ class OptimConfig:
     critic_lr: float | None = option(
         1.0e-3, help="learning rate of the critic head (null: lr); a fresh critic needs the pace"
     )
+    scale_lr: float | None = option(
+        3.0e-3,
+        help="learning rate of the action scale (null: lr); its gradient is weak and noisy",
+    )
     max_grad_norm: float = option(0.5, help="gradient clipping")
     epochs: int = option(4, help="passes over each batch")
     target_kl: float | None = option(
@@ -123,6 +141,9 @@ class CheckpointConfig:
     """When the trainer saves its state."""
 
     every: int = option(5, help="iterations between checkpoints (the last one is always saved)")
+    keep_evaluated: bool = option(
+        False, help="also keep each periodically evaluated policy (checkpoints/frames_<N>.pt)"
+    )
 
 
 @dataclass
@@ -133,7 +154,10 @@ class PPOSettings:
     privileged_critic: bool = option(
         True, help="the critic also reads ground truth (embedded server only)"
     )
-    warm_start_scale: float = option(0.2, help="action scale after a warm start")
+    warm_start_scale: list[float] | None = option(
+        default_factory=lambda: [0.2, 0.05],
+        help="[throttle, steering] action scale after a warm start (null: the source's)",
+    )
     collector: CollectorConfig = option(default_factory=CollectorConfig, help="experience")
     loss: LossConfig = option(default_factory=LossConfig, help="the PPO loss")
     optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
@@ -189,10 +213,19 @@ class BCPolicyConfig:
     use_state: bool = option(
         False, help="the previous action as an input (off: a clone would copy it)"
     )
-    loss: str = option("l1", help="l1 | mse")
+    head: str = option(
+        "mixture",
+        help="action head: mixture (commits to one manoeuvre) | tanh_normal (unimodal)",
+    )
+    components: int = option(3, help="mixture components")
+    loss: str = option(
+        "nll",
+        help="nll (likelihood of the demonstrated chunk) | l1 | mse (regression of the chunk)",
+    )
     action_loss_weights: list[float] = option(
         default_factory=lambda: [1.0, 5.0],
-        help="[throttle, steering] loss weights: steering varies ~5x less (not normalised)",
+        help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
+        "normalised)",
     )
     optimizer_lr: float = option(1.0e-3, help="learning rate")
     optimizer_weight_decay: float = option(1.0e-4, help="weight decay")

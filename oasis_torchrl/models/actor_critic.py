@@ -7,7 +7,8 @@ the encoder, so rollouts store compact uint8 frames; ``image_key="images"`` read
 ``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (e.g. TorchRL's ``ToTensorImage`` writing
 ``("images", <camera>)``).
 With ``critic_inputs`` configured, the critic also reads ``"critic_inputs"`` ``[*B, k]``.
-Keys out: ``"features"`` (shared), ``"loc"``, ``"scale"``, ``"action"`` ``[*B, 4, 2]``,
+Keys out: ``"features"`` (shared), the chunk distribution's parameters (``"loc"``,
+``"scale"``, and ``"logits"`` for the mixture head), ``"action"`` ``[*B, 4, 2]``,
 ``"action_log_prob"`` and ``"state_value"``.
 """
 
@@ -19,7 +20,7 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import Bounded
-from torchrl.modules import ActorValueOperator, ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.modules import ActorValueOperator, ProbabilisticActor, ValueOperator
 
 from oasis_torchrl.models.network import DrivingNet
 
@@ -42,15 +43,14 @@ class _Features(nn.Module):
 
 
 class _ChunkParams(nn.Module):
-    """``features -> (loc, scale)`` of the chunk distribution."""
+    """``features -> `` the chunk distribution's parameters, in ``net.action_params`` order."""
 
     def __init__(self, net: DrivingNet) -> None:
         super().__init__()
         self.net = net
 
-    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        loc = self.net.action_loc(features)
-        return loc, self.net.action_scale(loc)
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return tuple(self.net.action_params(features).values())
 
 
 class _Value(nn.Module):
@@ -80,8 +80,9 @@ class ActorCritic:
 
     Attributes:
         operator: the :class:`~torchrl.modules.ActorValueOperator` (features, action and value).
-        policy: the stochastic actor (a TanhNormal over the chunk in ``[-1, 1]``); call it under
-            ``set_exploration_type(ExplorationType.DETERMINISTIC)`` for ``tanh(loc)``.
+        policy: the stochastic actor (the network's chunk distribution over ``[-1, 1]``); call
+            it under ``set_exploration_type(ExplorationType.DETERMINISTIC)`` for the chunk the
+            policy commits to.
         value: the critic, writing ``"state_value"``.
         net: the network they wrap.
 
@@ -130,14 +131,15 @@ def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:
     common = TensorDictModule(
         _Features(net), in_keys=observation_keys(net, image_key), out_keys=[FEATURES]
     )
-    params = TensorDictModule(_ChunkParams(net), in_keys=[FEATURES], out_keys=["loc", "scale"])
+    param_keys = list(net.action_params(torch.zeros(cfg.features_dim)))
+    params = TensorDictModule(_ChunkParams(net), in_keys=[FEATURES], out_keys=param_keys)
     spec = Bounded(-1.0, 1.0, (cfg.chunk, cfg.action_dim))
     actor_head = ProbabilisticActor(
         params,
-        in_keys=["loc", "scale"],
+        in_keys=param_keys,
         spec=spec,
-        distribution_class=TanhNormal,
-        distribution_kwargs={"low": -1.0, "high": 1.0, "event_dims": 2},
+        distribution_class=net.distribution_class,
+        distribution_kwargs=net.distribution_kwargs,
         return_log_prob=True,
     )
     value_keys = [FEATURES, CRITIC_INPUTS] if cfg.critic_inputs else [FEATURES]

@@ -13,6 +13,10 @@ POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 """Default ``(height, width)`` the network sees."""
 MAX_INIT_ACTION = 0.99
 """Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
+TANH_NORMAL = "tanh_normal"
+MIXTURE = "mixture"
+HEADS = (TANH_NORMAL, MIXTURE)
+"""Action heads: one tanh-normal over the chunk, or a mixture of them (one per manoeuvre)."""
 
 
 @dataclass(frozen=True)
@@ -44,11 +48,26 @@ class DrivingNetConfig:
             same privileged state, as a training-only loss that shapes the encoder (0: none).
         chunk: actions per chunk.
         action_dim: numbers per action.
+        head: the action distribution over a chunk: ``"tanh_normal"`` (one TanhNormal: its
+            deterministic chunk answers the median of the demonstrations, straight ahead
+            between a left and a right lane change) or ``"mixture"`` (``components``
+            TanhNormals with observation-dependent weights; the deterministic chunk is the
+            most probable component's, so the policy commits to one manoeuvre;
+            :class:`~oasis_torchrl.models.distributions.TanhNormalMixture`).
+        components: mixture components (``head="mixture"`` only).
         init_action: the fresh actor's mean action (after the tanh), one value per action
             number in ``[-0.99, 0.99]``, repeated over the chunk. ``(0.5, 0.0)`` starts PPO
             from scratch at half throttle, straight: with the default zero chunk a fresh car
             stands still and measured runs spent their first ~6000 env steps learning to move.
-        init_scale: initial scale (before the tanh) of the PPO action distribution.
+        init_spread: mixture only: the fresh components' mean actions spread evenly from
+            ``init_action - init_spread`` to ``init_action + init_spread`` (one value per action
+            number), the outer ones ``e^-2`` as likely as the middle one, which the policy
+            commits to. ``(0.0, 0.3)`` gives a fresh actor (and behaviour cloning's first
+            steps) a keep, a left and a right manoeuvre: identical components would get
+            identical gradients and stay one.
+        init_scale: initial scale (before the tanh) of the action distribution, one value per
+            action number (repeated over the chunk and the components): ``(0.5, 0.1)``
+            explores throttle widely and steering by a tenth of a lane change, not a whole one.
         min_scale: lower bound of that scale.
 
     Example:
@@ -71,8 +90,11 @@ class DrivingNetConfig:
     aux_outputs: int = 0
     chunk: int = CHUNK
     action_dim: int = ACTION_DIM
+    head: str = MIXTURE
+    components: int = 3
     init_action: tuple[float, ...] = (0.0, 0.0)
-    init_scale: float = 0.5
+    init_spread: tuple[float, ...] = (0.0, 0.3)
+    init_scale: tuple[float, ...] = (0.5, 0.1)
     min_scale: float = 1e-3
 
     def __post_init__(self) -> None:
@@ -80,6 +102,13 @@ class DrivingNetConfig:
             raise ValueError("DrivingNetConfig.cameras must name at least one camera")
         if len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
+        if self.head not in HEADS:
+            raise ValueError(f"DrivingNetConfig.head must be one of {HEADS}, got {self.head!r}")
+        if len(self.init_scale) != self.action_dim:
+            raise ValueError(
+                f"DrivingNetConfig.init_scale needs {self.action_dim} values (one per action "
+                f"number), got {list(self.init_scale)}"
+            )
         for name in ("critic_inputs", "aux_outputs"):
             if getattr(self, name) < 0:
                 raise ValueError(f"DrivingNetConfig.{name} must be >= 0, got {getattr(self, name)}")
@@ -89,6 +118,15 @@ class DrivingNetConfig:
             raise ValueError(
                 f"DrivingNetConfig.init_action needs {self.action_dim} values in "
                 f"[-{MAX_INIT_ACTION}, {MAX_INIT_ACTION}], got {list(self.init_action)}"
+            )
+        if len(self.init_spread) != self.action_dim or any(
+            spread < 0 or abs(action) + spread > MAX_INIT_ACTION
+            for action, spread in zip(self.init_action, self.init_spread, strict=True)
+        ):
+            raise ValueError(
+                f"DrivingNetConfig.init_spread needs {self.action_dim} values >= 0 that keep "
+                f"init_action +- init_spread in [-{MAX_INIT_ACTION}, {MAX_INIT_ACTION}], got "
+                f"{list(self.init_spread)} around {list(self.init_action)}"
             )
         if len(self.encoder_channels) != 3:
             raise ValueError(
@@ -104,12 +142,18 @@ class DrivingNetConfig:
             "hidden_dim": (self.hidden_dim,),
             "chunk": (self.chunk,),
             "action_dim": (self.action_dim,),
-            "init_scale": (self.init_scale,),
+            "components": (self.components,),
+            "init_scale": self.init_scale,
             "min_scale": (self.min_scale,),
         }
         for name, values in positive.items():
             if any(value <= 0 for value in values):
                 raise ValueError(f"DrivingNetConfig.{name} must be positive, got {values}")
+
+    @property
+    def mixture_components(self) -> int:
+        """Components of the action distribution (1: the tanh-normal head)."""
+        return self.components if self.head == MIXTURE else 1
 
     @property
     def features_dim(self) -> int:
@@ -125,11 +169,23 @@ class DrivingNetConfig:
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> DrivingNetConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error naming them."""
+        """Inverse of :meth:`to_dict`; unknown keys are an error naming them.
+
+        Networks saved before the mixture head had one scale for every action number and no
+        ``head`` (they are tanh-normal networks): both are read as such.
+
+        Example:
+            >>> old = DrivingNetConfig.from_dict({"init_scale": 0.5})
+            >>> old.head, old.init_scale
+            ('tanh_normal', (0.5, 0.5))
+        """
         known = {field.name: field for field in dataclasses.fields(cls)}
         unknown = sorted(set(values) - set(known))
         if unknown:
             raise ValueError(f"unknown DrivingNetConfig fields {unknown}; known: {sorted(known)}")
+        values = {"head": TANH_NORMAL, "init_spread": [0.0] * ACTION_DIM, **values}
+        if isinstance(values.get("init_scale"), (int, float)):
+            values["init_scale"] = [values["init_scale"]] * values.get("action_dim", ACTION_DIM)
         return cls(
             **{
                 key: tuple(value) if isinstance(value, list) else value

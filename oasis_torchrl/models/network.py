@@ -1,21 +1,24 @@
 """The driving network: multi-camera encoder, action-chunk head and value head.
 
-One definition serves both ecosystems: TorchRL PPO reads ``loc``/``scale`` of a TanhNormal over
-the chunk and the value (:mod:`oasis_torchrl.models.actor_critic`); LeRobot behaviour cloning
-reads the deterministic chunk ``tanh(loc)`` (``policies/lerobot_policy_oasis``), which is also the
-TanhNormal's deterministic sample, so a cloned policy acts the same under PPO's evaluation.
+One definition serves both ecosystems: TorchRL PPO samples the chunk distribution and reads the
+value (:mod:`oasis_torchrl.models.actor_critic`); LeRobot behaviour cloning fits the same
+distribution to demonstrations (by likelihood, or by regression of the deterministic chunk) and
+acts with the deterministic chunk (``policies/lerobot_policy_oasis``), which is also the
+distribution's deterministic sample, so a cloned policy acts the same under PPO's evaluation.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 
 import torch
+from torch import distributions as D
 from torch import nn
+from torchrl.modules import TanhNormal
 
-from oasis_torchrl.models.config import DrivingNetConfig
+from oasis_torchrl.models.config import MIXTURE, DrivingNetConfig
+from oasis_torchrl.models.distributions import TanhNormalMixture
 from oasis_torchrl.models.encoder import MultiCameraEncoder
 
 
@@ -28,6 +31,11 @@ def _mlp(in_features: int, hidden: int, out_features: int) -> nn.Sequential:
 LOC_BOUND = 3.0
 """Bound of the chunk location before the tanh: ``tanh(3) = 0.995``, close to full throttle and
 far enough from 1 for float32 log-probabilities."""
+SPREAD_PRIOR = 2.0
+"""A fresh mixture's outer components are ``e^-SPREAD_PRIOR`` as likely as its middle one."""
+TARGET_BOUND = 0.99
+"""Demonstrated actions are clamped to this for their likelihood: ``atanh(0.99) = 2.65`` is a
+location the bounded head reaches (full throttle, exactly 1, would need an infinite one)."""
 
 
 class DrivingNet(nn.Module):
@@ -37,9 +45,11 @@ class DrivingNet(nn.Module):
     last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1, or the
     env's uint8 frames in the same shapes with the colour last (``[*B, K, H, W, 3]``); the state
     is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state (if ``use_state``).
-    The actor MLP gives ``loc`` ``[..., 4, 2]`` (before the tanh); the scale is a learned,
-    observation-independent ``[4, 2]`` parameter (the usual choice for PPO; behaviour cloning
-    leaves it untouched). The critic MLP gives the value (from the features, plus
+    The actor MLP gives the chunk distribution's parameters (:meth:`action_params`): ``loc``
+    ``[..., 4, 2]`` (before the tanh) for the tanh-normal head; ``logits`` ``[..., K]`` and ``loc``
+    ``[..., K, 4, 2]`` for the mixture head. The scale is a learned, observation-independent
+    parameter of the same shape as one ``loc`` (the usual choice for PPO; behaviour cloning by
+    likelihood fits it too). The critic MLP gives the value (from the features, plus
     ``critic_inputs`` extra numbers when configured: an asymmetric actor-critic whose critic may
     use privileged simulator state). With ``aux_outputs``, an auxiliary head predicts that many
     numbers from the camera features (a training-only loss; see :meth:`predict_aux`).
@@ -52,6 +62,9 @@ class DrivingNet(nn.Module):
         (torch.Size([2, 4, 2]), True)
         >>> net.value(net.features(images, torch.zeros(2, 2))).shape
         torch.Size([2, 1])
+        >>> params = net.action_params(torch.zeros(2, net.config.features_dim))
+        >>> {key: list(value.shape) for key, value in params.items()}
+        {'logits': [2, 3], 'loc': [2, 3, 4, 2], 'scale': [2, 3, 4, 2]}
     """
 
     def __init__(self, config: DrivingNetConfig | None = None) -> None:
@@ -59,25 +72,41 @@ class DrivingNet(nn.Module):
         self.config = config or DrivingNetConfig()
         cfg = self.config
         self.encoder = MultiCameraEncoder(cfg)
-        self.actor = _mlp(cfg.features_dim, cfg.hidden_dim, cfg.chunk * cfg.action_dim)
+        self.components = cfg.mixture_components
+        self.logit_outputs = self.components if cfg.head == MIXTURE else 0
+        chunk_outputs = self.components * cfg.chunk * cfg.action_dim
+        self.actor = _mlp(cfg.features_dim, cfg.hidden_dim, self.logit_outputs + chunk_outputs)
         self.critic = _mlp(cfg.features_dim + cfg.critic_inputs, cfg.hidden_dim, 1)
         camera_features = self.encoder.out_features
         self.aux = (
             _mlp(camera_features, cfg.hidden_dim, cfg.aux_outputs) if cfg.aux_outputs else None
         )
-        self.log_scale = nn.Parameter(torch.empty(cfg.chunk, cfg.action_dim))
+        self.log_scale = nn.Parameter(torch.empty(self._chunk_shape))
         self.set_scale(cfg.init_scale)
         # A small last actor layer starts PPO near one chunk (init_action) for every input,
-        # instead of saturated tanh ends.
+        # instead of saturated tanh ends; the mixture's components around it (init_spread).
+        offsets = torch.linspace(-1.0, 1.0, self.components) if self.components > 1 else None
         with torch.no_grad():
             self.actor[-1].weight.mul_(0.01)
-            self.actor[-1].bias.copy_(self._raw_location(cfg.init_action).repeat(cfg.chunk))
+            bias = self.actor[-1].bias
+            actions = torch.tensor([cfg.init_action])
+            if offsets is not None:
+                bias[: self.logit_outputs] = -SPREAD_PRIOR * offsets.square()
+                actions = actions + offsets.unsqueeze(1) * torch.tensor(cfg.init_spread)
+            location = self._raw_location(actions).unsqueeze(1).expand(-1, cfg.chunk, -1)
+            bias[self.logit_outputs :] = location.flatten()
+
+    @property
+    def _chunk_shape(self) -> tuple[int, ...]:
+        """Shape of one observation's chunk locations: ``[K, chunk, action_dim]`` for the
+        mixture head, ``[chunk, action_dim]`` for the tanh-normal head."""
+        chunk = (self.config.chunk, self.config.action_dim)
+        return (self.components, *chunk) if self.config.head == MIXTURE else chunk
 
     @staticmethod
-    def _raw_location(action: Sequence[float]) -> torch.Tensor:
+    def _raw_location(action: torch.Tensor) -> torch.Tensor:
         """The actor output whose chunk location is ``atanh(action)`` (inverse of the bound)."""
-        loc = torch.atanh(torch.tensor(action, dtype=torch.float32))
-        return LOC_BOUND * torch.atanh(loc / LOC_BOUND)
+        return LOC_BOUND * torch.atanh(torch.atanh(action.float()) / LOC_BOUND)
 
     def features(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """Shared features ``[..., features_dim]`` from each camera's frames and the state."""
@@ -106,22 +135,66 @@ class DrivingNet(nn.Module):
             )
         return image[..., -wanted:, :, :, :]
 
-    def action_loc(self, features: torch.Tensor) -> torch.Tensor:
-        """Location ``[..., chunk, action_dim]`` of the chunk distribution, before the tanh,
-        softly bounded to ``(-LOC_BOUND, LOC_BOUND)``.
+    def action_params(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The chunk distribution's parameters (the keyword arguments of
+        :attr:`distribution_class`): ``loc`` before the tanh, softly bounded to
+        ``(-LOC_BOUND, LOC_BOUND)``, ``scale`` broadcast to it, and for the mixture head the
+        component ``logits``.
 
         Why bounded: demonstrations hold actions at exactly +-1 (full throttle), which push a
         clone's location far out; float32 ``atanh`` of PPO's samples there saturates near 8.4,
         so the log-probability of a stored action swings by tens of nats per small update and
         PPO's ratio overflows (measured: 15 of 16 fine-tuning minibatches non-finite).
         """
-        raw = self.actor(features).unflatten(-1, (self.config.chunk, self.config.action_dim))
-        return LOC_BOUND * torch.tanh(raw / LOC_BOUND)
+        raw = self.actor(features)
+        loc = raw[..., self.logit_outputs :].unflatten(-1, self._chunk_shape)
+        loc = LOC_BOUND * torch.tanh(loc / LOC_BOUND)
+        scale = self.log_scale.exp().clamp_min(self.config.min_scale).expand_as(loc)
+        if self.config.head != MIXTURE:
+            return {"loc": loc, "scale": scale}
+        return {"logits": raw[..., : self.logit_outputs], "loc": loc, "scale": scale}
 
-    def action_scale(self, loc: torch.Tensor) -> torch.Tensor:
-        """Scale of the chunk distribution, broadcast to ``loc``'s shape."""
-        scale = self.log_scale.exp().clamp_min(self.config.min_scale)
-        return scale.expand_as(loc)
+    @property
+    def distribution_class(self) -> type[D.Distribution]:
+        """The chunk distribution: TorchRL's ``TanhNormal`` or :class:`TanhNormalMixture`."""
+        return TanhNormalMixture if self.config.head == MIXTURE else TanhNormal
+
+    @property
+    def distribution_kwargs(self) -> dict[str, float | int]:
+        """Its fixed arguments besides :meth:`action_params` (a ``[chunk, action_dim]`` event
+        in ``[-1, 1]``)."""
+        if self.config.head == MIXTURE:
+            return {"event_dims": 2}
+        return {"low": -1.0, "high": 1.0, "event_dims": 2}
+
+    def distribution(self, features: torch.Tensor) -> D.Distribution:
+        """The chunk distribution for ``features``."""
+        return self.distribution_class(**self.action_params(features), **self.distribution_kwargs)
+
+    def chunk_log_likelihood(
+        self, features: torch.Tensor, target: torch.Tensor, observed: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Log-likelihood ``[...]`` of demonstrated chunks ``target`` ``[..., chunk,
+        action_dim]`` (behaviour cloning by likelihood), clamped to ``TARGET_BOUND``.
+
+        ``observed`` (bool ``[..., chunk]``) leaves out actions past an episode's end. The
+        tanh-normal head is scored as a mixture of one component (the same density).
+        """
+        params = self.action_params(features)
+        if self.config.head != MIXTURE:
+            params = {key: value.unsqueeze(-3) for key, value in params.items()}
+            params["logits"] = params["loc"].new_zeros(params["loc"].shape[:-2])
+        mask = None if observed is None else observed.unsqueeze(-1)
+        dist = TanhNormalMixture(**params, event_dims=2)
+        return dist.log_prob(target.clamp(-TARGET_BOUND, TARGET_BOUND), mask)
+
+    def deterministic_chunk(self, features: torch.Tensor) -> torch.Tensor:
+        """The chunk ``[..., chunk, action_dim]`` the policy commits to: ``tanh(loc)`` of the
+        tanh-normal head, of the most probable component for the mixture head."""
+        params = self.action_params(features)
+        if self.config.head != MIXTURE:
+            return torch.tanh(params["loc"])
+        return TanhNormalMixture(**params, event_dims=2).deterministic_sample
 
     def value(self, features: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
         """State value ``[..., 1]`` (``extra``: the ``critic_inputs`` numbers, if configured)."""
@@ -164,12 +237,24 @@ class DrivingNet(nn.Module):
             raise ValueError(f"the source network lacks {unexpected}")
 
     def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
-        """The deterministic chunk ``tanh(loc)`` ``[..., chunk, action_dim]`` in ``[-1, 1]``."""
-        return torch.tanh(self.action_loc(self.features(images, state)))
+        """The deterministic chunk ``[..., chunk, action_dim]`` in ``[-1, 1]``
+        (:meth:`deterministic_chunk`)."""
+        return self.deterministic_chunk(self.features(images, state))
 
     @torch.no_grad()
-    def set_scale(self, scale: float) -> None:
-        """Reset the action distribution's scale (e.g. before PPO fine-tuning of a BC policy)."""
-        if scale <= 0:
-            raise ValueError(f"scale must be positive, got {scale}")
-        self.log_scale.fill_(math.log(scale))
+    def set_scale(self, scale: float | Sequence[float]) -> None:
+        """Reset the action distribution's scale (e.g. before PPO fine-tuning of a BC policy):
+        one value, or one per action number.
+
+        Example:
+            >>> net = DrivingNet(DrivingNetConfig(head="tanh_normal"))
+            >>> net.set_scale([0.4, 0.1])
+            >>> [round(value, 3) for value in net.log_scale.exp()[0].tolist()]
+            [0.4, 0.1]
+        """
+        values = torch.as_tensor(scale, dtype=self.log_scale.dtype)
+        if (values <= 0).any() or values.numel() not in (1, self.config.action_dim):
+            raise ValueError(
+                f"scale must be positive, one value or {self.config.action_dim}, got {scale}"
+            )
+        self.log_scale.copy_(values.log().expand_as(self.log_scale))

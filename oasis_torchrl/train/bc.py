@@ -128,9 +128,10 @@ class BCTrainer:
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         torch.manual_seed(cfg.seed)
-        policy_values = OmegaConf.to_container(cfg.policy)
-        for key in ("image_size", "encoder_channels", "pool_grid", "action_loss_weights"):
-            policy_values[key] = tuple(policy_values[key])
+        policy_values = {  # the settings' lists as the policy config's tuples
+            key: tuple(value) if isinstance(value, list) else value
+            for key, value in OmegaConf.to_container(cfg.policy).items()
+        }
         self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
         dataset = open_dataset(cfg.dataset, self.policy_config)
         self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)

@@ -15,8 +15,10 @@
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
 ``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
-folders), ``ppo/checkpoints/latest.pt``, ``eval.rrd``, ``summary.json`` (paths, evaluations,
-seconds per stage). Config: :class:`~oasis_torchrl.config.DemoConfig`.
+folders), ``ppo/checkpoints/latest.pt``, ``eval.rrd``, ``summary.json`` (paths, evaluations with
+their episodes, seconds per stage) and ``comparison.png`` (the evaluations as bars; the same
+comparison as a text table is :meth:`PipelineResult.table`). Config:
+:class:`~oasis_torchrl.config.DemoConfig`.
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
-from oasis_torchrl.drivers import load_driver
+from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
+from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
 
@@ -61,8 +64,22 @@ class PipelineResult:
     ppo_checkpoint: Path
     recording: Path | None
     summary_path: Path
-    evaluations: dict[str, dict[str, float]] = field(default_factory=dict)
+    plot_path: Path
+    evaluations: dict[str, dict[str, Any]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+
+    def rows(self) -> list[PolicyRow]:
+        """The evaluations compared with the autopilot and the best constant action."""
+        constants = [name for name in self.evaluations if name.startswith(SCRIPTED)]
+        return comparison(self.evaluations, autopilot=AUTOPILOT, constants=constants)
+
+    def table(self) -> str:
+        """The comparison as a text table, and where the files are."""
+        total = sum(self.seconds.values())
+        return (
+            f"{format_table(self.rows())}\n\n"
+            f"{total / 60:.1f} min; summary {self.summary_path}, plot {self.plot_path}"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: ``paths`` (str or None), ``evaluations`` and ``seconds`` per stage."""
@@ -73,6 +90,7 @@ class PipelineResult:
             "ppo_checkpoint": self.ppo_checkpoint,
             "recording": self.recording,
             "summary": self.summary_path,
+            "plot": self.plot_path,
         }
         return {
             "paths": {name: None if path is None else str(path) for name, path in paths.items()},
@@ -209,14 +227,15 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
     return policy
 
 
-def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, float]]:
-    """Evaluate each named policy spec on the config's fixed prompts and seeds.
+def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, Any]]:
+    """Evaluate each named policy spec on the config's fixed prompts and seeds: the aggregates
+    and every episode (:meth:`~oasis_torchrl.train.evaluate.EvalReport.to_dict`).
 
     The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``).
 
     Example:
         >>> evaluate_all(load_config("demo"), {"autopilot": "autopilot"})  # doctest: +SKIP
-        {'autopilot': {'mean_distance': ..., 'collision_rate': 0.0, ...}}
+        {'autopilot': {'mean_distance': ..., 'collision_rate': 0.0, ..., 'per_episode': [...]}}
     """
     plain = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
     results = {}
@@ -231,8 +250,9 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
             expert=driver.needs_expert,
             progress=cfg.progress,
         ) as evaluator:
-            results[name] = evaluator.evaluate(driver).summary()
-        logger.info("%s: %s", name, results[name])
+            report = evaluator.evaluate(driver)
+        results[name] = report.to_dict()
+        logger.info("%s: %s", name, report.summary())
     return results
 
 
@@ -301,9 +321,16 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
         ppo.checkpoint,
         recording,
         out / "summary.json",
+        out / "comparison.png",
         evaluations,
         seconds,
     )
     result.summary_path.write_text(json.dumps(result.to_dict(), indent=2))
+    seeds = ", ".join(str(seed) for seed in cfg.eval.seeds)
+    title = (
+        f"{', '.join(cfg.eval.prompts)}: {cfg.eval.episodes} episodes of up to "
+        f"{cfg.eval.max_steps} steps per seed ({seeds})"
+    )
+    plot_comparison(result.rows(), result.plot_path, title)
     logger.info("pipeline done in %.0f s; summary: %s", sum(seconds.values()), out / "summary.json")
     return result

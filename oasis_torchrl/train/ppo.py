@@ -42,6 +42,7 @@ from oasis_torchrl.models.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
+from oasis_torchrl.protocol import ACTION_NAMES
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
@@ -74,7 +75,8 @@ class PPOResult:
 
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
-    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with a reset scale;
+    """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with its scale reset
+    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's);
     with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
@@ -87,11 +89,13 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     image_size = tuple(int(size) for size in cfg.env.image_size)
     if cfg.init_from:
         net = load_net(cfg.init_from)
-        net.set_scale(cfg.warm_start_scale)
-        logger.info("warm start from %s (scale %.2f)", cfg.init_from, cfg.warm_start_scale)
+        if cfg.warm_start_scale is not None:
+            net.set_scale(OmegaConf.to_object(cfg.warm_start_scale))
+        logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
-        net = DrivingNet(DrivingNetConfig(cameras=cameras, image_size=image_size, **network))
+        config = {"cameras": cameras, "image_size": image_size, **network}
+        net = DrivingNet(DrivingNetConfig.from_dict(config))
     critic_inputs = len(PRIVILEGED_FIELDS) if cfg.privileged_critic else 0
     aux_outputs = len(PRIVILEGED_FIELDS) if cfg.loss.aux_coeff else 0
     if (net.config.critic_inputs, net.config.aux_outputs) != (critic_inputs, aux_outputs):
@@ -208,26 +212,36 @@ class PPOTrainer:
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
 
     def _param_groups(self) -> list[dict[str, Any]]:
-        """The fresh heads (critic, auxiliary) in their own group, at ``optim.critic_lr``
+        """Three groups: the acting parts (encoder, actor) at ``optim.lr``; the fresh heads
+        (critic, auxiliary) at ``optim.critic_lr``; the action scale at ``optim.scale_lr``
         (``null``: ``optim.lr``).
 
-        Why: a fresh critic on a warm-started encoder (whose features are small, ~0.08) moves
-        too slowly at the actor's fine-tuning rate: measured on 1536 steps of the cloned
-        policy, a critic fitted for 320 minibatches explains 31% of the returns' variance at
-        1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+        Why the heads: a fresh critic on a warm-started encoder (whose features are small,
+        ~0.08) moves too slowly at the actor's fine-tuning rate: measured on 1536 steps of the
+        cloned policy, a critic fitted for 320 minibatches explains 31% of the returns' variance
+        at 1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+
+        Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
+        the mean did worse), so at the actor's rate Adam moves it by little more than a random
+        walk: measured, PPO's scale stayed at its initial 0.5 through 184k env steps, and the
+        policy drove 260 m deterministically but 224 m with that noise.
         """
         heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
         head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
+        scale_id = id(self.net.log_scale)
         parameters = list(self.loss.parameters())
         return [
-            {"params": [p for p in parameters if id(p) not in head_ids]},
+            {"params": [p for p in parameters if id(p) not in head_ids and id(p) != scale_id]},
             {"params": [p for p in parameters if id(p) in head_ids]},
+            {"params": [self.net.log_scale]},
         ]
 
-    def _base_lrs(self) -> tuple[float, float]:
-        """The un-annealed learning rates of the two parameter groups (acting parts, heads)."""
-        critic_lr = self.cfg.optim.get("critic_lr")
-        return self.cfg.optim.lr, self.cfg.optim.lr if critic_lr is None else critic_lr
+    def _base_lrs(self) -> tuple[float, float, float]:
+        """The un-annealed learning rates of the parameter groups (acting parts, heads,
+        scale)."""
+        optim = self.cfg.optim
+        critic_lr = optim.lr if optim.critic_lr is None else optim.critic_lr
+        return optim.lr, critic_lr, optim.lr if optim.scale_lr is None else optim.scale_lr
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -359,8 +373,14 @@ class PPOTrainer:
         metrics["optim/skipped_minibatches"] = float(skipped)
         metrics["optim/updates"] = float(updates)
         metrics["optim/lr"] = cfg.optim.lr * factor
-        metrics["policy/scale"] = self.net.log_scale.exp().mean().item()
+        metrics.update(self._scale_metrics())
         return metrics
+
+    def _scale_metrics(self) -> dict[str, float]:
+        """The action scale's mean per action number (over chunk and components)."""
+        scale = self.net.log_scale.detach().exp().reshape(-1, self.net.config.action_dim)
+        means = zip(ACTION_NAMES, scale.mean(0).tolist(), strict=True)
+        return {f"policy/scale_{name}": value for name, value in means}
 
     def _anneal(self) -> float:
         """Set this iteration's learning rates (linear decay to 5%); the decay factor."""
@@ -411,9 +431,20 @@ class PPOTrainer:
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the best policy so far as
-        ``checkpoints/best.pt``; otherwise on ``eval.seeds``."""
+        ``checkpoints/best.pt``; otherwise on ``eval.seeds``. With
+        ``checkpoint.keep_evaluated``, the evaluated policy is also saved as
+        ``checkpoints/frames_<env steps>.pt`` (to choose among them later, e.g. the best within
+        a smaller budget)."""
         selection_seeds = self.cfg.eval.get("selection_seeds")
         report = self._evaluate(self.net, selection_seeds)
+        if self.cfg.checkpoint.keep_evaluated:
+            save_checkpoint(
+                self.checkpoint_dir / evaluated_checkpoint_name(self.frames),
+                self.net,
+                iteration=self.iteration,
+                frames=self.frames,
+                evaluation=report.summary(),
+            )
         if selection_seeds and (
             self.best_selection is None or report.mean_distance > self.best_selection
         ):
@@ -458,7 +489,8 @@ class PPOTrainer:
         policy_frames: int | None = None,
     ) -> EvalReport:
         """Evaluate ``net`` (trained for ``policy_frames`` env steps, default: all of this run's)
-        on ``seeds`` (default ``eval.seeds``) and add the summary to the history."""
+        on ``seeds`` (default ``eval.seeds``) and add its report (aggregates and episodes) to
+        the history."""
         if self._evaluator is None:
             self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
@@ -469,17 +501,17 @@ class PPOTrainer:
         finally:
             net.train()
         self._last_eval = (self.frames, seeds, report)
-        summary = report.summary()
         self.history.append(
-            {
-                "iteration": self.iteration,
-                "frames": self.frames,
-                "policy_frames": self.frames if policy_frames is None else policy_frames,
-                "seeds": list(seeds),
-                **summary,
-            }
+            report.to_dict(
+                iteration=self.iteration,
+                frames=self.frames,
+                policy_frames=self.frames if policy_frames is None else policy_frames,
+                seeds=list(seeds),
+            )
         )
-        logger.info("evaluation at %d env steps on seeds %s: %s", self.frames, seeds, summary)
+        logger.info(
+            "evaluation at %d env steps on seeds %s: %s", self.frames, seeds, report.summary()
+        )
         return report
 
     def _log(self, metrics: dict[str, float]) -> None:
@@ -514,6 +546,17 @@ class PPOTrainer:
             self._evaluator = None
             if not self.env.is_closed:
                 self.env.close()
+
+
+def evaluated_checkpoint_name(frames: int) -> str:
+    """The checkpoint file of the policy evaluated at ``frames`` env steps
+    (``checkpoint.keep_evaluated``).
+
+    Example:
+        >>> evaluated_checkpoint_name(10240)
+        'frames_10240.pt'
+    """
+    return f"frames_{frames}.pt"
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:

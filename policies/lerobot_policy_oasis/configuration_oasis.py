@@ -16,6 +16,8 @@ values. Any LeRobot mode can still be chosen per feature type with ``normalizati
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from dataclasses import dataclass, field
 
 from lerobot.configs.policies import PreTrainedConfig
@@ -27,6 +29,40 @@ from oasis_torchrl.models import CAMERAS, DrivingNetConfig
 
 POLICY_TYPE = "oasis"
 ACTION_DIM = 2
+LOSSES = ("nll", "l1", "mse")
+NETWORK_FIELDS = (
+    "image_size",
+    "shared_encoder",
+    "encoder_channels",
+    "pool_grid",
+    "camera_features",
+    "hidden_dim",
+    "use_state",
+    "head",
+    "components",
+    "init_action",
+    "init_spread",
+    "init_scale",
+    "min_scale",
+)
+"""The :class:`DrivingNetConfig` fields a LeRobot config sets as its own. The others come from
+LeRobot's fields (``frames``: ``n_obs_steps``, ``chunk``: ``chunk_size``, ``cameras`` and
+``state_dim``: the input features) or belong to PPO's training-only heads (``critic_inputs``,
+``aux_outputs``)."""
+
+
+def _network_fields() -> type:
+    """A dataclass of :data:`NETWORK_FIELDS` with :class:`DrivingNetConfig`'s types and
+    defaults, so the policy config follows the network's without a copy."""
+    types = typing.get_type_hints(DrivingNetConfig)
+    defaults = DrivingNetConfig()
+    fields = [
+        (name, types[name], field(default=getattr(defaults, name))) for name in NETWORK_FIELDS
+    ]
+    return dataclasses.make_dataclass("DrivingNetFields", fields)
+
+
+DrivingNetFields = _network_fields()
 
 
 def _identity_mapping() -> dict[str, NormalizationMode]:
@@ -39,33 +75,38 @@ def _identity_mapping() -> dict[str, NormalizationMode]:
 
 @PreTrainedConfig.register_subclass(POLICY_TYPE)
 @dataclass
-class OasisConfig(PreTrainedConfig):
+class OasisConfig(PreTrainedConfig, DrivingNetFields):
     """Configuration of :class:`~lerobot_policy_oasis.modeling_oasis.OasisPolicy`.
 
-    Architecture fields mirror :class:`oasis_torchrl.models.DrivingNetConfig`
+    The network's fields (:data:`NETWORK_FIELDS`: ``image_size``, ``shared_encoder``,
+    ``encoder_channels``, ``pool_grid``, ``camera_features``, ``hidden_dim``, ``use_state``,
+    ``head``, ``components``, ``init_action``, ``init_spread``, ``init_scale``, ``min_scale``)
+    are :class:`oasis_torchrl.models.DrivingNetConfig`'s, with its types, defaults and meaning
     (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
+    ``image_size`` is also the size the preprocessor resizes frames to.
 
     Args:
         n_obs_steps: consecutive frames per camera the network sees (its ``frames``).
         chunk_size: actions predicted per call.
         n_action_steps: actions of each chunk executed before predicting again.
-        image_size: ``(height, width)`` images are resized to in the preprocessor.
-        shared_encoder: one CNN for all cameras, or one per camera.
-        encoder_channels, pool_grid, camera_features, hidden_dim: network sizes.
-        use_state: feed ``observation.state`` (the previous action) to the network; see
-            ``DrivingNetConfig.use_state`` (off in :class:`~oasis_torchrl.config.BCConfig`: the
-            copycat shortcut).
-        loss: behaviour-cloning loss on the chunk, ``"l1"`` or ``"mse"``.
-        action_loss_weights: weight of the throttle and steering errors in the loss. Actions
-            are not normalised (see above), so with equal weights the loss follows the dimension
-            that varies most: in autopilot demonstrations throttle (std ~0.30) drowns steering
-            (std ~0.055), whose rare lane changes are what avoids obstacles.
+        loss: behaviour-cloning loss on the chunk: ``"nll"`` (the negative log-likelihood of
+            the demonstrated chunk under the network's chunk distribution, per action number:
+            with the mixture head each manoeuvre gets its own component and the clone commits
+            to one; it also fits the distribution's scale), ``"l1"`` or ``"mse"`` (regression of
+            the deterministic chunk, ``action_loss_weights`` weighted).
+        action_loss_weights: weight of the throttle and steering errors of ``"l1"`` and
+            ``"mse"``. Actions are not normalised (see above), so with equal weights the loss
+            follows the dimension that varies most: in autopilot demonstrations throttle (std
+            ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
+            obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
 
     Example:
         >>> config = OasisConfig(device="cpu")
         >>> config.type, config.observation_delta_indices, config.action_delta_indices
         ('oasis', [-1, 0], [0, 1, 2, 3])
+        >>> config.head == DrivingNetConfig().head
+        True
     """
 
     n_obs_steps: int = 2
@@ -73,15 +114,7 @@ class OasisConfig(PreTrainedConfig):
     n_action_steps: int = 4
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=_identity_mapping)
 
-    image_size: tuple[int, int] = (64, 96)
-    shared_encoder: bool = True
-    encoder_channels: tuple[int, int, int] = (24, 48, 64)
-    pool_grid: tuple[int, int] = (4, 6)
-    camera_features: int = 128
-    hidden_dim: int = 256
-    use_state: bool = True
-
-    loss: str = "l1"
+    loss: str = "nll"
     action_loss_weights: tuple[float, float] = (1.0, 1.0)
     optimizer_lr: float = 1e-3
     optimizer_weight_decay: float = 1e-4
@@ -99,8 +132,8 @@ class OasisConfig(PreTrainedConfig):
                 f"OasisConfig.n_action_steps must be in [1, chunk_size={self.chunk_size}], "
                 f"got {self.n_action_steps}"
             )
-        if self.loss not in ("l1", "mse"):
-            raise ValueError(f"OasisConfig.loss must be 'l1' or 'mse', got {self.loss!r}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"OasisConfig.loss must be one of {LOSSES}, got {self.loss!r}")
         weights = tuple(self.action_loss_weights)
         if len(weights) != ACTION_DIM or min(weights) < 0 or max(weights) == 0:
             raise ValueError(
@@ -119,19 +152,15 @@ class OasisConfig(PreTrainedConfig):
     def net_config(self) -> DrivingNetConfig:
         """The :class:`DrivingNetConfig` of this policy (needs the input features set)."""
         self.validate_features()
-        return DrivingNetConfig(
-            cameras=self.cameras,
-            image_size=tuple(self.image_size),
-            frames=self.n_obs_steps,
-            shared_encoder=self.shared_encoder,
-            encoder_channels=tuple(self.encoder_channels),
-            pool_grid=tuple(self.pool_grid),
-            camera_features=self.camera_features,
-            state_dim=self.robot_state_feature.shape[0],
-            use_state=self.use_state,
-            hidden_dim=self.hidden_dim,
-            chunk=self.chunk_size,
-            action_dim=ACTION_DIM,
+        return DrivingNetConfig.from_dict(
+            {
+                **{name: getattr(self, name) for name in NETWORK_FIELDS},
+                "cameras": self.cameras,
+                "frames": self.n_obs_steps,
+                "state_dim": self.robot_state_feature.shape[0],
+                "chunk": self.chunk_size,
+                "action_dim": ACTION_DIM,
+            }
         )
 
     @classmethod
@@ -139,9 +168,10 @@ class OasisConfig(PreTrainedConfig):
         """The policy config of a network (e.g. one trained with PPO), features included.
 
         Example:
-            >>> config = OasisConfig.from_net_config(DrivingNetConfig(image_size=(32, 48)))
-            >>> config.net_config().image_size, config.cameras[0]
-            ((32, 48), 'left_forward')
+            >>> net = DrivingNetConfig(image_size=(32, 48), head="tanh_normal")
+            >>> config = OasisConfig.from_net_config(net)
+            >>> config.net_config() == net, config.cameras[0]
+            (True, 'left_forward')
         """
         if net.action_dim != ACTION_DIM:
             raise ValueError(f"the network's action_dim must be {ACTION_DIM}, got {net.action_dim}")
@@ -157,13 +187,7 @@ class OasisConfig(PreTrainedConfig):
             n_obs_steps=net.frames,
             chunk_size=net.chunk,
             n_action_steps=net.chunk,
-            image_size=net.image_size,
-            shared_encoder=net.shared_encoder,
-            encoder_channels=net.encoder_channels,
-            pool_grid=net.pool_grid,
-            camera_features=net.camera_features,
-            hidden_dim=net.hidden_dim,
-            use_state=net.use_state,
+            **{name: getattr(net, name) for name in NETWORK_FIELDS},
         )
 
     def validate_features(self) -> None:

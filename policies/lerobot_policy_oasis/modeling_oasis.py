@@ -1,10 +1,12 @@
 """The oasis driving policy as a LeRobot ``PreTrainedPolicy`` (behaviour cloning).
 
 The network is :class:`oasis_torchrl.models.DrivingNet`, the one TorchRL PPO trains; this class
-only adapts LeRobot batches to it: ``forward`` returns the behaviour-cloning loss of the
-deterministic chunk ``tanh(loc)`` against the next ``chunk_size`` actions (padded actions past
-an episode's end are masked out), ``predict_action_chunk`` returns that chunk and
-``select_action`` serves it one action at a time from a queue.
+only adapts LeRobot batches to it: ``forward`` returns the behaviour-cloning loss against the
+next ``chunk_size`` actions (padded actions past an episode's end are masked out): by default
+their negative log-likelihood under the network's chunk distribution (a mixture: the clone keeps
+each manoeuvre and commits to one), or a regression of the deterministic chunk;
+``predict_action_chunk`` returns the chunk the policy commits to and ``select_action`` serves it
+one action at a time from a queue.
 
 Batches carry ``n_obs_steps`` frames per camera (``[B, n_obs_steps, 3, H, W]``, LeRobot's
 observation delta indices) and states ``[B, n_obs_steps, 2]`` (the last one is used).
@@ -66,9 +68,12 @@ class OasisPolicy(PreTrainedPolicy):
         self._history: dict[str, deque[Tensor]] = {}
 
     def get_optim_params(self) -> Iterator[nn.Parameter]:
-        """The parameters behaviour cloning trains: the encoder and the actor."""
+        """The parameters behaviour cloning trains: the encoder and the actor, and with the
+        likelihood loss the distribution's scale."""
         yield from self.model.encoder.parameters()
         yield from self.model.actor.parameters()
+        if self.config.loss == "nll":
+            yield self.model.log_scale
 
     def reset(self) -> None:
         """Drop queued actions and past observations (call at every episode start)."""
@@ -80,10 +85,10 @@ class OasisPolicy(PreTrainedPolicy):
             raise KeyError(f"the oasis policy needs batch[{key!r}]; the batch has {sorted(batch)}")
         return batch[key]
 
-    def _chunk(self, batch: dict[str, Any]) -> Tensor:
+    def _features(self, batch: dict[str, Any]) -> Tensor:
         images = [self._get(batch, key) for key in self._image_keys]
         state = self._get(batch, OBS_STATE)
-        return self.model(images, state[:, -1] if state.dim() == 3 else state)
+        return self.model.features(images, state[:, -1] if state.dim() == 3 else state)
 
     def _remember(self, observation: dict[str, Tensor]) -> dict[str, Tensor]:
         """Add one observation to the history; the last ``n_obs_steps``, stacked on dim 1."""
@@ -99,8 +104,9 @@ class OasisPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
-        """The chunk ``[B, chunk_size, 2]`` for a batch of (preprocessed) observations."""
-        return self._chunk(batch)
+        """The chunk ``[B, chunk_size, 2]`` the policy commits to for a batch of
+        (preprocessed) observations."""
+        return self.model.deterministic_chunk(self._features(batch))
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs: Any) -> Tensor:
@@ -115,25 +121,32 @@ class OasisPolicy(PreTrainedPolicy):
     def forward(
         self, batch: dict[str, Tensor], reduction: str = "mean"
     ) -> tuple[Tensor, dict[str, float]]:
-        """Behaviour-cloning loss of the chunk vs ``batch["action"]`` ``[B, chunk_size, 2]``.
+        """Behaviour-cloning loss of the chunk vs ``batch["action"]`` ``[B, chunk_size, 2]``
+        (``config.loss``), per action (padded actions past an episode's end left out).
 
         ``reduction="none"`` returns the per-sample loss ``[B]`` (LeRobot's weighted BC).
         """
         if reduction not in ("mean", "none"):
             raise ValueError(f"reduction must be 'mean' or 'none', got {reduction!r}")
         target = self._get(batch, ACTION)
-        predicted = self._chunk(batch)
-        if target.shape != predicted.shape:
+        expected = (target.shape[0], self.config.chunk_size, self.model.config.action_dim)
+        if tuple(target.shape) != expected:
             raise ValueError(
                 f"batch[{ACTION!r}] must be [B, {self.config.chunk_size}, 2] (set the dataset's "
                 f"delta timestamps from config.action_delta_indices), got {list(target.shape)}"
             )
-        error = predicted - target
-        error = error.abs() if self.config.loss == "l1" else error.square()
         pad = batch.get(ACTION_IS_PAD)
-        valid = torch.ones_like(error[..., 0]) if pad is None else (~pad).to(error.dtype)
-        weights = error.new_tensor(self.config.action_loss_weights)
-        weighted = (error * weights).sum(-1) / weights.sum()
-        per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+        valid = torch.ones_like(target[..., 0]) if pad is None else (~pad).to(target.dtype)
+        features = self._features(batch)
+        if self.config.loss == "nll":
+            log_likelihood = self.model.chunk_log_likelihood(features, target, valid.bool())
+            numbers = valid.sum(-1).clamp_min(1.0) * target.shape[-1]
+            per_sample = -log_likelihood / numbers
+        else:
+            error = self.model.deterministic_chunk(features) - target
+            error = error.abs() if self.config.loss == "l1" else error.square()
+            weights = error.new_tensor(self.config.action_loss_weights)
+            weighted = (error * weights).sum(-1) / weights.sum()
+            per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
         loss = per_sample if reduction == "none" else per_sample.mean()
         return loss, {f"{self.config.loss}_loss": per_sample.mean().item()}

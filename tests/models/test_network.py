@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -13,7 +15,8 @@ from oasis_torchrl.models import (
     MultiCameraEncoder,
     make_actor_critic,
 )
-from oasis_torchrl.models.network import LOC_BOUND
+from oasis_torchrl.models.config import HEADS
+from oasis_torchrl.models.network import LOC_BOUND, TARGET_BOUND
 
 SIZE = (32, 48)
 
@@ -110,9 +113,10 @@ def test_the_network_sees_motion_between_frames() -> None:
         net([still[:1]] * 3, state)
 
 
-def test_deterministic_actor_is_the_bc_chunk() -> None:
+@pytest.mark.parametrize("head", HEADS)
+def test_deterministic_actor_is_the_bc_chunk(head: str) -> None:
     torch.manual_seed(0)
-    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE)))
+    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE, head=head)))
     td = _pixels(net, 3)
     policy = make_actor_critic(net).policy
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
@@ -130,37 +134,71 @@ def test_float_images_work_for_a_one_frame_network() -> None:
     assert make_actor_critic(net, image_key="images").policy(td)["action"].shape == (2, 4, 2)
 
 
-def test_stochastic_actor_samples_in_bounds_with_finite_log_prob() -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_scale=2.0))
+@pytest.mark.parametrize("head", HEADS)
+def test_stochastic_actor_samples_in_bounds_with_finite_log_prob(head: str) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, head=head, init_scale=(2.0, 0.5)))
     modules = make_actor_critic(net)
     td = modules.value(modules.policy(_pixels(net, 64)))
     assert td["action"].shape == (64, 4, 2)
     assert td["action"].abs().max() <= 1.0
     assert torch.isfinite(td["action_log_prob"]).all() and td["action_log_prob"].shape == (64,)
     assert td["state_value"].shape == (64, 1)
-    assert td["scale"].flatten().unique().tolist() == pytest.approx([2.0])
+    assert td["scale"][..., 0].unique().tolist() == pytest.approx([2.0])  # throttle
+    assert td["scale"][..., 1].unique().tolist() == pytest.approx([0.5])  # steering
+    components = {"tanh_normal": (), "mixture": (3,)}[head]
+    assert td["loc"].shape == (64, *components, 4, 2)
+    dist = modules.policy.get_dist(td)
+    torch.testing.assert_close(dist.log_prob(td["action"]), td["action_log_prob"])
 
 
-@pytest.mark.parametrize("init_action", [(0.5, 0.0), (-0.3, 0.99)])
-def test_a_fresh_actor_starts_at_its_init_action(init_action: tuple[float, float]) -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_action=init_action))
+@pytest.mark.parametrize("head", HEADS)
+@pytest.mark.parametrize("init_action", [(0.5, 0.0), (-0.3, 0.69)])
+def test_a_fresh_actor_starts_at_its_init_action(
+    init_action: tuple[float, float], head: str
+) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, init_action=init_action, head=head))
     chunk = net(_frames((16,)), torch.rand(16, 2))
     expected = torch.tensor(init_action).expand(16, 4, 2)
     torch.testing.assert_close(chunk, expected, atol=0.02, rtol=0)
 
 
-@pytest.mark.parametrize("init_action", [(0.5,), (0.0, 1.0), (-0.995, 0.0)])
-def test_init_action_must_fit_the_actions(init_action: tuple[float, ...]) -> None:
-    with pytest.raises(ValueError, match=r"init_action needs 2 values in \[-0.99, 0.99\]"):
-        DrivingNetConfig(init_action=init_action)
+def test_a_fresh_mixture_spreads_its_components_around_the_init_action() -> None:
+    config = DrivingNetConfig(image_size=SIZE, init_action=(0.5, 0.1), init_spread=(0.2, 0.3))
+    params = DrivingNet(config).action_params(torch.rand(16, config.features_dim))
+    weights = params["logits"].softmax(-1)
+    expected = torch.tensor([1.0, math.exp(2.0), 1.0]) / (2.0 + math.exp(2.0))
+    torch.testing.assert_close(weights, expected.expand(16, 3), atol=0.01, rtol=0)
+    means = torch.tanh(params["loc"]).mean((0, 2))  # [component, action number]
+    spread = torch.tensor([[0.3, -0.2], [0.5, 0.1], [0.7, 0.4]])
+    torch.testing.assert_close(means, spread, atol=0.02, rtol=0)
+
+
+@pytest.mark.parametrize(
+    ("init_action", "init_spread", "message"),
+    [
+        ((0.5,), (0.0, 0.3), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((0.0, 1.0), (0.0, 0.0), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((-0.995, 0.0), (0.0, 0.3), r"init_action needs 2 values in \[-0.99, 0.99\]"),
+        ((0.0, 0.8), (0.0, 0.3), r"init_spread needs 2 values >= 0 that keep"),
+        ((0.0, 0.0), (0.3,), r"init_spread needs 2 values >= 0 that keep"),
+    ],
+)
+def test_init_action_must_fit_the_actions(
+    init_action: tuple[float, ...], init_spread: tuple[float, ...], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        DrivingNetConfig(init_action=init_action, init_spread=init_spread)
 
 
 def test_set_scale_and_gradients_reach_the_shared_encoder() -> None:
     net = DrivingNet(DrivingNetConfig(image_size=SIZE))
     net.set_scale(0.2)
-    assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.2] * 8)
-    with pytest.raises(ValueError, match="scale must be positive"):
-        net.set_scale(0.0)
+    assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.2] * 24)
+    net.set_scale([0.3, 0.05])
+    assert net.log_scale.exp()[..., 1].flatten().tolist() == pytest.approx([0.05] * 12)
+    for bad in (0.0, [0.3, 0.05, 0.1]):
+        with pytest.raises(ValueError, match="scale must be positive, one value or 2"):
+            net.set_scale(bad)
     td = make_actor_critic(net).value(_pixels(net, 2))
     td["state_value"].sum().backward()
     assert net.encoder.convs[0].weight.grad.abs().sum() > 0
@@ -188,8 +226,64 @@ def test_privileged_critic_takes_extra_inputs_and_the_aux_head_predicts_them() -
     assert modules.value(modules.policy(td))["state_value"].shape == (3, 1)
 
 
-def test_a_saturated_clone_keeps_ppo_ratios_finite() -> None:
-    net = DrivingNet(DrivingNetConfig(image_size=SIZE))
+def test_the_mixture_commits_to_the_most_probable_component() -> None:
+    torch.manual_seed(0)
+    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE, components=3)))
+    features = torch.rand(6, net.config.features_dim)
+    params = net.action_params(features)
+    chosen = params["logits"].argmax(-1)
+    expected = torch.tanh(params["loc"][torch.arange(6), chosen])
+    torch.testing.assert_close(net.deterministic_chunk(features), expected)
+
+
+@pytest.mark.parametrize("head", HEADS)
+def test_the_chunk_likelihood_is_the_distributions_density(head: str) -> None:
+    torch.manual_seed(0)
+    net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE, head=head)))
+    features = torch.rand(5, net.config.features_dim)
+    target = torch.rand(5, 4, 2) * 2 - 1
+    target[0, 0, 0] = 1.0  # full throttle: scored at the bound the head can reach
+    expected = net.distribution(features).log_prob(target.clamp(-TARGET_BOUND, TARGET_BOUND))
+    torch.testing.assert_close(net.chunk_log_likelihood(features, target), expected)
+    observed = torch.ones(5, 4, dtype=torch.bool)
+    observed[:, 3] = False  # the last action is past the episode's end: any value fits
+    shifted = target.clone()
+    shifted[:, 3] = 0.9
+    torch.testing.assert_close(
+        net.chunk_log_likelihood(features, target, observed),
+        net.chunk_log_likelihood(features, shifted, observed),
+    )
+
+
+def _clone(head: str, targets: torch.Tensor) -> torch.Tensor:
+    """Fit the head to ``targets`` [N, 4, 2] seen from one observation; its chunk for it."""
+    torch.manual_seed(0)
+    config = DrivingNetConfig(image_size=SIZE, head=head, camera_features=8, hidden_dim=32)
+    net = DrivingNet(config)
+    features = torch.rand(1, net.config.features_dim).expand(len(targets), -1)
+    optimizer = torch.optim.Adam([*net.actor.parameters(), net.log_scale], lr=1e-2)
+    for _ in range(300):
+        loss = -net.chunk_log_likelihood(features, targets).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    return net.deterministic_chunk(features[:1])[0].detach()
+
+
+def test_behaviour_cloning_by_likelihood_commits_to_one_side() -> None:
+    # The same view, demonstrated half with a left and half with a right lane change.
+    targets = torch.zeros(64, 4, 2)
+    targets[:, :, 0] = 0.6
+    targets[:32, :, 1], targets[32:, :, 1] = -0.3, 0.3
+    mixture, unimodal = _clone("mixture", targets), _clone("tanh_normal", targets)
+    torch.testing.assert_close(mixture[:, 0], torch.full((4,), 0.6), atol=0.03, rtol=0)
+    assert (mixture[:, 1].abs() - 0.3).abs().max() < 0.03  # steers as one demonstration did
+    assert unimodal[:, 1].abs().max() < 0.05  # the median of the two: straight ahead
+
+
+@pytest.mark.parametrize("head", HEADS)
+def test_a_saturated_clone_keeps_ppo_ratios_finite(head: str) -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, head=head))
     net.set_scale(0.2)
     modules = make_actor_critic(net)
     with torch.no_grad():
@@ -223,3 +317,19 @@ def test_config_round_trip_and_validation() -> None:
         DrivingNetConfig(encoder_channels=(8, 0, 8))
     with pytest.raises(ValueError, match="duplicates"):
         DrivingNetConfig(cameras=("front", "front"))
+    with pytest.raises(ValueError, match=r"head must be one of \('tanh_normal', 'mixture'\)"):
+        DrivingNetConfig(head="gmm")
+    with pytest.raises(ValueError, match=r"init_scale needs 2 values \(one per action number\)"):
+        DrivingNetConfig(init_scale=(0.5,))
+    with pytest.raises(ValueError, match="components must be positive"):
+        DrivingNetConfig(components=0)
+
+
+def test_networks_saved_before_the_mixture_head_load() -> None:
+    saved = DrivingNet(DrivingNetConfig(image_size=SIZE, head="tanh_normal", init_scale=(0.5, 0.5)))
+    values = saved.config.to_dict()
+    del values["head"], values["components"]
+    values["init_scale"] = 0.5
+    net = DrivingNet(DrivingNetConfig.from_dict(values))
+    net.load_state_dict(saved.state_dict())
+    assert net.config == saved.config

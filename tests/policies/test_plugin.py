@@ -99,22 +99,41 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
     )
 
 
-def test_forward_masks_padded_actions() -> None:
-    policy = _policy()
+@pytest.mark.parametrize("loss", ["l1", "nll"])
+def test_forward_masks_padded_actions(loss: str) -> None:
+    policy = _policy(loss=loss)
     batch = _stacked(_observation(seed=0), _observation(seed=1))
-    target = policy.predict_action_chunk(batch).clone()
-    batch["action"] = target.clone()
-    batch["action"][:, 2:] = 5.0  # wrong, but padding
+    batch["action"] = policy.predict_action_chunk(batch).clone()
     batch["action_is_pad"] = torch.tensor([[False, False, True, True]] * 2)
-    loss, info = policy.forward(batch)
-    assert loss.item() == pytest.approx(0.0, abs=1e-6) and "l1_loss" in info
+    fitted, info = policy.forward(batch)
+    assert f"{loss}_loss" in info
+    batch["action"][:, 2:] = 0.9  # wrong, but padding
+    torch.testing.assert_close(policy.forward(batch)[0], fitted)
+    if loss == "l1":
+        assert fitted.item() == pytest.approx(0.0, abs=1e-6)
     batch["action_is_pad"][:, 2] = False
-    loss, _ = policy.forward(batch)
-    assert loss.item() > 0.5
+    worse, _ = policy.forward(batch)
+    assert worse.item() > fitted.item() + 0.1
     per_sample, _ = policy.forward(batch, reduction="none")
     assert per_sample.shape == (2,)
-    loss.backward()
+    worse.backward()
     assert policy.model.encoder.convs[0].weight.grad is not None
+    # The likelihood fits the distribution's scale too; the regression leaves it alone.
+    trained = {id(parameter) for parameter in policy.get_optim_params()}
+    assert (id(policy.model.log_scale) in trained) == (loss == "nll")
+
+
+def test_the_policy_config_is_the_networks() -> None:
+    config = _config(head="tanh_normal", init_scale=(0.4, 0.2), hidden_dim=32)
+    net = config.net_config()
+    assert (net.head, net.init_scale, net.hidden_dim, net.frames) == (
+        "tanh_normal",
+        (0.4, 0.2),
+        32,
+        2,
+    )
+    assert OasisConfig.from_net_config(net).net_config() == net
+    assert OasisPolicy(config).model.log_scale.shape == (4, 2)  # the unimodal head
 
 
 def test_action_loss_weights_pick_the_dimensions() -> None:
@@ -122,10 +141,10 @@ def test_action_loss_weights_pick_the_dimensions() -> None:
     target = _policy().predict_action_chunk(batch)
     batch["action"] = target.clone()
     batch["action"][..., 0] += 0.5  # throttle wrong by 0.5, steering right
-    assert _policy().forward(batch)[0].item() == pytest.approx(0.25, abs=1e-5)
-    steering_only = _policy(action_loss_weights=(0.0, 1.0))
+    assert _policy(loss="l1").forward(batch)[0].item() == pytest.approx(0.25, abs=1e-5)
+    steering_only = _policy(loss="l1", action_loss_weights=(0.0, 1.0))
     assert steering_only.forward(batch)[0].item() == pytest.approx(0.0, abs=1e-6)
-    throttle_heavy = _policy(action_loss_weights=(3.0, 1.0))
+    throttle_heavy = _policy(loss="l1", action_loss_weights=(3.0, 1.0))
     assert throttle_heavy.forward(batch)[0].item() == pytest.approx(0.375, abs=1e-5)
 
 
@@ -136,6 +155,10 @@ def test_bad_features_are_named() -> None:
         OasisConfig(device="cpu", n_action_steps=5)
     with pytest.raises(ValueError, match="action_loss_weights must be two non-negative"):
         OasisConfig(device="cpu", action_loss_weights=(0.0, 0.0))
+    with pytest.raises(ValueError, match=r"loss must be one of \('nll', 'l1', 'mse'\)"):
+        OasisConfig(device="cpu", loss="huber")
+    with pytest.raises(ValueError, match="head must be one of"):
+        _config(head="gmm").net_config()
 
 
 def _record(root: Path) -> None:
@@ -169,6 +192,7 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
         "--dataset.repo_id=local/drives",
         f"--dataset.root={root}",
         "--policy.image_size=[32,48]",
+        "--policy.components=2",  # a network field, taken from DrivingNetConfig
         "--steps=2",
         "--batch_size=4",
         "--num_workers=0",
@@ -180,5 +204,5 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr[-3000:]
     folder = output / "checkpoints" / "last" / "pretrained_model"
     loaded = OasisPolicy.from_pretrained(folder)
-    assert loaded.config.image_size == SIZE
+    assert loaded.config.image_size == SIZE and loaded.model.config.components == 2
     assert (folder / "policy_preprocessor.json").exists()

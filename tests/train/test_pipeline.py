@@ -36,11 +36,16 @@ TINY_PIPELINE = [
 
 def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE]) == 0
-    printed = json.loads(capsys.readouterr().out)
-    assert printed == json.loads((tmp_path / "summary.json").read_text())
-    paths = {name: Path(path) for name, path in printed["paths"].items()}
-    assert list(printed["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
-    assert set(printed["seconds"]) == {"record", "bc", "ppo", "eval"}
+    table = capsys.readouterr().out.splitlines()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    paths = {name: Path(path) for name, path in summary["paths"].items()}
+    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    assert len(summary["evaluations"]["bc"]["per_episode"]) == 1
+    assert set(summary["seconds"]) == {"record", "bc", "ppo", "eval"}
+    assert table[0].startswith("policy") and table[0].endswith("vs best constant")
+    assert [line.split()[0] for line in table[1:4]] == list(summary["evaluations"])
+    assert table[1].endswith("1.00x")  # the constant is the best constant
+    assert str(paths["plot"]) in table[-1] and paths["plot"].stat().st_size > 0
     assert paths["bc_policy"] == tmp_path / "bc" / "round_1" / "policy"
     dataset = LeRobotDataset("local/demos", root=paths["dataset"], video_backend="pyav")
     assert dataset.num_episodes == 4  # 2 demonstrations + 2 DAgger episodes

@@ -65,10 +65,12 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     trainer.cfg.optim.target_kl = 0.05
     assert trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.06)}))
     assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.04)}))
-    actor_group, critic_group = trainer.optimizer.param_groups  # annealed alike, 5x apart
+    actor_group, critic_group, scale_group = trainer.optimizer.param_groups  # annealed alike
     assert critic_group["lr"] == pytest.approx(5 * actor_group["lr"])
+    assert scale_group["lr"] == pytest.approx(15 * actor_group["lr"])  # optim.scale_lr 3e-3
     heads = [*result.net.critic.parameters(), *result.net.aux.parameters()]
     assert {id(parameter) for parameter in critic_group["params"]} == {id(p) for p in heads}
+    assert scale_group["params"] == [result.net.log_scale]
     scalars = tmp_path / "logs" / "ppo" / "scalars"
     for name in ("loss_objective", "loss_critic", "loss_entropy", "loss_aux"):
         values = _csv_values(scalars / "loss" / f"{name}.csv")
@@ -77,6 +79,9 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     for name in ("collect_s", "update_s", "env_steps_per_s"):
         values = _csv_values(scalars / "time" / f"{name}.csv")
         assert values and all(v > 0 for v in values), name
+    throttle = _csv_values(scalars / "policy" / "scale_throttle.csv")
+    steering = _csv_values(scalars / "policy" / "scale_steering.csv")
+    assert throttle[0] == pytest.approx(0.5, rel=0.05) and steering[0] == pytest.approx(0.1, 0.05)
 
     state = load_checkpoint(result.checkpoint)
     assert (state["iteration"], state["frames"]) == (1, 16)
@@ -101,11 +106,20 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
 
 
 def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
-    cfg = _ppo_config(tmp_path, 48, "eval.selection_seeds=[5]", "eval.max_steps=4")
+    cfg = _ppo_config(
+        tmp_path,
+        48,
+        "eval.selection_seeds=[5]",
+        "eval.max_steps=4",
+        "checkpoint.keep_evaluated=true",
+    )
     result = PPOTrainer(cfg).run()
 
     *periodic, final = result.history
     assert [entry["seeds"] for entry in periodic] == [[5]] * 3
+    assert [episode["episode_seed"] for episode in final["per_episode"]] == [
+        episode["episode_seed"] for episode in result.final_eval.to_dict()["per_episode"]
+    ]
     assert final["seeds"] == [1000] and final["frames"] == 48
     assert [entry["policy_frames"] for entry in periodic] == [16, 32, 48]
     distances = [entry["mean_distance"] for entry in periodic]
@@ -122,6 +136,12 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
     )
     latest = load_checkpoint(tmp_path / "checkpoints" / "latest.pt")  # the training state
     assert (latest["frames"], latest["best_selection"]) == (48, max(distances))
+    for entry in periodic:  # every evaluated policy kept, e.g. to choose within a smaller budget
+        kept = load_checkpoint(tmp_path / "checkpoints" / f"frames_{entry['frames']}.pt")
+        assert kept["evaluation"]["mean_distance"] == entry["mean_distance"]
+    torch.testing.assert_close(
+        kept["net_state"]["actor.2.bias"], latest["net_state"]["actor.2.bias"]
+    )
 
     with pytest.raises(ValueError, match=r"eval\.selection_seeds must be null or a non-empty"):
         _ppo_config(tmp_path, 48, "eval.selection_seeds=[]")
@@ -131,12 +151,15 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
 
 
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
-    source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=1.5))
+    source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=(1.5, 0.3)))
     folder = export_lerobot(source, tmp_path / "bc_policy")
-    cfg = load_config("ppo", [*TINY_ENV, f"init_from={folder}", "warm_start_scale=0.25"])
+    cfg = load_config("ppo", [*TINY_ENV, f"init_from={folder}", "warm_start_scale=[0.25,0.05]"])
     net = build_net(cfg, CAMERAS)
     torch.testing.assert_close(net.encoder.convs[0].weight, source.encoder.convs[0].weight)
-    assert net.log_scale.exp().flatten().tolist() == pytest.approx([0.25] * 8)
+    assert net.log_scale.exp()[..., 0].flatten().tolist() == pytest.approx([0.25] * 12)
+    assert net.log_scale.exp()[..., 1].flatten().tolist() == pytest.approx([0.05] * 12)
+    kept = build_net(OmegaConf.merge(cfg, {"warm_start_scale": None}), CAMERAS)
+    torch.testing.assert_close(kept.log_scale, source.log_scale)  # null: the clone's own scale
     privileged = build_net(OmegaConf.merge(cfg, {"privileged_critic": True}), CAMERAS)
     assert privileged.critic[0].in_features == source.critic[0].in_features + len(PRIVILEGED_FIELDS)
     torch.testing.assert_close(privileged.actor[0].weight, source.actor[0].weight)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -11,6 +13,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.models.config import HEADS, TANH_NORMAL
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
 from .conftest import TINY_ENV
@@ -43,10 +46,14 @@ def _gradients(net: DrivingNet, loss: torch.Tensor) -> dict[str, torch.Tensor]:
     return {name: p.grad.clone() for name, p in net.named_parameters() if p.grad is not None}
 
 
-def test_matches_clip_ppo_loss_over_the_full_operators(rollout: TensorDict) -> None:
+@pytest.mark.parametrize("head", HEADS)
+def test_matches_clip_ppo_loss_over_the_full_operators(rollout: TensorDict, head: str) -> None:
     torch.manual_seed(0)
-    net = DrivingNet(ASYMMETRIC)
+    net = DrivingNet(dataclasses.replace(ASYMMETRIC, head=head))
     modules = make_actor_critic(net)
+    if head == TANH_NORMAL:  # the rollout's actions and log-probabilities are the mixture's
+        with torch.no_grad():
+            rollout = modules.policy(rollout.clone())
     terms = ("loss_objective", "loss_critic", "loss_entropy")
 
     reference = ClipPPOLoss(modules.policy, modules.value, **PPO_KWARGS)(rollout.clone())

@@ -1,0 +1,156 @@
+"""A mixture of tanh-squashed normals over an action chunk, for TorchRL's ProbabilisticActor.
+
+Why a mixture: the autopilot's lane changes go left or right for reasons the cameras often
+cannot tell, so a unimodal head fitted to them answers their median, straight ahead, and never
+steers. A mixture keeps each manoeuvre as its own component; the deterministic action is the
+most probable component's chunk, so the policy commits to one side.
+
+The components share the tanh, so the mixture of tanh-normals is the tanh of a mixture of
+normals: the log-probability is exact (a log-sum-exp over components of the normal densities
+of ``atanh(action)``, minus the tanh's log-Jacobian). The entropy has no closed form; it is
+estimated with reparameterised samples of every component, weighted by the component
+probabilities, so it is unbiased and its gradient reaches the weights, locations and scales
+(a plain sample-based estimate would give the weights no gradient).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import distributions as D
+from torch.distributions import constraints
+
+ACTION_BOUND = 1.0 - 1e-6
+"""Actions are clamped to this before ``atanh`` (float32's tanh reaches 1.0 near 9)."""
+
+
+def tanh_log_jacobian(pre_tanh: torch.Tensor) -> torch.Tensor:
+    """``log(1 - tanh(u)^2)`` elementwise, computed from ``u`` (exact where tanh saturates).
+
+    Example:
+        >>> u = torch.tensor([0.0, 2.0])
+        >>> torch.allclose(tanh_log_jacobian(u), torch.log1p(-torch.tanh(u) ** 2))
+        True
+    """
+    return 2.0 * (math.log(2.0) - pre_tanh - torch.nn.functional.softplus(-2.0 * pre_tanh))
+
+
+class TanhNormalMixture(D.Distribution):
+    """``tanh`` of a mixture of ``K`` diagonal normals over an event of ``event_dims`` dims.
+
+    Args:
+        logits: component log-weights ``[*B, K]`` (unnormalised).
+        loc: component locations before the tanh, ``[*B, K, *E]``.
+        scale: component scales before the tanh, broadcastable to ``loc``.
+        event_dims: number of trailing dimensions of an action (2 for a ``[4, 2]`` chunk).
+        entropy_samples: reparameterised samples per component of the entropy estimate.
+
+    Example:
+        >>> logits = torch.tensor([[0.0, 0.0]])
+        >>> loc = torch.tensor([[[-1.0], [1.0]]])  # two components of one number
+        >>> dist = TanhNormalMixture(logits, loc, torch.full_like(loc, 0.1), event_dims=1)
+        >>> dist.sample((1000,)).sign().mean().abs().item() < 0.2  # both sides, half each
+        True
+        >>> dist.deterministic_sample  # the first of equally likely components
+        tensor([[-0.7616]])
+        >>> middle, committed = torch.tensor([[0.0]]), dist.deterministic_sample
+        >>> bool(dist.log_prob(middle) < dist.log_prob(committed))
+        True
+    """
+
+    arg_constraints = {
+        "logits": constraints.real_vector,
+        "loc": constraints.real,
+        "scale": constraints.positive,
+    }
+    has_rsample = False
+
+    def __init__(
+        self,
+        logits: torch.Tensor,
+        loc: torch.Tensor,
+        scale: torch.Tensor,
+        event_dims: int = 1,
+        entropy_samples: int = 4,
+    ) -> None:
+        batch_dims = logits.dim() - 1
+        if loc.dim() != batch_dims + 1 + event_dims or loc.shape[: batch_dims + 1] != logits.shape:
+            raise ValueError(
+                f"loc must be [*B, K, *event] for logits [*B, K] = {list(logits.shape)} and "
+                f"{event_dims} event dims, got {list(loc.shape)}"
+            )
+        self.logits = logits
+        self.loc = loc
+        self.scale = scale.expand_as(loc)
+        self.event_dims = event_dims
+        self.entropy_samples = entropy_samples
+        super().__init__(logits.shape[:-1], loc.shape[batch_dims + 1 :], validate_args=False)
+
+    @property
+    def support(self) -> constraints.Constraint:
+        return constraints.independent(constraints.interval(-1.0, 1.0), self.event_dims)
+
+    @property
+    def log_weights(self) -> torch.Tensor:
+        """Normalised component log-weights ``[*B, K]``."""
+        return torch.log_softmax(self.logits, dim=-1)
+
+    def _mixture_log_prob(
+        self, pre_tanh: torch.Tensor, observed: torch.Tensor | None
+    ) -> torch.Tensor:
+        """Log-density of the actions ``tanh(u)``, ``u`` ``[*S, *B, *E]``: the mixture of
+        normals at ``u`` minus the tanh's log-Jacobian, over the ``observed`` numbers."""
+        component = self.event_dims + 1  # where the component axis goes in [*S, *B, K, *E]
+        per_component = D.Normal(self.loc, self.scale).log_prob(pre_tanh.unsqueeze(-component))
+        jacobian = tanh_log_jacobian(pre_tanh)
+        if observed is not None:
+            per_component = per_component * observed.unsqueeze(-component)
+            jacobian = jacobian * observed
+        per_component = per_component.flatten(-self.event_dims).sum(-1)
+        mixture = torch.logsumexp(per_component + self.log_weights, dim=-1)
+        return mixture - jacobian.flatten(-self.event_dims).sum(-1)
+
+    def log_prob(self, value: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
+        """Exact log-density of actions ``[*S, *B, *E]`` in ``[-1, 1]`` -> ``[*S, *B]``.
+
+        ``observed`` (bool, broadcastable to ``value``) marks the action numbers that are
+        known; the others are marginalised out (e.g. a demonstration's actions past the end of
+        its episode): with diagonal components that is leaving them out of each component's
+        density.
+        """
+        pre_tanh = torch.atanh(value.clamp(-ACTION_BOUND, ACTION_BOUND))
+        return self._mixture_log_prob(pre_tanh, observed)
+
+    @torch.no_grad()
+    def sample(self, sample_shape: torch.Size | tuple[int, ...] = ()) -> torch.Tensor:
+        """Draw a component per sample, then its tanh-normal chunk."""
+        shape = torch.Size(sample_shape)
+        component = D.Categorical(logits=self.logits).sample(shape)
+        pre_tanh = self._component(self.loc, component) + self._component(
+            self.scale, component
+        ) * torch.randn(shape + self.batch_shape + self.event_shape, device=self.loc.device)
+        return torch.tanh(pre_tanh).clamp(-ACTION_BOUND, ACTION_BOUND)
+
+    def _component(self, values: torch.Tensor, component: torch.Tensor) -> torch.Tensor:
+        """``values`` ``[*B, K, *E]`` at ``component`` ``[*S, *B]`` -> ``[*S, *B, *E]``."""
+        index = component.reshape(*component.shape, 1, *([1] * self.event_dims))
+        index = index.expand(*component.shape, 1, *self.event_shape)
+        expanded = values.expand(*component.shape[: -len(self.batch_shape) or None], *values.shape)
+        return expanded.gather(len(component.shape), index).squeeze(len(component.shape))
+
+    @property
+    def deterministic_sample(self) -> torch.Tensor:
+        """The most probable component's chunk, ``tanh(loc)`` (the policy commits to it)."""
+        return torch.tanh(self._component(self.loc, self.logits.argmax(-1)))
+
+    def entropy(self) -> torch.Tensor:
+        """Unbiased estimate ``[*B]`` of the entropy ``-E[log p(a)]``: ``entropy_samples``
+        reparameterised draws of every component, weighted by its probability."""
+        noise = torch.randn(
+            (self.entropy_samples, *self.loc.shape), device=self.loc.device, dtype=self.loc.dtype
+        )
+        # [S, *B, K, *E] -> [K, S, *B, *E]: every component's draws, scored by the mixture
+        pre_tanh = (self.loc + self.scale * noise).movedim(-self.event_dims - 1, 0)
+        log_prob = self._mixture_log_prob(pre_tanh, None).mean(1)  # [K, *B]
+        return -(log_prob * self.log_weights.exp().movedim(-1, 0)).sum(0)

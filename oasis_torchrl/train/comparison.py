@@ -1,0 +1,165 @@
+"""The comparison a person reads at the end of a run: each evaluated policy's mean distance
+(with its standard error over episodes), collision rate, and ratios to the autopilot and to the
+best constant action, as a text table and as a matplotlib PNG.
+
+Evaluations are :func:`oasis_torchrl.train.evaluate.EvalReport.to_dict` dicts (aggregates and
+``per_episode`` results), keyed by policy name.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+AUTOPILOT_COLOR = "0.25"
+CONSTANT_COLOR = "0.65"
+LEARNED_COLOR = "tab:blue"
+
+
+@dataclass(frozen=True)
+class PolicyRow:
+    """One policy's line of the comparison.
+
+    Example:
+        >>> row = PolicyRow("bc", 200.0, 5.0, 0.25, 16, vs_autopilot=0.8, vs_constant=1.3)
+        >>> row.kind
+        'learned'
+    """
+
+    name: str
+    mean_distance: float
+    distance_stderr: float
+    collision_rate: float
+    episodes: int
+    vs_autopilot: float | None = None
+    vs_constant: float | None = None
+    kind: str = "learned"
+
+
+def distance_stderr(evaluation: Mapping[str, Any]) -> float:
+    """Standard error of the mean distance over the evaluation's episodes (NaN for fewer than
+    two).
+
+    Example:
+        >>> distance_stderr({"per_episode": [{"distance": 10.0}, {"distance": 30.0}]})
+        10.0
+    """
+    distances = [episode["distance"] for episode in evaluation.get("per_episode", [])]
+    if len(distances) < 2:
+        return math.nan
+    mean = sum(distances) / len(distances)
+    variance = sum((d - mean) ** 2 for d in distances) / (len(distances) - 1)
+    return math.sqrt(variance / len(distances))
+
+
+def comparison(
+    evaluations: Mapping[str, Mapping[str, Any]],
+    *,
+    autopilot: str | None,
+    constants: Sequence[str] = (),
+) -> list[PolicyRow]:
+    """The rows of ``evaluations``, in their order, with ratios to the ``autopilot`` entry and to
+    the furthest-driving of the ``constants`` entries (either may be absent: no ratio).
+
+    Example:
+        >>> evaluations = {
+        ...     "autopilot": {"mean_distance": 300.0, "collision_rate": 0.0, "episodes": 16},
+        ...     "constant": {"mean_distance": 150.0, "collision_rate": 0.9, "episodes": 16},
+        ...     "bc": {"mean_distance": 240.0, "collision_rate": 0.3, "episodes": 16}}
+        >>> rows = comparison(evaluations, autopilot="autopilot", constants=["constant"])
+        >>> [(row.name, row.vs_autopilot, row.vs_constant) for row in rows][-1]
+        ('bc', 0.8, 1.6)
+    """
+    expert = evaluations[autopilot]["mean_distance"] if autopilot in evaluations else None
+    present = [name for name in constants if name in evaluations]
+    best = max((evaluations[name]["mean_distance"] for name in present), default=None)
+    rows = []
+    for name, evaluation in evaluations.items():
+        distance = evaluation["mean_distance"]
+        kind = "autopilot" if name == autopilot else "constant" if name in present else "learned"
+        rows.append(
+            PolicyRow(
+                name,
+                distance,
+                distance_stderr(evaluation),
+                evaluation["collision_rate"],
+                int(evaluation["episodes"]),
+                None if not expert else distance / expert,
+                None if not best else distance / best,
+                kind,
+            )
+        )
+    return rows
+
+
+def format_table(rows: Sequence[PolicyRow]) -> str:
+    """A fixed-width text table of the rows.
+
+    Example:
+        >>> print(format_table([PolicyRow("bc", 240.0, 12.5, 0.25, 16, 0.8, 1.6)]))
+        policy  mean distance   collision rate  vs autopilot  vs best constant
+        bc      240.0 ± 12.5 m  0.25 (4/16)              80%             1.60x
+    """
+    header = ("policy", "mean distance", "collision rate", "vs autopilot", "vs best constant")
+    lines = [
+        (
+            row.name,
+            f"{row.mean_distance:.1f} ± {row.distance_stderr:.1f} m",
+            f"{row.collision_rate:.2f} ({round(row.collision_rate * row.episodes)}/{row.episodes})",
+            "" if row.vs_autopilot is None else f"{row.vs_autopilot:.0%}",
+            "" if row.vs_constant is None else f"{row.vs_constant:.2f}x",
+        )
+        for row in rows
+    ]
+    widths = [max(len(line[i]) for line in [header, *lines]) for i in range(len(header))]
+
+    def render(cells: Sequence[str]) -> str:
+        text = [cell.ljust(width) for cell, width in zip(cells[:3], widths, strict=False)]
+        text += [cell.rjust(width) for cell, width in zip(cells[3:], widths[3:], strict=True)]
+        return "  ".join(text).rstrip()
+
+    return "\n".join(render(line) for line in [header, *lines])
+
+
+def plot_comparison(rows: Sequence[PolicyRow], path: str | Path, title: str) -> Path:
+    """A horizontal bar per policy (mean distance, standard-error whiskers, collision rate
+    written beside it) as a PNG at ``path``.
+
+    Example:
+        >>> import tempfile
+        >>> rows = [PolicyRow("autopilot", 300.0, 2.0, 0.0, 16, kind="autopilot"),
+        ...         PolicyRow("bc", 240.0, 12.5, 0.25, 16)]
+        >>> plot_comparison(rows, Path(tempfile.mkdtemp()) / "c.png", "demo").stat().st_size > 0
+        True
+    """
+    from matplotlib.figure import Figure
+
+    colors = {"autopilot": AUTOPILOT_COLOR, "constant": CONSTANT_COLOR}
+    figure = Figure(figsize=(8, 1.2 + 0.6 * len(rows)), layout="constrained")
+    axes = figure.add_subplot()
+    positions = list(range(len(rows)))[::-1]  # the first row on top
+    axes.barh(
+        positions,
+        [row.mean_distance for row in rows],
+        xerr=[0.0 if math.isnan(row.distance_stderr) else row.distance_stderr for row in rows],
+        color=[colors.get(row.kind, LEARNED_COLOR) for row in rows],
+        capsize=3,
+    )
+    for position, row in zip(positions, rows, strict=True):
+        axes.annotate(
+            f" {row.mean_distance:.0f} m, collisions {row.collision_rate:.0%}",
+            (row.mean_distance + (row.distance_stderr if row.distance_stderr > 0 else 0), position),
+            va="center",
+            fontsize=9,
+        )
+    axes.set_yticks(positions, [row.name for row in rows])
+    axes.set_xlabel("mean distance before collision (m), ± standard error")
+    axes.set_xlim(0, 1.35 * max((row.mean_distance for row in rows), default=1.0))
+    axes.set_title(title)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=120)
+    return path
