@@ -6,7 +6,8 @@ grammar that names them (:func:`load_driver`).
   ``"expert_action"``.
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
-  checkpoint, or any TorchScript / ``torch.save``d module.
+  checkpoint, any TorchScript / ``torch.save``d module, or a policy served by a policy server
+  (``grpc://host:port``, :class:`~oasis_torchrl.serving.RemotePolicy`).
 - :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
   (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
@@ -27,10 +28,12 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from torchrl.data import Composite
 
-from oasis_torchrl.models import DrivingNet, make_actor_critic
+from oasis_torchrl.models import DrivingNet, make_actor_critic, observation_spec
 from oasis_torchrl.models.checkpoint import load_checkpoint, load_net, net_from_checkpoint
 from oasis_torchrl.protocol import CAMERAS, CHUNK
+from oasis_torchrl.serving.client import RemotePolicy, is_policy_url
 
 logger = logging.getLogger(__name__)
 
@@ -52,6 +55,9 @@ class Driver(ABC):
 
     image_size: tuple[int, int] | None = None
     """``(height, width)`` of the frames the driver looks at (None: it does not look)."""
+    observation_spec: Composite | None = None
+    """What the driver reads of one row (shapes without batch dimensions; None: undeclared).
+    A policy server describes its inputs with it."""
 
     def __init__(self, *, chunk_actions: bool = True) -> None:
         self.chunk_actions = chunk_actions
@@ -227,6 +233,8 @@ class PolicyDriver(Driver):
     Args:
         module: the policy.
         in_keys: inputs of a plain module.
+        image_size: see :attr:`Driver.image_size`.
+        observation_spec: see :attr:`Driver.observation_spec`.
         chunk_actions: see :class:`Driver`.
 
     Example:
@@ -245,22 +253,30 @@ class PolicyDriver(Driver):
         in_keys: Sequence[str | tuple[str, ...]] | None = None,
         *,
         image_size: tuple[int, int] | None = None,
+        observation_spec: Composite | None = None,
         chunk_actions: bool = True,
     ) -> None:
         super().__init__(chunk_actions=chunk_actions)
         self.module = module.eval()
         self.in_keys = list(in_keys) if in_keys is not None else None
         self.image_size = image_size
+        self.observation_spec = observation_spec
 
     @classmethod
     def of_network(cls, net: DrivingNet, **kwargs: object) -> PolicyDriver:
         """The deterministic actor of a driving network, at the network's image size.
 
         Example:
-            >>> PolicyDriver.of_network(DrivingNet()).image_size
-            (64, 96)
+            >>> driver = PolicyDriver.of_network(DrivingNet())
+            >>> driver.image_size, driver.observation_spec["state"].shape
+            ((64, 96), torch.Size([2]))
         """
-        return cls(make_actor_critic(net).policy, image_size=tuple(net.config.image_size), **kwargs)
+        return cls(
+            make_actor_critic(net).policy,
+            image_size=tuple(net.config.image_size),
+            observation_spec=observation_spec(net),
+            **kwargs,
+        )
 
     @classmethod
     def load(cls, path: str | Path, **kwargs: object) -> PolicyDriver:
@@ -275,6 +291,13 @@ class PolicyDriver(Driver):
         if payload is not None:
             return cls.of_network(net_from_checkpoint(payload), **kwargs)
         return cls(load_module(path), **kwargs)
+
+    @classmethod
+    def remote(cls, url: str, **kwargs: object) -> PolicyDriver:
+        """The policy a policy server serves (``grpc://host:port``, ``grpcs://`` with TLS; the
+        key from ``$OASIS_POLICY_API_KEY``), at its image size."""
+        policy = RemotePolicy(url)
+        return cls(policy, image_size=policy.image_size, **kwargs)
 
     def _inputs(self, td: TensorDictBase) -> list[torch.Tensor]:
         if self.in_keys is not None:
@@ -302,8 +325,9 @@ AUTOPILOT = "autopilot"
 SCRIPTED = ("scripted:", "constant:")
 GRAMMAR = (
     "'autopilot', 'scripted:<script>' (or 'constant:<script>', e.g. "
-    "'constant:throttle=1.0,steering=0.0'), or the path of a saved policy (a LeRobot policy "
-    "folder, a PPO checkpoint, a TorchScript or torch.save file)"
+    "'constant:throttle=1.0,steering=0.0'), the path of a saved policy (a LeRobot policy "
+    "folder, a PPO checkpoint, a TorchScript or torch.save file), or a policy server "
+    "('grpc://host:port', 'grpcs://host:port' with TLS)"
 )
 
 
@@ -331,6 +355,8 @@ def load_driver(
     for prefix in SCRIPTED:
         if text.startswith(prefix):
             return ScriptedDriver.from_spec(text.removeprefix(prefix))
+    if is_policy_url(text):
+        return PolicyDriver.remote(text)
     if not Path(text).exists():
         raise ValueError(f"driver {text!r} is none of {GRAMMAR}")
     return PolicyDriver.load(text, in_keys=in_keys)

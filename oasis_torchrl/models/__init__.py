@@ -8,6 +8,7 @@ from oasis_torchrl.models.actor_critic import (
     ActorCritic,
     make_actor_critic,
     observation_keys,
+    observation_spec,
 )
 from oasis_torchrl.models.config import POLICY_IMAGE_SIZE, DrivingNetConfig
 from oasis_torchrl.models.encoder import MultiCameraEncoder
@@ -24,4 +25,5 @@ __all__ = [
     "MultiCameraEncoder",
     "make_actor_critic",
     "observation_keys",
+    "observation_spec",
 ]

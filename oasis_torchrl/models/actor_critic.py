@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
-from torchrl.data import Bounded
+from torchrl.data import Bounded, Composite
 from torchrl.modules import ActorValueOperator, ProbabilisticActor, TanhNormal, ValueOperator
 
 from oasis_torchrl.models.network import DrivingNet
@@ -72,6 +72,25 @@ def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tup
         [('pixels', 'left_forward'), ('pixels', 'front'), ('pixels', 'right_forward'), 'state']
     """
     return [(image_key, camera) for camera in net.config.cameras] + [STATE]
+
+
+def observation_spec(net: DrivingNet) -> Composite:
+    """What the actor reads of one row (no batch dimensions): the last ``frames`` uint8 frames
+    of each camera (``("pixels", <camera>)``, ``[frames, H, W, 3]``) and ``"state"``.
+
+    Example:
+        >>> spec = observation_spec(DrivingNet())
+        >>> spec["pixels", "front"].shape, spec["state"].shape
+        (torch.Size([2, 64, 96, 3]), torch.Size([2]))
+    """
+    cfg = net.config
+    frame = Bounded(0, 255, (cfg.frames, *cfg.image_size, 3), dtype=torch.uint8)
+    return Composite(
+        {
+            PIXELS: Composite({camera: frame.clone() for camera in cfg.cameras}),
+            STATE: Bounded(-1.0, 1.0, (cfg.state_dim,)),
+        }
+    )
 
 
 @dataclass
