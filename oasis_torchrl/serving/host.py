@@ -104,16 +104,15 @@ class PolicyHost:
     def _load_policy(self) -> None:
         try:
             policy = self._load()
+            self._batcher = Batcher(policy.predict_chunk, **self._batching)
+            self.name = policy.name
+            self._policy = policy
+            self.state = policy_pb2.STATE_READY
         except Exception as error:
             logger.exception("cannot load the policy %s", self.name)
             self.reason = f"{type(error).__name__}: {error}"
             self.state = policy_pb2.STATE_FAILED
-        else:
-            self.name = policy.name
-            self._batcher = Batcher(policy.predict_chunk, **self._batching)
-            self._policy = policy
-            self.state = policy_pb2.STATE_READY
-            if self._on_ready is not None:
-                self._on_ready()
         finally:
             self._done.set()
+        if self._on_ready is not None and self._policy is not None:
+            self._on_ready()
