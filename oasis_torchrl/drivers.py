@@ -30,7 +30,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.data import Composite
 
-from oasis_torchrl.models import DrivingNet, make_actor_critic, observation_spec
+from oasis_torchrl.models import DrivingNet, make_deterministic_actor, observation_spec
 from oasis_torchrl.models.checkpoint import load_checkpoint, load_net, net_from_checkpoint
 from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.serving.client import RemotePolicy, is_policy_url
@@ -264,7 +264,8 @@ class PolicyDriver(Driver):
 
     @classmethod
     def of_network(cls, net: DrivingNet, **kwargs: object) -> PolicyDriver:
-        """The deterministic actor of a driving network, at the network's image size.
+        """The deterministic actor of a driving network (its chunk ``tanh(loc)``), at the
+        network's image size.
 
         Example:
             >>> driver = PolicyDriver.of_network(DrivingNet())
@@ -272,7 +273,7 @@ class PolicyDriver(Driver):
             ((64, 96), torch.Size([2]))
         """
         return cls(
-            make_actor_critic(net).policy,
+            make_deterministic_actor(net),
             image_size=tuple(net.config.image_size),
             observation_spec=observation_spec(net),
             **kwargs,

@@ -37,6 +37,8 @@ def run(settings: DictConfig) -> int:
         >>> run(load_config("serve-policy", ["policy=nowhere.pt", "api_keys=[k]"]))
         2
     """
+    import torch
+
     from oasis_torchrl.serving.served import load_served_policy
     from oasis_torchrl.serving.server import PolicyServer
     from oasis_torchrl.sim.serving import wait_for_signal, write_port_file
@@ -45,6 +47,8 @@ def run(settings: DictConfig) -> int:
     if not Path(cfg.policy).exists():
         logger.error("cannot serve %s: no such file or folder", cfg.policy)
         return 2
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
     inputs = cfg.input_features()
     server = PolicyServer(cfg, lambda: load_served_policy(cfg.policy, inputs), name=cfg.policy)
     try:

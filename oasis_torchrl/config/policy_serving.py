@@ -84,12 +84,16 @@ class ServePolicyConfig(PolicyServerConfig):
         help="what a plain saved module reads, in order, as NAME:DTYPE:SHAPE "
         "(e.g. pixels.front:uint8:4x64x96x3); policies that declare their inputs need none",
     )
+    threads: int = option(
+        0, help="threads of the policy's forward passes (torch intra-op; 0: torch's default)"
+    )
     port_file: str | None = option(None, help="write the bound port to this file once serving")
     grace: float = option(2.0, help="seconds in-flight calls get at shutdown")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "inputs", tuple(self.inputs))
+        require_int("threads", self.threads, 0, 1024)
         self.input_features()
 
     def input_features(self) -> list[Feature] | None:

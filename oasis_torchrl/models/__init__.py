@@ -7,6 +7,7 @@
 from oasis_torchrl.models.actor_critic import (
     ActorCritic,
     make_actor_critic,
+    make_deterministic_actor,
     observation_keys,
     observation_spec,
 )
@@ -24,6 +25,7 @@ __all__ = [
     "DrivingNetConfig",
     "MultiCameraEncoder",
     "make_actor_critic",
+    "make_deterministic_actor",
     "observation_keys",
     "observation_spec",
 ]

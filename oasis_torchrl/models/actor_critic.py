@@ -41,6 +41,17 @@ class _Features(nn.Module):
         return self.net.features(inputs[:-1], inputs[-1])
 
 
+class _Chunk(nn.Module):
+    """``(*frames, state) -> tanh(loc)``: the deterministic chunk, no distribution."""
+
+    def __init__(self, net: DrivingNet) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        return self.net(inputs[:-1], inputs[-1])
+
+
 class _ChunkParams(nn.Module):
     """``features -> (loc, scale)`` of the chunk distribution."""
 
@@ -72,6 +83,26 @@ def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tup
         [('pixels', 'left_forward'), ('pixels', 'front'), ('pixels', 'right_forward'), 'state']
     """
     return [(image_key, camera) for camera in net.config.cameras] + [STATE]
+
+
+def make_deterministic_actor(net: DrivingNet, image_key: str = PIXELS) -> TensorDictModule:
+    """The actor that deploys: observations -> ``"action"``, the chunk ``tanh(loc)`` (what the
+    PPO actor gives under ``ExplorationType.DETERMINISTIC``, without building a distribution
+    and its log-probability on every call).
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> from oasis_torchrl.models import DrivingNetConfig
+        >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+        >>> frames = torch.zeros(3, 4, 32, 48, 3, dtype=torch.uint8)
+        >>> td = TensorDict({"pixels": {c: frames for c in net.config.cameras},
+        ...                  "state": torch.zeros(3, 2)}, batch_size=[3])
+        >>> make_deterministic_actor(net)(td)["action"].shape
+        torch.Size([3, 4, 2])
+    """
+    return TensorDictModule(
+        _Chunk(net), in_keys=observation_keys(net, image_key), out_keys=["action"]
+    )
 
 
 def observation_spec(net: DrivingNet) -> Composite:
