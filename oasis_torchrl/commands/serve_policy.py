@@ -13,6 +13,7 @@ lines are visible to every user of the machine.
 from __future__ import annotations
 
 import logging
+import threading
 from pathlib import Path
 
 from omegaconf import DictConfig
@@ -60,7 +61,7 @@ def run(settings: DictConfig) -> int:
         write_port_file(Path(cfg.port_file), server.port)
     logger.info("serving %s on %s; stop with SIGTERM or Ctrl-C", cfg.policy, server.endpoint)
     try:
-        wait_for_signal()
+        wait_for_signal(threading.Event())
     finally:
         logger.info("shutting down")
         server.stop(cfg.grace)
