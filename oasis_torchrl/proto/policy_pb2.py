@@ -24,7 +24,7 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n oasis_torchrl/proto/policy.proto\x12\x17oasis_torchrl.policy.v1\"T\n\x06Tensor\x12-\n\x05\x64type\x18\x01 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.DType\x12\r\n\x05shape\x18\x02 \x03(\r\x12\x0c\n\x04\x64\x61ta\x18\x03 \x01(\x0c\"\x9a\x01\n\x07\x46\x65\x61ture\x12\x0c\n\x04name\x18\x01 \x01(\t\x12-\n\x05\x64type\x18\x02 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.DType\x12\r\n\x05shape\x18\x03 \x03(\r\x12\x10\n\x03low\x18\x04 \x01(\x01H\x00\x88\x01\x01\x12\x11\n\x04high\x18\x05 \x01(\x01H\x01\x88\x01\x01\x12\r\n\x05names\x18\x06 \x03(\tB\x06\n\x04_lowB\x07\n\x05_high\"\r\n\x0bPingRequest\"&\n\x0cPingResponse\x12\x16\n\x0eserver_version\x18\x01 \x01(\t\"\x0f\n\rStatusRequest\"_\n\x0eStatusResponse\x12-\n\x05state\x18\x01 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.State\x12\x0e\n\x06reason\x18\x02 \x01(\t\x12\x0e\n\x06policy\x18\x03 \x01(\t\"\x11\n\x0f\x44\x65scribeRequest\"\xe5\x01\n\x10\x44\x65scribeResponse\x12\x30\n\x06inputs\x18\x01 \x03(\x0b\x32 .oasis_torchrl.policy.v1.Feature\x12\x30\n\x06\x61\x63tion\x18\x02 \x01(\x0b\x32 .oasis_torchrl.policy.v1.Feature\x12\x12\n\nchunk_size\x18\x03 \x01(\r\x12\x16\n\x0en_action_steps\x18\x04 \x01(\r\x12\x0e\n\x06policy\x18\x05 \x01(\t\x12\x16\n\x0emax_batch_rows\x18\x06 \x01(\r\x12\x19\n\x11max_request_bytes\x18\x07 \x01(\x04\"\xbe\x01\n\x13PredictChunkRequest\x12R\n\x0bobservation\x18\x01 \x03(\x0b\x32=.oasis_torchrl.policy.v1.PredictChunkRequest.ObservationEntry\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01\"H\n\x14PredictChunkResponse\x12\x30\n\x07\x61\x63tions\x18\x01 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor\"\xd2\x01\n\x13SelectActionRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\x12R\n\x0bobservation\x18\x02 \x03(\x0b\x32=.oasis_torchrl.policy.v1.SelectActionRequest.ObservationEntry\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01\"G\n\x14SelectActionResponse\x12/\n\x06\x61\x63tion\x18\x01 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor\"0\n\x0cResetRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\x12\x0c\n\x04rows\x18\x02 \x03(\r\"\x0f\n\rResetResponse\"6\n\x12SampleInputRequest\x12\x12\n\nbatch_size\x18\x01 \x01(\r\x12\x0c\n\x04seed\x18\x02 \x01(\x04\"\xbe\x01\n\x13SampleInputResponse\x12R\n\x0bobservation\x18\x01 \x03(\x0b\x32=.oasis_torchrl.policy.v1.SampleInputResponse.ObservationEntry\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01*\xcf\x01\n\x05\x44Type\x12\x15\n\x11\x44TYPE_UNSPECIFIED\x10\x00\x12\x0e\n\nDTYPE_BOOL\x10\x01\x12\x0f\n\x0b\x44TYPE_UINT8\x10\x02\x12\x0e\n\nDTYPE_INT8\x10\x03\x12\x0f\n\x0b\x44TYPE_INT16\x10\x04\x12\x0f\n\x0b\x44TYPE_INT32\x10\x05\x12\x0f\n\x0b\x44TYPE_INT64\x10\x06\x12\x11\n\rDTYPE_FLOAT16\x10\x07\x12\x12\n\x0e\x44TYPE_BFLOAT16\x10\x08\x12\x11\n\rDTYPE_FLOAT32\x10\t\x12\x11\n\rDTYPE_FLOAT64\x10\n*T\n\x05State\x12\x15\n\x11STATE_UNSPECIFIED\x10\x00\x12\x11\n\rSTATE_LOADING\x10\x01\x12\x0f\n\x0bSTATE_READY\x10\x02\x12\x10\n\x0cSTATE_FAILED\x10\x03\x32\xbc\x05\n\rPolicyService\x12S\n\x04Ping\x12$.oasis_torchrl.policy.v1.PingRequest\x1a%.oasis_torchrl.policy.v1.PingResponse\x12Y\n\x06Status\x12&.oasis_torchrl.policy.v1.StatusRequest\x1a\'.oasis_torchrl.policy.v1.StatusResponse\x12_\n\x08\x44\x65scribe\x12(.oasis_torchrl.policy.v1.DescribeRequest\x1a).oasis_torchrl.policy.v1.DescribeResponse\x12k\n\x0cPredictChunk\x12,.oasis_torchrl.policy.v1.PredictChunkRequest\x1a-.oasis_torchrl.policy.v1.PredictChunkResponse\x12k\n\x0cSelectAction\x12,.oasis_torchrl.policy.v1.SelectActionRequest\x1a-.oasis_torchrl.policy.v1.SelectActionResponse\x12V\n\x05Reset\x12%.oasis_torchrl.policy.v1.ResetRequest\x1a&.oasis_torchrl.policy.v1.ResetResponse\x12h\n\x0bSampleInput\x12+.oasis_torchrl.policy.v1.SampleInputRequest\x1a,.oasis_torchrl.policy.v1.SampleInputResponseb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n oasis_torchrl/proto/policy.proto\x12\x17oasis_torchrl.policy.v1\"T\n\x06Tensor\x12-\n\x05\x64type\x18\x01 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.DType\x12\r\n\x05shape\x18\x02 \x03(\r\x12\x0c\n\x04\x64\x61ta\x18\x03 \x01(\x0c\"\x9a\x01\n\x07\x46\x65\x61ture\x12\x0c\n\x04name\x18\x01 \x01(\t\x12-\n\x05\x64type\x18\x02 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.DType\x12\r\n\x05shape\x18\x03 \x03(\r\x12\x10\n\x03low\x18\x04 \x01(\x01H\x00\x88\x01\x01\x12\x11\n\x04high\x18\x05 \x01(\x01H\x01\x88\x01\x01\x12\r\n\x05names\x18\x06 \x03(\tB\x06\n\x04_lowB\x07\n\x05_high\"\r\n\x0bPingRequest\"&\n\x0cPingResponse\x12\x16\n\x0eserver_version\x18\x01 \x01(\t\"\x0f\n\rStatusRequest\"_\n\x0eStatusResponse\x12-\n\x05state\x18\x01 \x01(\x0e\x32\x1e.oasis_torchrl.policy.v1.State\x12\x0e\n\x06reason\x18\x02 \x01(\t\x12\x0e\n\x06policy\x18\x03 \x01(\t\"\x11\n\x0f\x44\x65scribeRequest\"\xe5\x01\n\x10\x44\x65scribeResponse\x12\x30\n\x06inputs\x18\x01 \x03(\x0b\x32 .oasis_torchrl.policy.v1.Feature\x12\x30\n\x06\x61\x63tion\x18\x02 \x01(\x0b\x32 .oasis_torchrl.policy.v1.Feature\x12\x12\n\nchunk_size\x18\x03 \x01(\r\x12\x16\n\x0en_action_steps\x18\x04 \x01(\r\x12\x0e\n\x06policy\x18\x05 \x01(\t\x12\x16\n\x0emax_batch_rows\x18\x06 \x01(\r\x12\x19\n\x11max_request_bytes\x18\x07 \x01(\x04\"\xbe\x01\n\x13PredictChunkRequest\x12R\n\x0bobservation\x18\x01 \x03(\x0b\x32=.oasis_torchrl.policy.v1.PredictChunkRequest.ObservationEntry\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01\"H\n\x14PredictChunkResponse\x12\x30\n\x07\x61\x63tions\x18\x01 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor\"\xe1\x01\n\x13SelectActionRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\x12R\n\x0bobservation\x18\x02 \x03(\x0b\x32=.oasis_torchrl.policy.v1.SelectActionRequest.ObservationEntry\x12\r\n\x05\x63ount\x18\x03 \x01(\r\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01\"H\n\x14SelectActionResponse\x12\x30\n\x07\x61\x63tions\x18\x01 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor\"0\n\x0cResetRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\x12\x0c\n\x04rows\x18\x02 \x03(\r\"\x0f\n\rResetResponse\"6\n\x12SampleInputRequest\x12\x12\n\nbatch_size\x18\x01 \x01(\r\x12\x0c\n\x04seed\x18\x02 \x01(\x04\"\xbe\x01\n\x13SampleInputResponse\x12R\n\x0bobservation\x18\x01 \x03(\x0b\x32=.oasis_torchrl.policy.v1.SampleInputResponse.ObservationEntry\x1aS\n\x10ObservationEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12.\n\x05value\x18\x02 \x01(\x0b\x32\x1f.oasis_torchrl.policy.v1.Tensor:\x02\x38\x01*\xcf\x01\n\x05\x44Type\x12\x15\n\x11\x44TYPE_UNSPECIFIED\x10\x00\x12\x0e\n\nDTYPE_BOOL\x10\x01\x12\x0f\n\x0b\x44TYPE_UINT8\x10\x02\x12\x0e\n\nDTYPE_INT8\x10\x03\x12\x0f\n\x0b\x44TYPE_INT16\x10\x04\x12\x0f\n\x0b\x44TYPE_INT32\x10\x05\x12\x0f\n\x0b\x44TYPE_INT64\x10\x06\x12\x11\n\rDTYPE_FLOAT16\x10\x07\x12\x12\n\x0e\x44TYPE_BFLOAT16\x10\x08\x12\x11\n\rDTYPE_FLOAT32\x10\t\x12\x11\n\rDTYPE_FLOAT64\x10\n*T\n\x05State\x12\x15\n\x11STATE_UNSPECIFIED\x10\x00\x12\x11\n\rSTATE_LOADING\x10\x01\x12\x0f\n\x0bSTATE_READY\x10\x02\x12\x10\n\x0cSTATE_FAILED\x10\x03\x32\xbc\x05\n\rPolicyService\x12S\n\x04Ping\x12$.oasis_torchrl.policy.v1.PingRequest\x1a%.oasis_torchrl.policy.v1.PingResponse\x12Y\n\x06Status\x12&.oasis_torchrl.policy.v1.StatusRequest\x1a\'.oasis_torchrl.policy.v1.StatusResponse\x12_\n\x08\x44\x65scribe\x12(.oasis_torchrl.policy.v1.DescribeRequest\x1a).oasis_torchrl.policy.v1.DescribeResponse\x12k\n\x0cPredictChunk\x12,.oasis_torchrl.policy.v1.PredictChunkRequest\x1a-.oasis_torchrl.policy.v1.PredictChunkResponse\x12k\n\x0cSelectAction\x12,.oasis_torchrl.policy.v1.SelectActionRequest\x1a-.oasis_torchrl.policy.v1.SelectActionResponse\x12V\n\x05Reset\x12%.oasis_torchrl.policy.v1.ResetRequest\x1a&.oasis_torchrl.policy.v1.ResetResponse\x12h\n\x0bSampleInput\x12+.oasis_torchrl.policy.v1.SampleInputRequest\x1a,.oasis_torchrl.policy.v1.SampleInputResponseb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -37,10 +37,10 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_SELECTACTIONREQUEST_OBSERVATIONENTRY']._serialized_options = b'8\001'
   _globals['_SAMPLEINPUTRESPONSE_OBSERVATIONENTRY']._loaded_options = None
   _globals['_SAMPLEINPUTRESPONSE_OBSERVATIONENTRY']._serialized_options = b'8\001'
-  _globals['_DTYPE']._serialized_start=1594
-  _globals['_DTYPE']._serialized_end=1801
-  _globals['_STATE']._serialized_start=1803
-  _globals['_STATE']._serialized_end=1887
+  _globals['_DTYPE']._serialized_start=1610
+  _globals['_DTYPE']._serialized_end=1817
+  _globals['_STATE']._serialized_start=1819
+  _globals['_STATE']._serialized_end=1903
   _globals['_TENSOR']._serialized_start=61
   _globals['_TENSOR']._serialized_end=145
   _globals['_FEATURE']._serialized_start=148
@@ -64,21 +64,21 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_PREDICTCHUNKRESPONSE']._serialized_start=917
   _globals['_PREDICTCHUNKRESPONSE']._serialized_end=989
   _globals['_SELECTACTIONREQUEST']._serialized_start=992
-  _globals['_SELECTACTIONREQUEST']._serialized_end=1202
+  _globals['_SELECTACTIONREQUEST']._serialized_end=1217
   _globals['_SELECTACTIONREQUEST_OBSERVATIONENTRY']._serialized_start=832
   _globals['_SELECTACTIONREQUEST_OBSERVATIONENTRY']._serialized_end=915
-  _globals['_SELECTACTIONRESPONSE']._serialized_start=1204
-  _globals['_SELECTACTIONRESPONSE']._serialized_end=1275
-  _globals['_RESETREQUEST']._serialized_start=1277
-  _globals['_RESETREQUEST']._serialized_end=1325
-  _globals['_RESETRESPONSE']._serialized_start=1327
-  _globals['_RESETRESPONSE']._serialized_end=1342
-  _globals['_SAMPLEINPUTREQUEST']._serialized_start=1344
-  _globals['_SAMPLEINPUTREQUEST']._serialized_end=1398
-  _globals['_SAMPLEINPUTRESPONSE']._serialized_start=1401
-  _globals['_SAMPLEINPUTRESPONSE']._serialized_end=1591
+  _globals['_SELECTACTIONRESPONSE']._serialized_start=1219
+  _globals['_SELECTACTIONRESPONSE']._serialized_end=1291
+  _globals['_RESETREQUEST']._serialized_start=1293
+  _globals['_RESETREQUEST']._serialized_end=1341
+  _globals['_RESETRESPONSE']._serialized_start=1343
+  _globals['_RESETRESPONSE']._serialized_end=1358
+  _globals['_SAMPLEINPUTREQUEST']._serialized_start=1360
+  _globals['_SAMPLEINPUTREQUEST']._serialized_end=1414
+  _globals['_SAMPLEINPUTRESPONSE']._serialized_start=1417
+  _globals['_SAMPLEINPUTRESPONSE']._serialized_end=1607
   _globals['_SAMPLEINPUTRESPONSE_OBSERVATIONENTRY']._serialized_start=832
   _globals['_SAMPLEINPUTRESPONSE_OBSERVATIONENTRY']._serialized_end=915
-  _globals['_POLICYSERVICE']._serialized_start=1890
-  _globals['_POLICYSERVICE']._serialized_end=2590
+  _globals['_POLICYSERVICE']._serialized_start=1906
+  _globals['_POLICYSERVICE']._serialized_end=2606
 # @@protoc_insertion_point(module_scope)

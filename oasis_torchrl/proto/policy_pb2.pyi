@@ -135,7 +135,7 @@ class PredictChunkResponse(_message.Message):
     def __init__(self, actions: _Optional[_Union[Tensor, _Mapping]] = ...) -> None: ...
 
 class SelectActionRequest(_message.Message):
-    __slots__ = ("session_id", "observation")
+    __slots__ = ("session_id", "observation", "count")
     class ObservationEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -145,15 +145,17 @@ class SelectActionRequest(_message.Message):
         def __init__(self, key: _Optional[str] = ..., value: _Optional[_Union[Tensor, _Mapping]] = ...) -> None: ...
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     OBSERVATION_FIELD_NUMBER: _ClassVar[int]
+    COUNT_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     observation: _containers.MessageMap[str, Tensor]
-    def __init__(self, session_id: _Optional[str] = ..., observation: _Optional[_Mapping[str, Tensor]] = ...) -> None: ...
+    count: int
+    def __init__(self, session_id: _Optional[str] = ..., observation: _Optional[_Mapping[str, Tensor]] = ..., count: _Optional[int] = ...) -> None: ...
 
 class SelectActionResponse(_message.Message):
-    __slots__ = ("action",)
-    ACTION_FIELD_NUMBER: _ClassVar[int]
-    action: Tensor
-    def __init__(self, action: _Optional[_Union[Tensor, _Mapping]] = ...) -> None: ...
+    __slots__ = ("actions",)
+    ACTIONS_FIELD_NUMBER: _ClassVar[int]
+    actions: Tensor
+    def __init__(self, actions: _Optional[_Union[Tensor, _Mapping]] = ...) -> None: ...
 
 class ResetRequest(_message.Message):
     __slots__ = ("session_id", "rows")

@@ -1,8 +1,9 @@
 """``RemotePolicy``: a policy served by ``oasis-torchrl serve-policy``, used like a local one.
 
 It is a TorchRL policy module (``env.rollout(n, RemotePolicy("grpc://host:port"))``) reading
-the policy's inputs from the TensorDict and writing ``"action"``, and it has LeRobot's
-inference calls (``select_action``, ``predict_action_chunk``, ``reset``). Transient faults
+the policy's inputs from the TensorDict and writing ``"action"`` (the next actions of each
+row's queue on the server; a row starting an episode drops its queue first), and it has
+LeRobot's inference calls (``select_action``, ``predict_action_chunk``, ``reset``). Transient faults
 (UNAVAILABLE, a per-key limit) are retried with capped, jittered backoff
 (:class:`~oasis_torchrl.client.retry.RetryPolicy`); failures are typed
 (:mod:`oasis_torchrl.serving.errors`). Observations are checked against the policy's inputs
@@ -16,7 +17,7 @@ import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal, TypeVar
+from typing import TypeVar
 
 import grpc
 import torch
@@ -27,7 +28,12 @@ from oasis_torchrl.client.channel import TlsSetting, create_channel
 from oasis_torchrl.client.errors import TransportError
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
 from oasis_torchrl.proto import policy_pb2, policy_pb2_grpc
-from oasis_torchrl.protocol import API_KEY_METADATA, POLICY_API_KEY_ENV_VAR, POLICY_SCHEMES
+from oasis_torchrl.protocol import (
+    API_KEY_METADATA,
+    CHUNK,
+    POLICY_API_KEY_ENV_VAR,
+    POLICY_SCHEMES,
+)
 from oasis_torchrl.serving.errors import (
     AuthError,
     InvalidInputError,
@@ -41,7 +47,8 @@ from oasis_torchrl.serving.tensors import decode, decode_map, encode_map
 
 _Response = TypeVar("_Response")
 Observation = Mapping[str, torch.Tensor] | TensorDictBase
-Mode = Literal["chunk", "action"]
+STEP_COUNT = "step_count"
+EPISODE_SEED = "episode_seed"
 STATES = {
     policy_pb2.STATE_LOADING: "loading",
     policy_pb2.STATE_READY: "ready",
@@ -114,13 +121,17 @@ class RemotePolicy(TensorDictModuleBase):
     Construction waits for the server's policy to be ready and reads its description
     (inputs, action, chunk size); the module's ``in_keys`` are the policy's inputs.
 
+    As a TorchRL module it writes the next ``actions`` actions of each row's queue on the
+    server: a world-model chunk ``[N, 4, 2]`` by default, as an in-process driver does (a row
+    whose queue is empty gets a new chunk from its observation). A row starting an episode (its
+    ``"step_count"`` is 0, or, without one, its ``"episode_seed"`` changed) drops its queue first.
+
     Args:
         endpoint: ``grpc://host:port`` (plain text), ``grpcs://host:port`` (TLS), or
             ``host:port`` with ``tls``.
         api_key: the key (default: ``$OASIS_POLICY_API_KEY``).
-        mode: what ``forward`` writes to ``"action"``: ``"chunk"`` (a chunk per row,
-            ``[N, chunk_size, ...]``, PredictChunk) or ``"action"`` (the next action of each
-            row's queue, ``[N, ...]``, SelectAction).
+        actions: actions per row ``forward`` writes: ``[N, actions, ...]``, or one action
+            ``[N, ...]`` with None (an env built with ``chunk_actions=False``).
         session_id: the session of this client's action queues (default: a fresh random id).
         timeout: seconds per call attempt.
         retry: the retry policy of transient faults.
@@ -139,8 +150,11 @@ class RemotePolicy(TensorDictModuleBase):
         ...         observation = policy.sample_input(batch_size=2)
         ...         chunk = policy.predict_action_chunk(observation)
         ...         first = policy.select_action(observation)
+        ...         rest = policy.next_actions(observation, 3)
         >>> policy.in_keys[-1], chunk.shape, first.shape, policy.image_size
         ('state', torch.Size([2, 4, 2]), torch.Size([2, 2]), (64, 96))
+        >>> torch.equal(torch.cat([first.unsqueeze(1), rest], dim=1), chunk)
+        True
     """
 
     def __init__(
@@ -148,7 +162,7 @@ class RemotePolicy(TensorDictModuleBase):
         endpoint: str,
         *,
         api_key: str | None = None,
-        mode: Mode = "chunk",
+        actions: int | None = CHUNK,
         session_id: str | None = None,
         timeout: float = 30.0,
         retry: RetryPolicy | None = None,
@@ -156,12 +170,12 @@ class RemotePolicy(TensorDictModuleBase):
         wait: float | None = 60.0,
     ) -> None:
         super().__init__()
-        if mode not in ("chunk", "action"):
-            raise ValueError(f"mode must be 'chunk' or 'action', got {mode!r}")
+        if actions is not None and actions < 1:
+            raise ValueError(f"actions must be >= 1 or None, got {actions}")
         address, scheme_tls = channel_endpoint(endpoint)
         key = api_key or _key_from_env()
         self.endpoint = endpoint
-        self.mode = mode
+        self.actions = actions
         self.session_id = session_id or uuid.uuid4().hex
         self.timeout = timeout
         self.retry = retry or RetryPolicy()
@@ -174,6 +188,7 @@ class RemotePolicy(TensorDictModuleBase):
         self.description = self.describe()
         self.in_keys = [feature.key for feature in self.description.inputs]
         self.out_keys = ["action"]
+        self._episodes: torch.Tensor | None = None  # each row's last episode seed
 
     # -- LeRobot-style inference ---------------------------------------------------------
 
@@ -187,10 +202,15 @@ class RemotePolicy(TensorDictModuleBase):
     def select_action(self, observation: Observation) -> torch.Tensor:
         """The next action of each row, ``[rows, *action.shape]``, from this client's session
         queues on the server (a row whose queue is empty gets a new chunk)."""
-        request = policy_pb2.SelectActionRequest(session_id=self.session_id)
+        return self.next_actions(observation, 1)[:, 0]
+
+    def next_actions(self, observation: Observation, count: int) -> torch.Tensor:
+        """The next ``count`` actions of each row's queue, ``[rows, count, *action.shape]``
+        (a queue that runs out is refilled from the same observation)."""
+        request = policy_pb2.SelectActionRequest(session_id=self.session_id, count=count)
         encode_map(self._checked(observation), request.observation)
         response = self._call("SelectAction", self._stub.SelectAction, request)
-        return decode(response.action, "action")
+        return decode(response.actions, "actions")
 
     def reset(self, rows: Sequence[int] | None = None) -> None:
         """Drop the queued actions of ``rows`` (default: all) of this client's session; call it
@@ -264,12 +284,28 @@ class RemotePolicy(TensorDictModuleBase):
     # -- TorchRL ---------------------------------------------------------------------------
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Write ``"action"`` for the rows of ``tensordict`` (a chunk or the next action, see
-        ``mode``)."""
-        observation = self.observation_of(tensordict)
-        act = self.predict_action_chunk if self.mode == "chunk" else self.select_action
-        tensordict.set("action", act(observation).to(tensordict.device or "cpu"))
+        """Write ``"action"``: the next ``actions`` actions of each row (see the class)."""
+        starting = self._episode_starts(tensordict)
+        if starting:
+            self.reset(rows=starting)
+        chosen = self.next_actions(self.observation_of(tensordict), self.actions or 1)
+        action = chosen if self.actions else chosen[:, 0]
+        tensordict.set("action", action.to(tensordict.device or "cpu"))
         return tensordict
+
+    def _episode_starts(self, tensordict: TensorDictBase) -> list[int]:
+        """Rows starting an episode: ``"step_count"`` 0, or a changed ``"episode_seed"``."""
+        counter = tensordict.get(STEP_COUNT, None)
+        if counter is not None:
+            return counter.reshape(len(counter), -1)[:, 0].eq(0).nonzero()[:, 0].tolist()
+        seeds = tensordict.get(EPISODE_SEED, None)
+        if seeds is None:
+            return []
+        seeds = seeds.reshape(len(seeds), -1)[:, 0].cpu()
+        previous, self._episodes = self._episodes, seeds.clone()
+        if previous is None or previous.shape != seeds.shape:
+            return list(range(len(seeds)))
+        return seeds.ne(previous).nonzero()[:, 0].tolist()
 
     def observation_of(self, tensordict: TensorDictBase) -> dict[str, torch.Tensor]:
         """The policy's inputs read from a TensorDict with one batch dimension. An entry with

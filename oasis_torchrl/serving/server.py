@@ -37,6 +37,8 @@ logger = logging.getLogger(__name__)
 
 _Response = TypeVar("_Response")
 _MAX_ERROR_CHARS = 1000
+MAX_ACTIONS_PER_CALL = 1024
+"""``SelectActionRequest.count`` at most."""
 
 
 def _api_key(context: grpc.ServicerContext) -> str | None:
@@ -107,18 +109,24 @@ class PolicyServicer(policy_pb2_grpc.PolicyServiceServicer):
     def SelectAction(
         self, request: policy_pb2.SelectActionRequest, context: grpc.ServicerContext
     ) -> policy_pb2.SelectActionResponse:
-        """The next action per row from the session's queues."""
+        """The next actions of each row from the session's queues."""
 
         def answer(key: bytes) -> policy_pb2.SelectActionResponse:
+            if request.count > MAX_ACTIONS_PER_CALL:
+                raise StatusError(
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"count {request.count} is over {MAX_ACTIONS_PER_CALL} actions per call",
+                )
             observation = self._observation(request.observation)
             steps = self._host.policy.n_action_steps
-            action = self._queues.select(
+            actions = self._queues.select(
                 key,
                 request.session_id,
                 observation,
                 lambda rows: self._host.predict_chunk(rows)[:, :steps],
+                count=max(request.count, 1),
             )
-            return policy_pb2.SelectActionResponse(action=encode(action))
+            return policy_pb2.SelectActionResponse(actions=encode(actions))
 
         return self._serve(context, answer)
 

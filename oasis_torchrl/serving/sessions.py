@@ -3,7 +3,7 @@
 A client names its session with any id; the session is private to the API key that used it
 (another key naming the same id gets a session of its own). A row whose queue is empty gets
 the next actions of a new chunk (the rows of one call that need one share a single forward
-pass); every call pops one action per row. Reset drops rows'
+pass); every call takes the same number of actions from each row's queue. Reset drops rows'
 queues. Sessions idle longer than ``idle_timeout`` are forgotten; the number of sessions is
 bounded in total and per key (RESOURCE_EXHAUSTED).
 """
@@ -51,8 +51,8 @@ class ActionQueues:
         >>> [queues.select(b"key", "s", observation, chunk).flatten().tolist() for _ in range(2)]
         [[10.0, 20.0], [11.0, 21.0]]
         >>> queues.reset(b"key", "s", rows=[1])
-        >>> queues.select(b"key", "s", observation, chunk).flatten().tolist()
-        [12.0, 20.0]
+        >>> queues.select(b"key", "s", observation, chunk, count=3).flatten().tolist()
+        [12.0, 13.0, 10.0, 20.0, 21.0, 22.0]
     """
 
     def __init__(
@@ -68,21 +68,38 @@ class ActionQueues:
         return len(self._sessions)
 
     def select(
-        self, key: bytes, session_id: str, observation: TensorDictBase, next_actions: ChunkCall
+        self,
+        key: bytes,
+        session_id: str,
+        observation: TensorDictBase,
+        next_actions: ChunkCall,
+        count: int = 1,
     ) -> torch.Tensor:
-        """The next action of every row of ``observation`` (``[rows, ...]``); the rows whose
-        queue is empty get ``next_actions`` of their observations (one call, ``[k, n, ...]``)."""
+        """The next ``count`` actions of every row of ``observation`` (``[rows, count, ...]``);
+        a row whose queue runs out gets ``next_actions`` of its observation (the rows that need
+        them in one call, ``[k, n, ...]``)."""
         session = self._session(key, session_id)
         with session.lock:
             rows = observation.batch_size[0]
-            empty = [row for row in range(rows) if not session.queues.get(row)]
-            if empty:
-                chunks = next_actions(observation[torch.tensor(empty)])
-                for row, chunk in zip(empty, chunks, strict=True):
-                    session.queues[row] = deque(chunk.unbind(0))
-            action = torch.stack([session.queues[row].popleft() for row in range(rows)])
+            taken: list[list[torch.Tensor]] = [[] for _ in range(rows)]
+            while len(taken[0]) < count:
+                self._refill(session, observation, next_actions)
+                for row in range(rows):
+                    queue = session.queues[row]
+                    while queue and len(taken[row]) < count:
+                        taken[row].append(queue.popleft())
             session.last_used = time.monotonic()
-        return action
+        return torch.stack([torch.stack(actions) for actions in taken])
+
+    @staticmethod
+    def _refill(session: _Session, observation: TensorDictBase, next_actions: ChunkCall) -> None:
+        """Queue new actions for the rows whose queue is empty."""
+        empty = [row for row in range(observation.batch_size[0]) if not session.queues.get(row)]
+        if not empty:
+            return
+        chunks = next_actions(observation[torch.tensor(empty)])
+        for row, chunk in zip(empty, chunks, strict=True):
+            session.queues[row] = deque(chunk.unbind(0))
 
     def reset(self, key: bytes, session_id: str, rows: Sequence[int] = ()) -> None:
         """Drop the queued actions of ``rows`` of a session (all rows when empty); a session

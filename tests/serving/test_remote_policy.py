@@ -24,6 +24,7 @@ from oasis_torchrl.serving import (
     RemotePolicy,
     UnavailableError,
 )
+from oasis_torchrl.serving.features import as_tensordict
 from oasis_torchrl.serving.server import PolicyServer
 from oasis_torchrl.sim.config import ServerConfig
 
@@ -58,6 +59,29 @@ def test_select_action_serves_each_rows_chunk_and_reset_starts_a_new_one(
         with same_id_other_key:
             assert torch.equal(same_id_other_key.select_action(second), chunks[2][:, 0])
         assert torch.equal(policy.select_action(second), chunks[1][:, 1])
+
+
+def test_as_a_torchrl_module_rows_starting_an_episode_drop_their_queue(
+    policy_server: PolicyServer,
+) -> None:
+    policy = RemotePolicy(policy_server.endpoint, api_key=KEYS[0], actions=2)
+    observation = policy.sample_input(3, seed=4)
+    chunk = policy.predict_action_chunk(observation)
+    td = as_tensordict(observation, rows=3)
+    td["episode_seed"] = torch.tensor([[10], [11], [12]])
+    assert torch.equal(policy(td.clone())["action"], chunk[:, :2])
+    assert torch.equal(policy(td.clone())["action"], chunk[:, 2:])  # the queues go on
+    policy(td.clone())  # new chunks, half served
+    td["episode_seed"][1] = 21  # row 1 starts an episode: it plans afresh
+    action = policy(td.clone())["action"]
+    assert torch.equal(action[[0, 2]], chunk[[0, 2], 2:])
+    torch.testing.assert_close(action[1], chunk[1, :2], rtol=0, atol=1e-6)
+    td["step_count"] = torch.tensor([[0], [5], [5]])  # a step counter decides instead
+    action = policy(td.clone())["action"]
+    torch.testing.assert_close(action[0], chunk[0, :2], rtol=0, atol=1e-6)
+    torch.testing.assert_close(action[1], chunk[1, 2:], rtol=0, atol=1e-6)  # planned alone
+    one = RemotePolicy(policy_server.endpoint, api_key=KEYS[0], actions=None)
+    assert one(td.clone())["action"].shape == (3, 2)
 
 
 def test_features_status_and_typed_errors(
