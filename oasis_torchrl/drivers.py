@@ -58,6 +58,8 @@ class Driver(ABC):
     observation_spec: Composite | None = None
     """What the driver reads of one row (shapes without batch dimensions; None: undeclared).
     A policy server describes its inputs with it."""
+    n_action_steps: int = CHUNK
+    """Actions of each :meth:`plan` a policy server queues for a row before planning again."""
 
     def __init__(self, *, chunk_actions: bool = True) -> None:
         self.chunk_actions = chunk_actions
@@ -66,11 +68,28 @@ class Driver(ABC):
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """float32 ``[N, 4, 2]`` action chunks for the observation rows of ``td``."""
 
+    def plan(self, td: TensorDictBase) -> torch.Tensor:
+        """The actions ``[N, K, 2]`` (``K >= n_action_steps``) each row would take from its
+        observation alone, bounded to ``[-1, 1]``: what a policy server queues for a row. The
+        chunk, unless the driver keeps state between calls (a queue, a history): then it
+        plans without touching that state."""
+        return bounded(self.chunks(td))
+
     def __call__(self, td: TensorDictBase) -> TensorDictBase:
         """Set ``td["action"]`` and return ``td`` (as a TorchRL policy does)."""
-        chunk = self.chunks(td).to(torch.float32).clamp(-1.0, 1.0)
+        chunk = bounded(self.chunks(td))
         td.set("action", chunk if self.chunk_actions else chunk[:, 0].contiguous())
         return td
+
+
+def bounded(actions: torch.Tensor) -> torch.Tensor:
+    """Actions as float32 in ``[-1, 1]``, the world model's box.
+
+    Example:
+        >>> bounded(torch.tensor([2.0, -0.5], dtype=torch.float64))
+        tensor([ 1.0000, -0.5000])
+    """
+    return actions.to(torch.float32).clamp(-1.0, 1.0)
 
 
 # -- autopilot ----------------------------------------------------------------------------

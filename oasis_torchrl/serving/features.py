@@ -271,6 +271,22 @@ def sample_observation(features: Iterable[Feature], rows: int, seed: int = 0) ->
     return {feature.name: feature.sample(rows, generator) for feature in features}
 
 
+def neutral_observation(features: Iterable[Feature], rows: int) -> dict:
+    """An observation of ``rows`` rows of zeros, moved into each feature's bounds: a plain
+    input to probe a policy with (its warm-up).
+
+    Example:
+        >>> neutral_observation([Feature("speed", (1,), torch.float32, 2.0, 5.0)], 1)["speed"]
+        tensor([[2.]])
+    """
+    neutral = {}
+    for feature in features:
+        value = max(0.0, -math.inf if feature.low is None else feature.low)
+        value = min(value, math.inf if feature.high is None else feature.high)
+        neutral[feature.name] = torch.full((rows, *feature.shape), value, dtype=feature.dtype)
+    return neutral
+
+
 def as_tensordict(observation: Mapping[str, torch.Tensor], rows: int) -> TensorDictBase:
     """A flat observation as a TensorDict of ``rows`` rows, names turned into nested keys.
 

@@ -1,6 +1,6 @@
 """The policy a server serves: a driver loaded by the project's one grammar
 (:func:`~oasis_torchrl.drivers.load_driver`), its input features, and one batched, stateless
-call that turns observations into action chunks.
+call that turns observations into plans (:meth:`~oasis_torchrl.drivers.Driver.plan`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,12 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from oasis_torchrl.drivers import Driver, load_driver
 from oasis_torchrl.protocol import ACTION_DIM, ACTION_NAMES, CHUNK
-from oasis_torchrl.serving.features import Feature, features_of_spec
+from oasis_torchrl.serving.features import (
+    Feature,
+    as_tensordict,
+    features_of_spec,
+    neutral_observation,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -29,12 +34,11 @@ class ServedPolicy:
     """A driver and what it reads: what a policy server answers with.
 
     Args:
-        driver: computes ``[rows, 4, 2]`` chunks from a TensorDict of observations.
+        driver: plans ``[rows, chunk_size, 2]`` actions from a TensorDict of observations
+            (:meth:`~oasis_torchrl.drivers.Driver.plan`).
         inputs: the features it reads (from its ``observation_spec``, or declared).
         name: what Status and Describe call it.
-        action: one action.
-        chunk_size: actions per chunk.
-        n_action_steps: actions of each chunk SelectAction serves before a new chunk.
+        chunk_size: actions per plan.
 
     Example:
         >>> from oasis_torchrl.drivers import PolicyDriver
@@ -43,23 +47,27 @@ class ServedPolicy:
         >>> served = ServedPolicy.of_driver(PolicyDriver.of_network(DrivingNet()), "fresh")
         >>> [feature.name for feature in served.inputs]
         ['pixels.left_forward', 'pixels.front', 'pixels.right_forward', 'state']
-        >>> observation = as_tensordict(sample_observation(served.inputs, rows=3), rows=3)
-        >>> served.predict_chunk(observation).shape
-        torch.Size([3, 4, 2])
+        >>> served.chunk_size, served.n_action_steps
+        (4, 4)
     """
 
     driver: Driver
     inputs: tuple[Feature, ...]
     name: str
+    chunk_size: int
     action: Feature = ACTION
-    chunk_size: int = CHUNK
-    n_action_steps: int = CHUNK
+
+    @property
+    def n_action_steps(self) -> int:
+        """Actions of each plan SelectAction serves before planning again."""
+        return min(self.driver.n_action_steps, self.chunk_size)
 
     @classmethod
     def of_driver(
         cls, driver: Driver, name: str, inputs: Sequence[Feature] | None = None
     ) -> ServedPolicy:
-        """Serve ``driver``, reading ``inputs`` (default: its ``observation_spec``)."""
+        """Serve ``driver``, reading ``inputs`` (default: its ``observation_spec``). One plan
+        of a neutral observation sizes the chunk (and warms the policy up)."""
         if inputs is None:
             if driver.observation_spec is None:
                 raise ValueError(
@@ -70,13 +78,16 @@ class ServedPolicy:
             inputs = features_of_spec(driver.observation_spec)
         if not inputs:
             raise ValueError(f"{name} reads no input; a served policy needs at least one")
-        return cls(driver, tuple(inputs), name)
+        served = cls(driver, tuple(inputs), name, chunk_size=CHUNK)
+        probe = as_tensordict(neutral_observation(served.inputs, rows=1), rows=1)
+        served.chunk_size = served.predict_chunk(probe).shape[1]
+        return served
 
     @torch.no_grad()
     def predict_chunk(self, observation: TensorDictBase) -> torch.Tensor:
-        """float32 ``[rows, chunk_size, 2]`` chunks in ``[-1, 1]``, acting deterministically."""
+        """float32 ``[rows, chunk_size, 2]`` plans in ``[-1, 1]``, acting deterministically."""
         with set_exploration_type(ExplorationType.DETERMINISTIC):
-            return self.driver(observation)["action"]
+            return self.driver.plan(observation)
 
 
 def load_served_policy(spec: str, inputs: Sequence[Feature] | None = None) -> ServedPolicy:
