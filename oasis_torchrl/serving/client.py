@@ -308,22 +308,13 @@ class RemotePolicy(TensorDictModuleBase):
         return seeds.ne(previous).nonzero()[:, 0].tolist()
 
     def observation_of(self, tensordict: TensorDictBase) -> dict[str, torch.Tensor]:
-        """The policy's inputs read from a TensorDict with one batch dimension. An entry with
-        more frames than the policy reads (the env's 4 frames per chunk for a 2-frame policy)
-        gives its last ones."""
-        observation = {}
-        for feature in self.description.inputs:
-            value = tensordict.get(feature.key)
-            frames = feature.shape[0] if feature.shape else None
-            if (
-                frames is not None
-                and value.dim() == len(feature.shape) + 1
-                and value.shape[2:] == feature.shape[1:]
-                and value.shape[1] > frames
-            ):
-                value = value[:, -frames:]
-            observation[feature.name] = value
-        return observation
+        """The policy's inputs read from a TensorDict with one batch dimension. Where the env
+        gives more frames than the policy reads (its 4 frames per chunk), the newest ones go:
+        the last 2 for a policy reading 2 frames, the last one for a policy reading a frame."""
+        return {
+            feature.name: _newest(tensordict.get(feature.key), feature.shape)
+            for feature in self.description.inputs
+        }
 
     def close(self) -> None:
         """Close the channel."""
@@ -380,6 +371,17 @@ class RemotePolicy(TensorDictModuleBase):
         return UnavailableError(
             grpc.StatusCode.UNAVAILABLE, text, method="wait_until_ready", target=self.endpoint
         )
+
+
+def _newest(value: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:
+    """``value`` ``[N, ...]`` cut to ``[N, *shape]`` along its time axis (dimension 1), keeping
+    the newest entries, when only that axis is longer or extra; else as it is."""
+    rows_shape = (value.shape[0], *shape)
+    if value.dim() == len(rows_shape) + 1 and value.shape[2:] == shape:
+        return value[:, -1]
+    if shape and value.dim() == len(rows_shape) and value.shape[2:] == shape[1:]:
+        return value[:, -shape[0] :] if value.shape[1] > shape[0] else value
+    return value
 
 
 def _key_from_env() -> str:
