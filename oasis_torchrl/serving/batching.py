@@ -4,7 +4,8 @@ One thread runs the policy. Requests queue up while it runs; when it is free it 
 waiting ones (and those arriving within ``max_wait`` of the first) up to ``max_rows`` rows,
 concatenates them, makes one call and hands each request its rows of the answer. N clients
 then cost about one batched call, not N. A request is never split; one with more rows than
-``max_rows`` runs alone.
+``max_rows`` runs alone. The first request waits for others only when the previous call
+merged several: a lone client pays no wait.
 
 When a merged call raises, each of its requests runs again alone, so only a request the
 policy cannot answer fails (with :class:`PolicyRaised`) and the others get their actions.
@@ -84,6 +85,7 @@ class Batcher:
         self.stats = BatchStats()
         self._queue: queue.SimpleQueue[_Request | None] = queue.SimpleQueue()
         self._held: _Request | None = None  # taken from the queue, too big for the last batch
+        self._company = False  # the last call merged several requests: others may follow
         self._thread = threading.Thread(target=self._serve, name="policy-batcher", daemon=True)
         self._thread.start()
 
@@ -119,7 +121,7 @@ class Batcher:
         if first is None:
             return [], True
         batch, rows = [first], first.rows
-        deadline = time.monotonic() + self.max_wait
+        deadline = time.monotonic() + (self.max_wait if self._company else 0.0)
         while rows < self.max_rows:
             try:
                 wait = deadline - time.monotonic()
@@ -136,6 +138,7 @@ class Batcher:
         return batch, False
 
     def _run(self, batch: list[_Request]) -> None:
+        self._company = len(batch) > 1
         self.stats.requests += len(batch)
         if len(batch) > 1:
             merged = torch.cat([request.observation for request in batch])
