@@ -6,7 +6,8 @@ grammar that names them (:func:`load_driver`).
   ``expert=True`` exposes as ``"expert_action"`` (a driver's :attr:`~Driver.needs_expert`).
 - :class:`ScriptedDriver`: constant or sinusoidal throttle and steering from a small spec.
 - :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
-  checkpoint, or any TorchScript / ``torch.save``d module.
+  checkpoint, any TorchScript / ``torch.save``d module, or a policy served by a policy server
+  (``grpc://host:port``, :class:`~oasis_torchrl.serving.RemotePolicy`).
 - :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
   (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
@@ -27,10 +28,12 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from torchrl.data import Composite
 
-from oasis_torchrl.models import DrivingNet, make_actor_critic
+from oasis_torchrl.models import DrivingNet, make_deterministic_actor, observation_spec
 from oasis_torchrl.models.checkpoint import load_checkpoint, load_net, net_from_checkpoint
 from oasis_torchrl.protocol import CAMERAS, CHUNK
+from oasis_torchrl.serving.client import RemotePolicy, is_policy_url
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +58,11 @@ class Driver(ABC):
     needs_expert: bool = False
     """Whether the driver drives with the embedded server's expert: build its env with
     ``expert=True``."""
+    observation_spec: Composite | None = None
+    """What the driver reads of one row (shapes without batch dimensions; None: undeclared).
+    A policy server describes its inputs with it."""
+    n_action_steps: int = CHUNK
+    """Actions of each :meth:`plan` a policy server queues for a row before planning again."""
 
     def __init__(self, *, chunk_actions: bool = True) -> None:
         self.chunk_actions = chunk_actions
@@ -63,11 +71,28 @@ class Driver(ABC):
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """float32 ``[N, 4, 2]`` action chunks for the observation rows of ``td``."""
 
+    def plan(self, td: TensorDictBase) -> torch.Tensor:
+        """The actions ``[N, K, 2]`` (``K >= n_action_steps``) each row would take from its
+        observation alone, bounded to ``[-1, 1]``: what a policy server queues for a row. The
+        chunk, unless the driver keeps state between calls (a queue, a history): then it
+        plans without touching that state."""
+        return bounded(self.chunks(td))
+
     def __call__(self, td: TensorDictBase) -> TensorDictBase:
         """Set ``td["action"]`` and return ``td`` (as a TorchRL policy does)."""
-        chunk = self.chunks(td).to(torch.float32).clamp(-1.0, 1.0)
+        chunk = bounded(self.chunks(td))
         td.set("action", chunk if self.chunk_actions else chunk[:, 0].contiguous())
         return td
+
+
+def bounded(actions: torch.Tensor) -> torch.Tensor:
+    """Actions as float32 in ``[-1, 1]``, the world model's box.
+
+    Example:
+        >>> bounded(torch.tensor([2.0, -0.5], dtype=torch.float64))
+        tensor([ 1.0000, -0.5000])
+    """
+    return actions.to(torch.float32).clamp(-1.0, 1.0)
 
 
 # -- autopilot ----------------------------------------------------------------------------
@@ -232,6 +257,8 @@ class PolicyDriver(Driver):
     Args:
         module: the policy.
         in_keys: inputs of a plain module.
+        image_size: see :attr:`Driver.image_size`.
+        observation_spec: see :attr:`Driver.observation_spec`.
         chunk_actions: see :class:`Driver`.
 
     Example:
@@ -250,22 +277,31 @@ class PolicyDriver(Driver):
         in_keys: Sequence[str | tuple[str, ...]] | None = None,
         *,
         image_size: tuple[int, int] | None = None,
+        observation_spec: Composite | None = None,
         chunk_actions: bool = True,
     ) -> None:
         super().__init__(chunk_actions=chunk_actions)
         self.module = module.eval()
         self.in_keys = list(in_keys) if in_keys is not None else None
         self.image_size = image_size
+        self.observation_spec = observation_spec
 
     @classmethod
     def of_network(cls, net: DrivingNet, **kwargs: object) -> PolicyDriver:
-        """The deterministic actor of a driving network, at the network's image size.
+        """The deterministic actor of a driving network (its chunk ``tanh(loc)``), at the
+        network's image size.
 
         Example:
-            >>> PolicyDriver.of_network(DrivingNet()).image_size
-            (64, 96)
+            >>> driver = PolicyDriver.of_network(DrivingNet())
+            >>> driver.image_size, driver.observation_spec["state"].shape
+            ((64, 96), torch.Size([2]))
         """
-        return cls(make_actor_critic(net).policy, image_size=tuple(net.config.image_size), **kwargs)
+        return cls(
+            make_deterministic_actor(net),
+            image_size=tuple(net.config.image_size),
+            observation_spec=observation_spec(net),
+            **kwargs,
+        )
 
     @classmethod
     def load(cls, path: str | Path, **kwargs: object) -> PolicyDriver:
@@ -280,6 +316,13 @@ class PolicyDriver(Driver):
         if payload is not None:
             return cls.of_network(net_from_checkpoint(payload), **kwargs)
         return cls(load_module(path), **kwargs)
+
+    @classmethod
+    def remote(cls, url: str, **kwargs: object) -> PolicyDriver:
+        """The policy a policy server serves (``grpc://host:port``, ``grpcs://`` with TLS; the
+        key from ``$OASIS_POLICY_API_KEY``), at its image size."""
+        policy = RemotePolicy(url)
+        return cls(policy, image_size=policy.image_size, **kwargs)
 
     def _inputs(self, td: TensorDictBase) -> list[torch.Tensor]:
         if self.in_keys is not None:
@@ -307,8 +350,9 @@ AUTOPILOT = "autopilot"
 SCRIPTED = ("scripted:", "constant:")
 GRAMMAR = (
     "'autopilot', 'scripted:<script>' (or 'constant:<script>', e.g. "
-    "'constant:throttle=1.0,steering=0.0'), or the path of a saved policy (a LeRobot policy "
-    "folder, a PPO checkpoint, a TorchScript or torch.save file)"
+    "'constant:throttle=1.0,steering=0.0'), the path of a saved policy (a LeRobot policy "
+    "folder, a PPO checkpoint, a TorchScript or torch.save file), or a policy server "
+    "('grpc://host:port', 'grpcs://host:port' with TLS)"
 )
 
 
@@ -336,6 +380,8 @@ def load_driver(
     for prefix in SCRIPTED:
         if text.startswith(prefix):
             return ScriptedDriver.from_spec(text.removeprefix(prefix))
+    if is_policy_url(text):
+        return PolicyDriver.remote(text)
     if not Path(text).exists():
         raise ValueError(f"driver {text!r} is none of {GRAMMAR}")
     return PolicyDriver.load(text, in_keys=in_keys)

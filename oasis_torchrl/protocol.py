@@ -72,6 +72,16 @@ SERVER_API_KEYS_ENV_VAR = "OASIS_SERVER_API_KEYS"
 SIM_SERVICE = "oasis_torchrl.sim.v1.SimService"
 """The embedded server's local-only side channel (depth maps, scene layout)."""
 
+# -- the policy service: a trained policy served over the network (oasis_torchrl.policy.v1) ----
+
+POLICY_SERVICE = "oasis_torchrl.policy.v1.PolicyService"
+POLICY_SCHEMES: dict[str, bool] = {"grpc://": False, "grpcs://": True}
+"""URL prefixes naming a policy server (``grpc://host:port``), and whether each uses TLS."""
+POLICY_API_KEY_ENV_VAR = "OASIS_POLICY_API_KEY"
+"""The key a policy client sends when it is given none."""
+POLICY_SERVER_API_KEYS_ENV_VAR = "OASIS_POLICY_SERVER_API_KEYS"
+"""Comma-separated API keys the policy server accepts."""
+
 
 class FrameFormat(enum.IntEnum):
     """``decart.inference.common.FrameFormat`` as a Python enum (same values), plus this

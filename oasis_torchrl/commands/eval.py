@@ -1,7 +1,8 @@
 """``oasis-torchrl eval``: evaluate a policy on fixed prompts and seeds; JSON out.
 
 The policy is ``autopilot``, ``constant:throttle=1.0,steering=0.0`` (any scripted driver spec),
-a PPO checkpoint or a LeRobot ``oasis`` policy folder. Settings:
+a PPO checkpoint, a LeRobot ``oasis`` policy folder or a policy server (``grpc://host:port``,
+the key in ``OASIS_POLICY_API_KEY``). Settings:
 :class:`~oasis_torchrl.config.EvalConfig`, each a flag or a ``key=value`` override:
 ``oasis-torchrl eval policy=outputs/bc/policy seeds=[0,1] episodes=8 output=eval.json``.
 The report (mean distance before collision, collision rate, mean return, and every episode) is
@@ -34,6 +35,7 @@ def run(cfg: DictConfig) -> int:
         2
     """
     from oasis_torchrl.drivers import load_driver
+    from oasis_torchrl.serving import RemotePolicyError
     from oasis_torchrl.train.evaluate import Evaluator
 
     try:
@@ -42,7 +44,7 @@ def run(cfg: DictConfig) -> int:
             cfg.env, cfg, image_size=driver.image_size, expert=driver.needs_expert
         ) as evaluator:
             report = evaluator.evaluate(driver)
-    except (ValueError, FileNotFoundError, ImportError, KeyError) as error:
+    except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)
         return 2
     if cfg.output:

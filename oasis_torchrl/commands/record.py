@@ -1,10 +1,11 @@
 """``oasis-torchrl record``: drive N envs and record the episodes as a LeRobot dataset.
 
 Drivers: the ground-truth ``autopilot`` (embedded server only), a ``scripted`` open-loop drive
-(``--script "throttle=0.5,steering=sine:0.3:40"``) or a saved ``policy`` (``--policy
-file.pt``). Episodes still running when the requested number is reached are dropped. A remote
-endpoint reads its key from ``DECART_API_KEY`` (never from a flag: command lines are visible to
-every user of the machine); keys never reach the dataset.
+(``--script "throttle=0.5,steering=sine:0.3:40"``) or a ``policy``, saved (``--policy
+file.pt``) or served (``--policy grpc://host:port``, the key in ``OASIS_POLICY_API_KEY``).
+Episodes still running when the requested number is reached are dropped. A remote endpoint
+reads its key from ``DECART_API_KEY`` (never from a flag: command lines are visible to every
+user of the machine); keys never reach the dataset.
 
 With ``--ray`` the sessions run on Ray workers (TorchRL's ``RayCollector``; a local runtime, or
 a cluster with ``--ray-address``), each recording its share of the episodes into its own shard
@@ -154,6 +155,7 @@ def run(settings: DictConfig) -> int:
         2
     """
     from oasis_torchrl.data.quiet import quiet_dataset_libraries
+    from oasis_torchrl.serving import RemotePolicyError
 
     cfg: RecordConfig = to_object(settings)
     quiet_dataset_libraries()
@@ -164,7 +166,14 @@ def run(settings: DictConfig) -> int:
                 written, stopped = result.episodes, result.stopped
             else:
                 written, stopped = record(cfg, stop), False
-    except (ValueError, TypeError, KeyError, FileExistsError, FileNotFoundError) as error:
+    except (
+        ValueError,
+        TypeError,
+        KeyError,
+        FileExistsError,
+        FileNotFoundError,
+        RemotePolicyError,
+    ) as error:
         logger.error("cannot record: %s", error)
         return 2
     except KeyboardInterrupt:

@@ -26,6 +26,7 @@ T = TypeVar("T")
 def _named() -> dict[str, type]:
     from oasis_torchrl.config.evaluation import EvalConfig
     from oasis_torchrl.config.pipeline import DemoConfig
+    from oasis_torchrl.config.policy_serving import ServePolicyConfig
     from oasis_torchrl.config.recording import ImportConfig, RecordConfig
     from oasis_torchrl.config.serving import ServeConfig
     from oasis_torchrl.config.training import BCConfig, PPOConfig
@@ -40,6 +41,7 @@ def _named() -> dict[str, type]:
         "ppo": PPOConfig,
         "record": RecordConfig,
         "serve": ServeConfig,
+        "serve-policy": ServePolicyConfig,
         "view": ViewConfig,
     }
 

@@ -3,7 +3,7 @@ runs it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import ClassVar
 
 from oasis_torchrl.config.fields import Alias, option
@@ -31,5 +31,5 @@ class ServeConfig(ServerConfig):
             >>> ServeConfig(width=96, height=64, api_keys=("k",)).server_config().width
             96
         """
-        names = ServerConfig.__dataclass_fields__
+        names = [item.name for item in fields(ServerConfig)]
         return ServerConfig(**{name: getattr(self, name) for name in names})

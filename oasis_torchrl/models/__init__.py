@@ -7,7 +7,9 @@
 from oasis_torchrl.models.actor_critic import (
     ActorCritic,
     make_actor_critic,
+    make_deterministic_actor,
     observation_keys,
+    observation_spec,
 )
 from oasis_torchrl.models.config import POLICY_IMAGE_SIZE, DrivingNetConfig
 from oasis_torchrl.models.encoder import MultiCameraEncoder
@@ -23,5 +25,7 @@ __all__ = [
     "DrivingNetConfig",
     "MultiCameraEncoder",
     "make_actor_critic",
+    "make_deterministic_actor",
     "observation_keys",
+    "observation_spec",
 ]

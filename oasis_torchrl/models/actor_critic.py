@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
-from torchrl.data import Bounded
+from torchrl.data import Bounded, Composite
 from torchrl.modules import ActorValueOperator, ProbabilisticActor, ValueOperator
 
 from oasis_torchrl.models.network import DrivingNet
@@ -40,6 +40,17 @@ class _Features(nn.Module):
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         return self.net.features(inputs[:-1], inputs[-1])
+
+
+class _Chunk(nn.Module):
+    """``(*frames, state) -> tanh(loc)``: the deterministic chunk, no distribution."""
+
+    def __init__(self, net: DrivingNet) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        return self.net(inputs[:-1], inputs[-1])
 
 
 class _ChunkParams(nn.Module):
@@ -72,6 +83,45 @@ def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tup
         [('pixels', 'left_forward'), ('pixels', 'front'), ('pixels', 'right_forward'), 'state']
     """
     return [(image_key, camera) for camera in net.config.cameras] + [STATE]
+
+
+def make_deterministic_actor(net: DrivingNet, image_key: str = PIXELS) -> TensorDictModule:
+    """The actor that deploys: observations -> ``"action"``, the chunk ``tanh(loc)`` (what the
+    PPO actor gives under ``ExplorationType.DETERMINISTIC``, without building a distribution
+    and its log-probability on every call).
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> from oasis_torchrl.models import DrivingNetConfig
+        >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+        >>> frames = torch.zeros(3, 4, 32, 48, 3, dtype=torch.uint8)
+        >>> td = TensorDict({"pixels": {c: frames for c in net.config.cameras},
+        ...                  "state": torch.zeros(3, 2)}, batch_size=[3])
+        >>> make_deterministic_actor(net)(td)["action"].shape
+        torch.Size([3, 4, 2])
+    """
+    return TensorDictModule(
+        _Chunk(net), in_keys=observation_keys(net, image_key), out_keys=["action"]
+    )
+
+
+def observation_spec(net: DrivingNet) -> Composite:
+    """What the actor reads of one row (no batch dimensions): the last ``frames`` uint8 frames
+    of each camera (``("pixels", <camera>)``, ``[frames, H, W, 3]``) and ``"state"``.
+
+    Example:
+        >>> spec = observation_spec(DrivingNet())
+        >>> spec["pixels", "front"].shape, spec["state"].shape
+        (torch.Size([2, 64, 96, 3]), torch.Size([2]))
+    """
+    cfg = net.config
+    frame = Bounded(0, 255, (cfg.frames, *cfg.image_size, 3), dtype=torch.uint8)
+    return Composite(
+        {
+            PIXELS: Composite({camera: frame.clone() for camera in cfg.cameras}),
+            STATE: Bounded(-1.0, 1.0, (cfg.state_dim,)),
+        }
+    )
 
 
 @dataclass

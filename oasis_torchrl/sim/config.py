@@ -7,7 +7,10 @@ import math
 import os
 import re
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
+
+import grpc
 
 from oasis_torchrl.config.fields import option
 from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR
@@ -33,77 +36,56 @@ def parse_formats(text: str) -> tuple[int, ...]:
     return tuple(int(FORMAT_NAMES[name]) for name in names)
 
 
-def keys_from_env(environ: dict[str, str] | None = None) -> tuple[str, ...]:
-    """API keys listed (comma-separated) in ``OASIS_SERVER_API_KEYS``.
+def keys_from_env(
+    environ: dict[str, str] | None = None, variable: str = SERVER_API_KEYS_ENV_VAR
+) -> tuple[str, ...]:
+    """API keys listed (comma-separated) in ``variable`` (default ``OASIS_SERVER_API_KEYS``).
 
     Example:
         >>> keys_from_env({"OASIS_SERVER_API_KEYS": "alpha, beta,,"})
         ('alpha', 'beta')
     """
-    raw = (os.environ if environ is None else environ).get(SERVER_API_KEYS_ENV_VAR, "")
+    raw = (os.environ if environ is None else environ).get(variable, "")
     return tuple(key.strip() for key in raw.split(",") if key.strip())
 
 
 @dataclass(frozen=True)
-class ServerConfig:
-    """Everything the embedded A2V server needs; validated on construction.
+class GrpcServerConfig:
+    """Where a gRPC server of this project listens and whom it lets in: interface, port, API
+    keys, TLS, message size and handler threads (the A2V server's and the policy server's).
 
-    When ``api_keys`` is empty the keys come from ``OASIS_SERVER_API_KEYS``. A server with no
-    key at all refuses to start unless ``allow_any_key`` is set (then any non-empty key works).
+    When ``api_keys`` is empty the keys come from the environment variable
+    :attr:`API_KEYS_ENV_VAR`. A server with no key at all refuses to start unless
+    ``allow_any_key`` is set (then any non-empty key works).
 
     Example:
-        >>> config = ServerConfig(width=96, height=64, api_keys=("secret",))
-        >>> config.address_to_bind, config.tls_enabled
-        ('127.0.0.1:0', False)
-        >>> ServerConfig(width=95)
+        >>> GrpcServerConfig(api_keys=("k",)).endpoint(50051)
+        'http://127.0.0.1:50051'
+        >>> GrpcServerConfig(api_keys=("two words",))
         Traceback (most recent call last):
         ...
-        ValueError: width must be an even integer in [16, 4096], got 95
+        ValueError: api_keys[0] must be 1-256 printable ASCII characters without spaces or commas
     """
+
+    API_KEYS_ENV_VAR: ClassVar[str] = SERVER_API_KEYS_ENV_VAR
+    URL_SCHEMES: ClassVar[tuple[str, str]] = ("http", "https")
+    """The scheme of :meth:`endpoint` without and with TLS."""
 
     host: str = option("127.0.0.1", help="interface to bind")
     port: int = option(0, help="port to bind; 0 picks a free one")
-    width: int = option(768, help="frame width")
-    height: int = option(512, help="frame height")
-    fps: float = option(FPS, help="frame rate (the world's time step is 1/fps)")
     api_keys: tuple[str, ...] = option(
-        (), help="accepted API keys (default: $OASIS_SERVER_API_KEYS; flags are visible to all)"
+        (), help="accepted API keys (default: from the environment; flags are visible to all)"
     )
     allow_any_key: bool = option(False, help="accept any non-empty key")
-    latency_ms: float = option(0.0, help="delay added to every Infer, emulating a GPU model")
-    failure_rate: float = option(0.0, help="probability of an injected UNAVAILABLE per call")
-    failure_seed: int = option(0, help="seed of the injected failures")
-    idle_timeout_s: float = option(300.0, help="idle session expiry, seconds")
-    max_sessions: int = option(64, help="open sessions at most")
-    max_sessions_per_key: int = option(32, help="open sessions per API key at most")
-    max_prompt_chars: int = option(2000, help="longest prompt")
     max_message_bytes: int = option(64 * 1024, help="largest request, bytes")
     tls_cert: str | None = option(None, help="PEM certificate chain (with tls_key)")
     tls_key: str | None = option(None, help="PEM private key (with tls_cert)")
     workers: int = option(32, help="gRPC handler threads")
-    processes: int | None = option(
-        None,
-        help="worker processes running the sessions (null: one per core; 0: all in the "
-        "server's process)",
-    )
-    encode_workers: int = option(0, help="threads encoding streams per process (0: automatic)")
-    formats: tuple[int, ...] = option(
-        tuple(int(value) for value in SUPPORTED_FORMATS),
-        help="allowed frame formats in preference order, e.g. raw,vp9,jpeg",
-        parse=parse_formats,
-        metavar="FORMATS",
-    )
-    vp9_cpu_used: int = option(8, help="libvpx speed 0-8")
-    vp9_bit_rate: int | None = option(None, help="VP9 bits/s (null: scales with the frame size)")
-    vp9_threads: int = option(1, help="libvpx threads per stream")
-    jpeg_quality: int = option(90, help="JPEG quality 1-100")
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "api_keys", tuple(self.api_keys) or keys_from_env())
-        object.__setattr__(self, "formats", tuple(self.formats))
+        keys = tuple(self.api_keys) or keys_from_env(variable=self.API_KEYS_ENV_VAR)
+        object.__setattr__(self, "api_keys", keys)
         self._validate_network()
-        self._validate_video()
-        self._validate_limits()
         self._validate_keys()
 
     @property
@@ -134,7 +116,90 @@ class ServerConfig:
             >>> ServerConfig(api_keys=("k",)).endpoint(50051)
             'http://127.0.0.1:50051'
         """
-        return f"{'https' if self.tls_enabled else 'http'}://{self.client_address(port)}"
+        return f"{self.URL_SCHEMES[self.tls_enabled]}://{self.client_address(port)}"
+
+    def bind(self, server: grpc.Server) -> int:
+        """Add this config's listening port to ``server`` (with TLS when configured); returns
+        the bound port."""
+        if not self.tls_enabled:
+            return server.add_insecure_port(self.address_to_bind)
+        credentials = grpc.ssl_server_credentials(
+            [(Path(self.tls_key).read_bytes(), Path(self.tls_cert).read_bytes())]
+        )
+        return server.add_secure_port(self.address_to_bind, credentials)
+
+    def _validate_network(self) -> None:
+        if not self.host:
+            raise ValueError("host must be a non-empty host name or address")
+        require_int("port", self.port, 0, 65535)
+        require_int("workers", self.workers, 1, 1024)
+        require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError(
+                "tls_cert and tls_key must be given together, got "
+                f"tls_cert={self.tls_cert!r}, tls_key={self.tls_key!r}"
+            )
+
+    def _validate_keys(self) -> None:
+        for index, key in enumerate(self.api_keys):
+            if not isinstance(key, str) or not _API_KEY_PATTERN.fullmatch(key):
+                raise ValueError(
+                    f"api_keys[{index}] must be 1-256 printable ASCII characters without "
+                    "spaces or commas"
+                )
+
+
+@dataclass(frozen=True)
+class ServerConfig(GrpcServerConfig):
+    """Everything the embedded A2V server needs; validated on construction.
+
+    When ``api_keys`` is empty the keys come from ``OASIS_SERVER_API_KEYS``. A server with no
+    key at all refuses to start unless ``allow_any_key`` is set (then any non-empty key works).
+
+    Example:
+        >>> config = ServerConfig(width=96, height=64, api_keys=("secret",))
+        >>> config.address_to_bind, config.tls_enabled
+        ('127.0.0.1:0', False)
+        >>> ServerConfig(width=95)
+        Traceback (most recent call last):
+        ...
+        ValueError: width must be an even integer in [16, 4096], got 95
+    """
+
+    width: int = option(768, help="frame width")
+    height: int = option(512, help="frame height")
+    fps: float = option(FPS, help="frame rate (the world's time step is 1/fps)")
+    latency_ms: float = option(0.0, help="delay added to every Infer, emulating a GPU model")
+    failure_rate: float = option(0.0, help="probability of an injected UNAVAILABLE per call")
+    failure_seed: int = option(0, help="seed of the injected failures")
+    idle_timeout_s: float = option(300.0, help="idle session expiry, seconds")
+    max_sessions: int = option(64, help="open sessions at most")
+    max_sessions_per_key: int = option(32, help="open sessions per API key at most")
+    max_prompt_chars: int = option(2000, help="longest prompt")
+    processes: int | None = option(
+        None,
+        help="worker processes running the sessions (null: one per core; 0: all in the "
+        "server's process)",
+    )
+    encode_workers: int = option(0, help="threads encoding streams per process (0: automatic)")
+    formats: tuple[int, ...] = option(
+        tuple(int(value) for value in SUPPORTED_FORMATS),
+        help="allowed frame formats in preference order, e.g. raw,vp9,jpeg",
+        parse=parse_formats,
+        metavar="FORMATS",
+    )
+    vp9_cpu_used: int = option(8, help="libvpx speed 0-8")
+    vp9_bit_rate: int | None = option(None, help="VP9 bits/s (null: scales with the frame size)")
+    vp9_threads: int = option(1, help="libvpx threads per stream")
+    jpeg_quality: int = option(90, help="JPEG quality 1-100")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "formats", tuple(self.formats))
+        if self.processes is not None:
+            require_int("processes", self.processes, 0, 1024)
+        self._validate_video()
+        self._validate_limits()
 
     @property
     def resolved_processes(self) -> int:
@@ -209,31 +274,17 @@ class ServerConfig:
         values["api_keys"] = f"<{len(self.api_keys)} key(s)>"
         return values
 
-    def _validate_network(self) -> None:
-        if not self.host:
-            raise ValueError("host must be a non-empty host name or address")
-        _require_int("port", self.port, 0, 65535)
-        _require_int("workers", self.workers, 1, 1024)
-        if self.processes is not None:
-            _require_int("processes", self.processes, 0, 1024)
-        _require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
-        if (self.tls_cert is None) != (self.tls_key is None):
-            raise ValueError(
-                "tls_cert and tls_key must be given together, got "
-                f"tls_cert={self.tls_cert!r}, tls_key={self.tls_key!r}"
-            )
-
     def _validate_video(self) -> None:
         for name in ("width", "height"):
             value = getattr(self, name)
-            if not _is_int(value) or value % 2 or not 16 <= value <= 4096:
+            if not is_int(value) or value % 2 or not 16 <= value <= 4096:
                 raise ValueError(f"{name} must be an even integer in [16, 4096], got {value!r}")
-        _require_float("fps", self.fps, 1.0, 240.0)
-        _require_int("vp9_cpu_used", self.vp9_cpu_used, 0, 8)
-        _require_int("vp9_threads", self.vp9_threads, 1, 64)
-        _require_int("jpeg_quality", self.jpeg_quality, 1, 100)
+        require_float("fps", self.fps, 1.0, 240.0)
+        require_int("vp9_cpu_used", self.vp9_cpu_used, 0, 8)
+        require_int("vp9_threads", self.vp9_threads, 1, 64)
+        require_int("jpeg_quality", self.jpeg_quality, 1, 100)
         if self.vp9_bit_rate is not None:
-            _require_int("vp9_bit_rate", self.vp9_bit_rate, 1000, 1 << 31)
+            require_int("vp9_bit_rate", self.vp9_bit_rate, 1000, 1 << 31)
         if not self.formats:
             raise ValueError("formats must name at least one frame format")
         for frame_format in self.formats:
@@ -244,34 +295,26 @@ class ServerConfig:
                 )
 
     def _validate_limits(self) -> None:
-        _require_float("latency_ms", self.latency_ms, 0.0, 600_000.0)
-        _require_float("failure_rate", self.failure_rate, 0.0, 1.0)
-        _require_int("failure_seed", self.failure_seed, 0, (1 << 64) - 1)
-        _require_float("idle_timeout_s", self.idle_timeout_s, 0.001, math.inf)
-        _require_int("max_sessions", self.max_sessions, 1, 1 << 20)
-        _require_int("max_sessions_per_key", self.max_sessions_per_key, 1, 1 << 20)
-        _require_int("max_prompt_chars", self.max_prompt_chars, 1, 1 << 20)
-        _require_int("encode_workers", self.encode_workers, 0, 1024)
-
-    def _validate_keys(self) -> None:
-        for index, key in enumerate(self.api_keys):
-            if not isinstance(key, str) or not _API_KEY_PATTERN.fullmatch(key):
-                raise ValueError(
-                    f"api_keys[{index}] must be 1-256 printable ASCII characters without "
-                    "spaces or commas"
-                )
+        require_float("latency_ms", self.latency_ms, 0.0, 600_000.0)
+        require_float("failure_rate", self.failure_rate, 0.0, 1.0)
+        require_int("failure_seed", self.failure_seed, 0, (1 << 64) - 1)
+        require_float("idle_timeout_s", self.idle_timeout_s, 0.001, math.inf)
+        require_int("max_sessions", self.max_sessions, 1, 1 << 20)
+        require_int("max_sessions_per_key", self.max_sessions_per_key, 1, 1 << 20)
+        require_int("max_prompt_chars", self.max_prompt_chars, 1, 1 << 20)
+        require_int("encode_workers", self.encode_workers, 0, 1024)
 
 
-def _is_int(value: object) -> bool:
+def is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _require_int(name: str, value: object, low: int, high: int) -> None:
-    if not _is_int(value) or not low <= value <= high:  # type: ignore[operator]
+def require_int(name: str, value: object, low: int, high: int) -> None:
+    if not is_int(value) or not low <= value <= high:  # type: ignore[operator]
         raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
 
 
-def _require_float(name: str, value: object, low: float, high: float) -> None:
+def require_float(name: str, value: object, low: float, high: float) -> None:
     number_ok = isinstance(value, (int, float)) and not isinstance(value, bool)
     if not number_ok or math.isnan(value) or not low <= value <= high:  # type: ignore[arg-type]
         raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")

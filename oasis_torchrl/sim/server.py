@@ -21,7 +21,6 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager
-from pathlib import Path
 from typing import Any, TypeVar
 
 import grpc
@@ -390,13 +389,7 @@ class A2VServer:
 
     def start(self) -> int:
         """Bind, start serving and report SERVING; returns the bound port."""
-        if self.config.tls_enabled:
-            credentials = grpc.ssl_server_credentials(
-                [(Path(self.config.tls_key).read_bytes(), Path(self.config.tls_cert).read_bytes())]
-            )
-            self.port = self._server.add_secure_port(self.config.address_to_bind, credentials)
-        else:
-            self.port = self._server.add_insecure_port(self.config.address_to_bind)
+        self.port = self.config.bind(self._server)
         self._worlds.start()
         self._server.start()
         self._registry.start_reaper()
