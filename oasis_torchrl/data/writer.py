@@ -33,7 +33,9 @@ DEFAULT_VCODEC = "h264"
 """libx264 through PyAV: about twice as fast here as LeRobot's default libsvtav1 at LeRobot's
 settings (crf 30, keyframe every 2 frames), somewhat lower quality (PSNR about 35 vs 40 dB on
 768x512 simulator frames), decoded by both pyav and torchcodec (benchmarks/export_speed.py)."""
-ROBOT_TYPE = "oasis_car"
+ROBOT_TYPE = "oasis"
+"""The datasets' ``robot_type``: the oasis robot's (``--robot.type=oasis``), so a person's
+recordings and the project's datasets can be merged (LeRobot merges only equal robot types)."""
 
 
 def camera_encoder(vcodec: str) -> RGBEncoderConfig:
