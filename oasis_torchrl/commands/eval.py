@@ -1,9 +1,9 @@
 """``oasis-torchrl eval``: evaluate a policy on fixed prompts and seeds; JSON out.
 
 The policy is ``autopilot``, ``constant:throttle=1.0,steering=0.0`` (any scripted driver spec),
-a PPO checkpoint or a LeRobot ``oasis`` policy folder. Settings:
-:class:`~oasis_torchrl.config.EvalConfig`, each a flag or a ``key=value`` override:
-``oasis-torchrl eval policy=outputs/bc/policy seeds=[0,1] episodes=8 output=eval.json``.
+a PPO checkpoint or a LeRobot policy folder of any type (``oasis``, ``act``, ``diffusion``,
+plugins). Settings: :class:`~oasis_torchrl.config.EvalConfig`, each a flag or a ``key=value``
+override: ``oasis-torchrl eval policy=outputs/bc/policy seeds=[0,1] episodes=8 output=eval.json``.
 The report (mean distance before collision, collision rate, mean return, and every episode) is
 written to stdout as JSON, and to ``output`` when set.
 """

@@ -88,7 +88,11 @@ class RecordConfig(DatasetOutputConfig):
     episodes: int = option(10, help="episodes to record (with --ray, env.num_envs is unused)")
     driver: str = option("autopilot", help="who drives: autopilot | scripted | policy")
     script: str = option("throttle=0.5", help="scripted driver spec (throttle=...,steering=...)")
-    policy: str | None = option(None, help="saved policy (TorchScript or torch.save)")
+    policy: str | None = option(
+        None,
+        help="saved policy: a LeRobot policy folder (any type), a PPO checkpoint, a TorchScript "
+        "or torch.save file",
+    )
     policy_in_keys: str | None = option(
         None,
         help="comma-separated inputs of a plain policy module, nested keys with dots "
