@@ -87,9 +87,10 @@ def _policy_config(folder: str) -> PreTrainedConfig:
     return config
 
 
-def evaluate(policy_folder: str, sessions: int, seed: int) -> dict:
-    """LeRobot's evaluation of a policy folder on ``sessions`` world-model sessions at once."""
-    env_config = OasisEnvConfig(task=PROMPT, episode_length=200)
+def evaluate(policy_folder: str, sessions: int, frames: int, seed: int) -> dict:
+    """LeRobot's evaluation of a policy folder on ``sessions`` world-model sessions at once,
+    episodes of ``frames`` frames."""
+    env_config = OasisEnvConfig(task=PROMPT, episode_length=frames)
     envs = make_env(env_config, n_envs=sessions)
     policy_config = _policy_config(policy_folder)
     policy = make_policy(policy_config, env_cfg=env_config)
@@ -123,11 +124,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--policy", help="a LeRobot policy folder to evaluate in the world model")
     parser.add_argument("--sessions", type=int, default=4, help="sessions evaluated at once")
+    parser.add_argument("--episode-frames", type=int, default=200, help="frames per evaluation")
     args = parser.parse_args()
     dataset = record(args.root, args.episodes, args.seconds, args.seed)
     print(f"recorded {dataset.num_episodes} episodes, {dataset.num_frames} rows in {args.root}")
     if args.policy:
-        print(json.dumps(evaluate(args.policy, args.sessions, args.seed), indent=2))
+        metrics = evaluate(args.policy, args.sessions, args.episode_frames, args.seed)
+        print(json.dumps(metrics, indent=2))
 
 
 if __name__ == "__main__":

@@ -116,7 +116,7 @@ class OasisRobot(Robot):
             self.disconnect()
             raise
         self._stop_listening = on_lerobot_episode_start(self.start_episode)
-        logger.info("%s connected to %s: %r", self, self.config.endpoint, self.config.prompt)
+        logger.info("oasis robot connected to %s: %r", self.config.endpoint, self.config.prompt)
 
     def calibrate(self) -> None:
         """Nothing to calibrate."""

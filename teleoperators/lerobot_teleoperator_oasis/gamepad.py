@@ -24,9 +24,7 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot.utils.errors import DeviceNotConnectedError
 
 from lerobot_teleoperator_oasis.config_oasis import OasisGamepadTeleopConfig
-from oasis_torchrl.data.features import ACTION_NAMES
-
-THROTTLE, STEERING = ACTION_NAMES
+from lerobot_teleoperator_oasis.controls import STEERING, THROTTLE, CarControls
 
 
 def _beyond_deadzone(value: float, deadzone: float) -> float:
@@ -67,7 +65,7 @@ def gamepad_action(axes: Sequence[float], config: OasisGamepadTeleopConfig) -> d
     return {THROTTLE: round(pressed - braked, 6), STEERING: round(steering, 6)}
 
 
-class OasisGamepadTeleop(Teleoperator):
+class OasisGamepadTeleop(CarControls, Teleoperator):
     """Analog driving with a gamepad or joystick through pygame.
 
     Args:
@@ -88,24 +86,9 @@ class OasisGamepadTeleop(Teleoperator):
         self._joystick: Any = None
 
     @property
-    def action_features(self) -> dict[str, type]:
-        """The oasis robot's action names."""
-        return dict.fromkeys(ACTION_NAMES, float)
-
-    @property
-    def feedback_features(self) -> dict:
-        """No feedback."""
-        return {}
-
-    @property
     def is_connected(self) -> bool:
         """Whether a gamepad is open."""
         return self._joystick is not None
-
-    @property
-    def is_calibrated(self) -> bool:
-        """Axes come calibrated by the driver."""
-        return True
 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:

@@ -29,9 +29,7 @@ from lerobot.teleoperators.keyboard import KeyboardTeleop
 from lerobot.utils.decorators import check_if_not_connected
 
 from lerobot_teleoperator_oasis.config_oasis import OasisKeyboardTeleopConfig
-from oasis_torchrl.data.features import ACTION_NAMES
-
-THROTTLE, STEERING = ACTION_NAMES
+from lerobot_teleoperator_oasis.controls import STEERING, THROTTLE, CarControls
 
 
 def keyboard_action(
@@ -51,7 +49,7 @@ def keyboard_action(
     return {THROTTLE: float(throttle), STEERING: float(steering)}
 
 
-class OasisKeyboardTeleop(KeyboardTeleop):
+class OasisKeyboardTeleop(CarControls, KeyboardTeleop):
     """WASD driving through LeRobot's keyboard listener (pynput: an X11 session, Windows or
     macOS with input monitoring allowed).
 
@@ -71,21 +69,6 @@ class OasisKeyboardTeleop(KeyboardTeleop):
         super().__init__(config)
         self.config = config
         self._held: set[object] = set()
-
-    @property
-    def action_features(self) -> dict[str, type]:
-        """The oasis robot's action names."""
-        return dict.fromkeys(ACTION_NAMES, float)
-
-    @property
-    def feedback_features(self) -> dict:
-        """No feedback."""
-        return {}
-
-    @property
-    def is_calibrated(self) -> bool:
-        """A keyboard needs no calibration."""
-        return True
 
     @check_if_not_connected
     def get_action(self) -> dict[str, float]:
