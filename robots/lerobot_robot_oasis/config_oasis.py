@@ -8,6 +8,8 @@ from lerobot.robots import RobotConfig
 
 from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
 from oasis_torchrl.data.writer import ROBOT_TYPE
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
 
 _ENV = EnvConfig()
 _SERVER = EmbeddedServerConfig()
@@ -53,15 +55,17 @@ class OasisRobotConfig(RobotConfig):
         if not self.prompt.strip():
             raise ValueError("robot.prompt must be a non-empty scene description")
 
-    def env_config(self) -> EnvConfig:
-        """The project's env settings of this robot's world (one row)."""
-        return EnvConfig(
-            endpoint=self.endpoint,
-            prompts=[self.prompt],
+    def world(self) -> OasisEnv:
+        """The robot's world: a one-session env with all 4 frames of each chunk (it opens
+        nothing before its first reset)."""
+        return OasisEnv(
+            self.endpoint,
             num_envs=1,
-            max_steps=2**31 - 1,  # the world ends only when the car collides
-            image_size=(self.image_height, self.image_width),
-            server=EmbeddedServerConfig(
+            prompts=self.prompt,
+            server=ServerConfig(
                 width=self.server_width, height=self.server_height, fps=_SERVER.fps
             ),
+            frame_size=(self.image_height, self.image_width),
+            all_frames=True,
+            max_steps=2**31 - 1,  # the world ends only when the car collides
         )

@@ -35,7 +35,6 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot_robot_oasis.config_oasis import ROBOT_TYPE, OasisRobotConfig
 from oasis_torchrl.compat import on_lerobot_episode_start
 from oasis_torchrl.data.features import ACTION_NAMES
-from oasis_torchrl.envs import make_env
 from oasis_torchrl.envs.per_frame import FrameStepper
 from oasis_torchrl.protocol import CAMERAS
 
@@ -105,7 +104,7 @@ class OasisRobot(Robot):
     def connect(self, calibrate: bool = True) -> None:
         """Open the session (starting the embedded server for ``endpoint=local``) and prompt
         episode 0."""
-        self._stepper = FrameStepper(make_env(self.config.env_config()))  # opens nothing yet
+        self._stepper = FrameStepper(self.config.world())
         try:
             if self.config.rerun:
                 from oasis_torchrl.viz import RolloutLogger

@@ -13,7 +13,8 @@ from lerobot.utils.utils import log_say
 from lerobot_robot_oasis import OasisRobot, OasisRobotConfig
 
 from oasis_torchrl.data.features import DatasetLayout, build_features
-from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS
+from oasis_torchrl.sim.launcher import LocalServer
 
 
 @pytest.fixture
@@ -91,3 +92,18 @@ def test_bad_actions_are_named(robot: OasisRobot) -> None:
         robot.send_action({"throttle.vel": 1.0, "angular_velocity": 0.5})
     with pytest.raises(ValueError, match="not finite"):
         robot.send_action({"throttle.vel": float("nan"), "steering.vel": 0.0})
+
+
+def test_a_remote_endpoint_drives_without_ground_truth(
+    local_server: LocalServer, server_keys: tuple[str, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(API_KEY_ENV_VAR, server_keys[0])  # keys never travel as flags
+    robot = OasisRobot(OasisRobotConfig(endpoint=f"http://{local_server.address}", image_height=32))
+    robot.connect()
+    try:
+        first = robot.get_observation()
+        _drive(robot, 8)
+        assert first["front"].shape == (32, 96, 3)
+        assert not np.array_equal(robot.get_observation()["front"], first["front"])
+    finally:
+        robot.disconnect()
