@@ -16,6 +16,9 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,lerobot,rerun,depth,ray
+# The LeRobot plugins, each a small distribution LeRobot finds by name (lerobot_policy_oasis,
+# lerobot_robot_oasis, lerobot_teleoperator_oasis, lerobot_env_oasis).
+PLUGINS := policies robots teleoperators envs
 DEMO_OUT ?= outputs/demo
 
 define NO_PYTHON
@@ -44,10 +47,10 @@ venv-python:
 		"$(PYTHON)" -m venv $(VENV); \
 	fi
 
-$(STAMP): pyproject.toml policies/pyproject.toml constraints.txt | venv-python
+$(STAMP): pyproject.toml $(PLUGINS:%=%/pyproject.toml) constraints.txt | venv-python
 	$(PY) -m pip install --quiet --upgrade "pip>=24"
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[$(EXTRAS)]"
-	$(PY) -m pip install --quiet -c constraints.txt --no-deps -e policies/
+	$(PY) -m pip install --quiet -c constraints.txt --no-deps $(PLUGINS:%=-e %/)
 	touch $(STAMP)
 
 demo: venv-python $(STAMP)

@@ -12,6 +12,10 @@ misbehaving on a layout it does not know). What is used, and why no public API d
 - TorchRL's ``RayCollector`` (:func:`drop_ray_collectors`): it can add remote collectors but not
   remove one, so after a worker died the survivors are kept by rewriting its actor list and
   those of its weight senders.
+- LeRobot's episode announcements (:func:`on_lerobot_episode_start`): a robot has no hook for
+  the start of an episode, but ``lerobot-record`` and ``lerobot-rollout``'s episodic strategy
+  announce each one with ``log_say("Recording episode N")`` (a root-logger INFO record); the oasis
+  robot listens for it to re-prompt its world for that episode.
 
 Example:
     >>> SUPPORTED["lerobot"]
@@ -22,9 +26,10 @@ Example:
 from __future__ import annotations
 
 import importlib.metadata
+import logging
 import re
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 SUPPORTED: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
@@ -121,3 +126,49 @@ def drop_ray_collectors(collector: Any, keep: Sequence[int]) -> None:
     for scheme in (collector._weight_sync_schemes or {}).values():
         scheme._remote_collectors = list(actors)
         scheme._num_workers = len(actors)
+
+
+# -- LeRobot: the episode announcements of its recording loops -----------------------------------
+
+_EPISODE_ANNOUNCEMENT = re.compile(r"Recording episode (\d+)")
+
+
+class _EpisodeStarts(logging.Handler):
+    """Calls back with ``N`` for every ``"Recording episode N"`` record it sees."""
+
+    def __init__(self, callback: Callable[[int], None]) -> None:
+        super().__init__(logging.INFO)
+        self.callback = callback
+
+    def emit(self, record: logging.LogRecord) -> None:
+        match = _EPISODE_ANNOUNCEMENT.fullmatch(str(record.msg))
+        if match is not None and record.name == "root":
+            self.callback(int(match[1]))
+
+
+def on_lerobot_episode_start(callback: Callable[[int], None]) -> Callable[[], None]:
+    """Call ``callback(index)`` whenever a LeRobot recording loop starts dataset episode
+    ``index`` (``lerobot-record``, ``lerobot-rollout --strategy.type=episodic``; a re-recorded
+    episode is announced again with the same index). Returns a function that stops listening.
+
+    LeRobot's tools log at INFO from the root logger (``init_logging``), where the announcement
+    arrives; a program running LeRobot's loops with the root logger above INFO is not told.
+
+    Example:
+        >>> from lerobot.utils.utils import log_say
+        >>> root, starts = logging.getLogger(), []
+        >>> level = root.level
+        >>> root.setLevel(logging.INFO)  # as LeRobot's tools log
+        >>> stop = on_lerobot_episode_start(starts.append)
+        >>> log_say("Recording episode 3", play_sounds=False)
+        >>> stop()
+        >>> log_say("Recording episode 4", play_sounds=False)
+        >>> root.setLevel(level)
+        >>> starts
+        [3]
+    """
+    require("lerobot")
+    handler = _EpisodeStarts(callback)
+    root = logging.getLogger()
+    root.addHandler(handler)
+    return lambda: root.removeHandler(handler)

@@ -8,6 +8,8 @@ grammar that names them (:func:`load_driver`).
 - :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
   checkpoint, any TorchScript / ``torch.save``d module, or a policy served by a policy server
   (``grpc://host:port``, :class:`~oasis_torchrl.serving.RemotePolicy`).
+- :class:`~oasis_torchrl.lerobot_driver.LeRobotDriver`: any other LeRobot policy folder (``act``,
+  ``diffusion``, plugins, ...) with its saved processors, four ``select_action`` calls per chunk.
 - :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
   (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
@@ -351,9 +353,11 @@ SCRIPTED = ("scripted:", "constant:")
 GRAMMAR = (
     "'autopilot', 'scripted:<script>' (or 'constant:<script>', e.g. "
     "'constant:throttle=1.0,steering=0.0'), the path of a saved policy (a LeRobot policy "
-    "folder, a PPO checkpoint, a TorchScript or torch.save file), or a policy server "
-    "('grpc://host:port', 'grpcs://host:port' with TLS)"
+    "folder of any type LeRobot loads, a PPO checkpoint, a TorchScript or torch.save file), or "
+    "a policy server ('grpc://host:port', 'grpcs://host:port' with TLS)"
 )
+NETWORK_POLICY_TYPE = "oasis"
+"""The LeRobot policy type whose folders load as the driving network itself."""
 
 
 def load_driver(
@@ -361,6 +365,10 @@ def load_driver(
 ) -> Driver:
     """The driver a spec names (:data:`GRAMMAR`), everywhere a driver or policy is named:
     ``oasis-torchrl eval policy=``, ``record --driver``, the pipeline's references and learners.
+
+    A LeRobot policy folder of type ``oasis`` loads as the driving network
+    (:class:`PolicyDriver`, the TorchRL actor); any other type through LeRobot's factory and
+    the processors saved with it (:class:`~oasis_torchrl.lerobot_driver.LeRobotDriver`).
 
     Args:
         spec: the driver's name.
@@ -382,9 +390,15 @@ def load_driver(
             return ScriptedDriver.from_spec(text.removeprefix(prefix))
     if is_policy_url(text):
         return PolicyDriver.remote(text)
-    if not Path(text).exists():
+    path = Path(text)
+    if not path.exists():
         raise ValueError(f"driver {text!r} is none of {GRAMMAR}")
-    return PolicyDriver.load(text, in_keys=in_keys)
+    if path.is_dir():
+        from oasis_torchrl.lerobot_driver import LeRobotDriver, policy_type
+
+        if policy_type(path) != NETWORK_POLICY_TYPE:
+            return LeRobotDriver.load(path)
+    return PolicyDriver.load(path, in_keys=in_keys)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """``oasis-torchrl eval``: evaluate a policy on fixed prompts and seeds; JSON out.
 
 The policy is ``autopilot``, ``constant:throttle=1.0,steering=0.0`` (any scripted driver spec),
-a PPO checkpoint, a LeRobot ``oasis`` policy folder or a policy server (``grpc://host:port``,
-the key in ``OASIS_POLICY_API_KEY``). Settings:
+a PPO checkpoint, a LeRobot policy folder of any type (``oasis``, ``act``, ``diffusion``, plugins)
+or a policy server (``grpc://host:port``, the key in ``OASIS_POLICY_API_KEY``). Settings:
 :class:`~oasis_torchrl.config.EvalConfig`, each a flag or a ``key=value`` override:
 ``oasis-torchrl eval policy=outputs/bc/policy seeds=[0,1] episodes=8 output=eval.json``.
 The report (mean distance before collision, collision rate, mean return, and every episode) is

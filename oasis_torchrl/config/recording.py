@@ -90,8 +90,8 @@ class RecordConfig(DatasetOutputConfig):
     script: str = option("throttle=0.5", help="scripted driver spec (throttle=...,steering=...)")
     policy: str | None = option(
         None,
-        help="the policy: saved (LeRobot policy folder, PPO checkpoint, TorchScript or "
-        "torch.save file) or served (grpc://host:port)",
+        help="the policy: saved (a LeRobot policy folder of any type, a PPO checkpoint, a "
+        "TorchScript or torch.save file) or served (grpc://host:port)",
     )
     policy_in_keys: str | None = option(
         None,

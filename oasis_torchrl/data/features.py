@@ -20,6 +20,12 @@ key                                dtype       shape          meaning
                                                               it rebuilds the scene
 ``task``                           string                     the episode's prompt
 =================================  ==========  =============  =====================================
+
+State and action components are named ``throttle.vel`` and ``steering.vel`` (chunk rows:
+``throttle_0.vel``, ``steering_0.vel``, ...): LeRobot's ``<name>.vel`` convention for velocity-like
+commands (its mobile bases use ``x.vel`` / ``theta.vel``), which ``lerobot-rollout`` needs to route
+a feature to a policy. The oasis robot (``lerobot_robot_oasis``) and its teleoperators use the same
+names, so a person's recordings and the project's own datasets share their features.
 """
 
 from __future__ import annotations
@@ -38,11 +44,13 @@ from lerobot.utils.constants import (
     REWARD,
 )
 
+from oasis_torchrl.protocol import ACTION_NAMES as WIRE_NAMES
 from oasis_torchrl.protocol import CHUNK
 
-"""Frame rate of the world model (frames per second of its video)."""
 SEED_KEY = "episode_seed"
-ACTION_NAMES = ("throttle", "steering")
+VELOCITY_SUFFIX = ".vel"
+ACTION_NAMES = tuple(f"{name}{VELOCITY_SUFFIX}" for name in WIRE_NAMES)
+"""Dataset names of ``[throttle, steering]`` (state and action)."""
 IMAGE_NAMES = ("height", "width", "channels")
 
 Feature = dict[str, Any]
@@ -104,7 +112,9 @@ class DatasetLayout:
 def _action_names(actions_per_row: int) -> list[str]:
     if actions_per_row == 1:
         return list(ACTION_NAMES)
-    return [f"{name}_{k}" for k in range(actions_per_row) for name in ACTION_NAMES]
+    return [
+        f"{name}_{k}{VELOCITY_SUFFIX}" for k in range(actions_per_row) for name in WIRE_NAMES
+    ]
 
 
 def build_features(layout: DatasetLayout) -> dict[str, Feature]:
@@ -113,7 +123,7 @@ def build_features(layout: DatasetLayout) -> dict[str, Feature]:
     Example:
         >>> features = build_features(DatasetLayout(("front",), (48, 64), actions_per_row=4))
         >>> features["action"]["shape"], features["action"]["names"][:3]
-        ((8,), ['throttle_0', 'steering_0', 'throttle_1'])
+        ((8,), ['throttle_0.vel', 'steering_0.vel', 'throttle_1.vel'])
     """
     height, width = layout.image_size
     features: dict[str, Feature] = {

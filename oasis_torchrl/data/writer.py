@@ -33,7 +33,9 @@ DEFAULT_VCODEC = "h264"
 """libx264 through PyAV: faster than LeRobot's default libsvtav1 at LeRobot's settings, at a
 somewhat lower quality, and decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
 measures both; BENCHMARKS.md has the figures)."""
-ROBOT_TYPE = "oasis_car"
+ROBOT_TYPE = "oasis"
+"""The datasets' ``robot_type``: the oasis robot's (``--robot.type=oasis``), so a person's
+recordings and the project's datasets can be merged (LeRobot merges only equal robot types)."""
 
 
 def camera_encoder(vcodec: str) -> RGBEncoderConfig:

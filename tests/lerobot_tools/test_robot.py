@@ -1,0 +1,109 @@
+"""The oasis robot in-process: its features, its episodes and seeds, bad actions."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from lerobot.robots.utils import make_robot_from_config
+from lerobot.utils.feature_utils import hw_to_dataset_features
+from lerobot.utils.utils import log_say
+from lerobot_robot_oasis import OasisRobot, OasisRobotConfig
+
+from oasis_torchrl.data.features import DatasetLayout, build_features
+from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS
+from oasis_torchrl.sim.launcher import LocalServer
+
+
+@pytest.fixture
+def robot() -> Iterator[OasisRobot]:
+    robot = make_robot_from_config(OasisRobotConfig(seed=5))
+    robot.connect()
+    yield robot
+    if robot.is_connected:
+        robot.disconnect()
+
+
+def _drive(robot: OasisRobot, ticks: int, throttle: float = 1.0) -> None:
+    for _ in range(ticks):
+        robot.get_observation()
+        robot.send_action({"throttle.vel": throttle, "steering.vel": 0.2})
+
+
+def test_recorded_features_are_the_project_datasets() -> None:
+    robot = OasisRobot(OasisRobotConfig())
+    recorded = {
+        **hw_to_dataset_features(robot.observation_features, "observation"),
+        **hw_to_dataset_features(robot.action_features, "action"),
+    }
+    layout = DatasetLayout(CAMERAS, (64, 96), with_reward=False, with_seed=False)
+    project = {key: value for key, value in build_features(layout).items() if key != "next.done"}
+    assert recorded.keys() == project.keys()
+    for key, feature in project.items():
+        assert recorded[key]["dtype"] == feature["dtype"], key
+        assert tuple(recorded[key]["shape"]) == tuple(feature["shape"]), key
+        assert list(recorded[key]["names"]) == list(feature["names"]), key
+    assert robot.robot_type == robot.name == "oasis" and robot.cameras == {}
+
+
+def test_a_tick_holds_the_newest_frame_and_sends_every_fourth(robot: OasisRobot) -> None:
+    first = robot.get_observation()
+    assert first["throttle.vel"] == first["steering.vel"] == 0.0
+    frames = []
+    for throttle in (1.0, 0.5, 0.25, 0.75):
+        robot.send_action({"throttle.vel": throttle, "steering.vel": 0.0})
+        frames.append(robot.get_observation())
+    held = [np.array_equal(frame["front"], first["front"]) for frame in frames]
+    assert held == [True, True, True, False]  # the 4th action sends the chunk
+    assert [frame["throttle.vel"] for frame in frames] == [1.0, 0.5, 0.25, 0.75]
+
+
+def test_dataset_episode_n_is_the_world_of_seed_plus_n(
+    robot: OasisRobot, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO)  # LeRobot's tools log at INFO
+    _drive(robot, 8)
+    log_say("Recording episode 2", play_sounds=False)
+    fresh = robot.get_observation()
+    assert robot.episode == 2 and fresh["throttle.vel"] == 0.0
+    other = OasisRobot(OasisRobotConfig(seed=7))
+    other.connect()
+    try:
+        expected = other.get_observation()
+    finally:
+        other.disconnect()
+    for camera in CAMERAS:
+        np.testing.assert_array_equal(fresh[camera], expected[camera])
+    # A re-recorded episode is announced again: an untouched world is kept, a driven one rebuilt.
+    log_say("Recording episode 2", play_sounds=False)
+    np.testing.assert_array_equal(robot.get_observation()["front"], fresh["front"])
+    _drive(robot, 4)
+    assert not np.array_equal(robot.get_observation()["front"], fresh["front"])
+    log_say("Recording episode 2", play_sounds=False)
+    np.testing.assert_array_equal(robot.get_observation()["front"], fresh["front"])
+    robot.disconnect()
+    log_say("Recording episode 3", play_sounds=False)  # a disconnected robot stops listening
+
+
+def test_bad_actions_are_named(robot: OasisRobot) -> None:
+    with pytest.raises(KeyError, match=r"lacks \['steering\.vel'\]"):
+        robot.send_action({"throttle.vel": 1.0, "angular_velocity": 0.5})
+    with pytest.raises(ValueError, match="not finite"):
+        robot.send_action({"throttle.vel": float("nan"), "steering.vel": 0.0})
+
+
+def test_a_remote_endpoint_drives_without_ground_truth(
+    local_server: LocalServer, server_keys: tuple[str, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(API_KEY_ENV_VAR, server_keys[0])  # keys never travel as flags
+    robot = OasisRobot(OasisRobotConfig(endpoint=f"http://{local_server.address}", image_height=32))
+    robot.connect()
+    try:
+        first = robot.get_observation()
+        _drive(robot, 8)
+        assert first["front"].shape == (32, 96, 3)
+        assert not np.array_equal(robot.get_observation()["front"], first["front"])
+    finally:
+        robot.disconnect()
