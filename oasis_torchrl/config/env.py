@@ -32,8 +32,8 @@ class RewardConfig:
     progress_scale: float = option(0.1, help="reward per metre along the road")
     collision_penalty: float = option(
         2.0,
-        help="penalty of a collision, on top of the progress it forgoes (10 made PPO drive "
-        "slowly instead of steering around obstacles)",
+        help="penalty of a collision, on top of the progress it forgoes (a large one makes PPO "
+        "drive slowly instead of steering around obstacles)",
     )
     lane_penalty: float = option(0.01, help="penalty per metre off the lane centre")
     clearance_weight: float = option(

@@ -30,9 +30,9 @@ from oasis_torchrl.data.loading import default_repo_id, default_video_backend
 logger = logging.getLogger(__name__)
 
 DEFAULT_VCODEC = "h264"
-"""libx264 through PyAV: about twice as fast here as LeRobot's default libsvtav1 at LeRobot's
-settings (crf 30, keyframe every 2 frames), somewhat lower quality (PSNR about 35 vs 40 dB on
-768x512 simulator frames), decoded by both pyav and torchcodec (benchmarks/export_speed.py)."""
+"""libx264 through PyAV: faster than LeRobot's default libsvtav1 at LeRobot's settings, at a
+somewhat lower quality, and decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
+measures both; BENCHMARKS.md has the figures)."""
 ROBOT_TYPE = "oasis_car"
 
 

@@ -162,7 +162,7 @@ class Vp9Encoder:
 
 
 class JpegEncoder:
-    """Baseline JPEG encoder (Pillow; measured faster here than PyAV's mjpeg).
+    """Baseline JPEG encoder (Pillow: faster than PyAV's mjpeg).
 
     Every frame is independent, so :meth:`restart` has nothing to reset.
 

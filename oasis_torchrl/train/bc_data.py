@@ -1,9 +1,9 @@
 """A LeRobot dataset decoded once into memory, for fast behaviour-cloning epochs.
 
 ``LeRobotDataset.__getitem__`` decodes every camera's video from the nearest keyframe for every
-sample (about 13 ms per 3-camera sample here, far more than a training step of the oasis
-network). :class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass
-through LeRobot's own decoder, keeps the frames as uint8, and serves the same sample dict
+sample, which costs far more than a training step of the oasis network.
+:class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass through LeRobot's
+own decoder, keeps the frames as uint8, and serves the same sample dict
 (``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``, the
 ``<key>_is_pad`` masks and the indices) by LeRobot's delta-index rules: a key with delta
 indices stacks the rows at those offsets within the same episode, clamped at its ends and

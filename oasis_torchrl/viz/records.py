@@ -66,7 +66,7 @@ def batch_rows(td: TensorDictBase) -> int:
 
 
 def _numpy(value: torch.Tensor, index: np.ndarray) -> np.ndarray:
-    # numpy's fancy indexing copies rows at memcpy speed; torch's uint8 gather is ~30x slower.
+    # numpy's fancy indexing copies rows at memcpy speed; torch's uint8 gather is far slower.
     return value.detach().cpu().numpy()[index]
 
 
