@@ -28,7 +28,7 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test lint protos lock bench bench-learning clean-venv venv-python
+.PHONY: demo test lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
 
 venv-python:
 	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
@@ -81,6 +81,13 @@ bench: venv-python $(STAMP)
 
 bench-learning: venv-python $(STAMP)
 	$(PY) $(LEARNING_BENCH)
+
+# LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
+# the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).
+# Without them LeRobot decodes with PyAV.
+ffmpeg-libs:
+	apt-get update -q
+	apt-get install -y -q --no-install-recommends ffmpeg
 
 clean-venv:
 	rm -rf $(VENV)
