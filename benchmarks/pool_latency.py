@@ -1,7 +1,8 @@
 """SessionPool throughput vs pool size against a server with a fixed Infer latency.
 
-The embedded server runs in a subprocess (its own GIL) with ``latency_ms`` added to every Infer,
-like a remote GPU model; the pool steps N sessions at once. Throughput is session-steps per
+The embedded server runs in a subprocess (its own GIL) with its worker processes and
+``latency_ms`` added to every Infer, like a remote GPU model; the pool steps N sessions at once
+(raw frames: the server is on this machine). Throughput is session-steps per
 second (N chunks per pool step); the target is N=16 >= 12x N=1 (latency hidden by concurrency).
 
 Usage: ``python benchmarks/pool_latency.py [--latency-ms 100 --sizes 1 4 16 --seconds 4]``;
@@ -25,12 +26,17 @@ PROMPT = "a quiet suburban road"
 
 
 def process_cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds of process ``pid`` (Linux /proc), None elsewhere."""
+    """User + system CPU seconds of process ``pid`` and its children (the server's worker
+    processes), from Linux /proc; None elsewhere."""
     stat = Path(f"/proc/{pid}/stat")
     if not stat.exists():
         return None
-    fields = stat.read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    total = 0.0
+    for process in (pid, *map(int, children)):
+        fields = Path(f"/proc/{process}/stat").read_text().rsplit(")", 1)[1].split()
+        total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
 
 
 def session_steps_per_second(server: ServerProcess, sessions: int, seconds: float) -> dict:

@@ -149,8 +149,20 @@ class ServerConfig:
 
     @property
     def resolved_encode_workers(self) -> int:
-        """Encoder threads to run: the configured number, or one per stream per CPU."""
-        return self.encode_workers or max(3, os.cpu_count() or 1)
+        """Encoder threads per process: the configured number, or automatically one per stream
+        or core in a server without workers, and each worker's share of the cores (so that
+        workers busy with many sessions do not fight over the cores).
+
+        Example:
+            >>> ServerConfig(processes=os.cpu_count(), api_keys=("k",)).resolved_encode_workers
+            1
+        """
+        cores = os.cpu_count() or 1
+        if self.encode_workers:
+            return self.encode_workers
+        if self.resolved_processes == 0:
+            return max(3, cores)
+        return max(1, cores // self.resolved_processes)
 
     def encoder_settings(self) -> dict[str, Any]:
         """Keyword arguments for :func:`oasis_torchrl.sim.encoding.make_encoder`."""

@@ -1,5 +1,6 @@
 """Start the embedded A2V server in this process (:class:`LocalServer`) or as a subprocess
-(:class:`ServerProcess`), e.g. for tests, examples and offline training.
+(:class:`ServerProcess`), e.g. for tests, examples and offline training; either way with the
+worker processes its config asks for.
 
 Both accept a :class:`ServerConfig` plus field overrides. When the config names no API key,
 the launcher generates a random one, configures the server with it and exposes it as
@@ -45,7 +46,9 @@ def _with_api_key(config: ServerConfig | None, overrides: dict[str, Any]) -> Ser
 
 
 class LocalServer:
-    """The embedded A2V server running in this process, on a free loopback port by default.
+    """The embedded A2V server running in this process, on a free loopback port by default
+    (with ``config.processes`` worker processes for the sessions' worlds, which stop with it;
+    ``processes=0`` keeps everything in this process).
 
     Args:
         config: Server settings (defaults to :class:`ServerConfig`).
@@ -134,9 +137,11 @@ class ServerProcess:
     """The embedded A2V server as a subprocess (``python -m oasis_torchrl.sim``).
 
     The child reads the config as JSON on its stdin, so API keys never appear on its command
-    line. Readiness: the child writes its bound port to a file once serving; the launcher then
-    waits for the gRPC health service to answer SERVING (plain-text servers) within
-    ``startup_timeout``. The child's output goes to :attr:`log_path`.
+    line, and serves while that pipe stays open: if this process exits or dies without
+    stopping it, the child stops too. Readiness: the child writes its bound port to a file
+    once serving; the launcher then waits for the gRPC health service to answer SERVING
+    (plain-text servers) within ``startup_timeout``. The child's output goes to
+    :attr:`log_path`.
 
     Args:
         config: Server settings (defaults to :class:`ServerConfig`); picklable.
@@ -256,17 +261,22 @@ class ServerProcess:
                 logger.warning("server process %d ignored %s; killing it", process.pid, signum)
                 process.kill()
                 process.wait()
+        if process.stdin is not None:
+            with contextlib.suppress(BrokenPipeError):
+                process.stdin.close()
         if self._workdir is not None:
             shutil.rmtree(self._workdir, ignore_errors=True)
             self._workdir = None
         return process.returncode
 
     def _send_config(self) -> None:
-        """Hand the config (API keys included) to the child on its stdin, then close it."""
+        """Hand the config (API keys included) to the child on its stdin, as one line."""
         assert self._process is not None and self._process.stdin is not None
         # A child that died at once breaks the pipe; waiting for readiness reports its output.
-        with contextlib.suppress(BrokenPipeError), self._process.stdin as stdin:
-            stdin.write(self.config.to_json().encode())
+        # The pipe stays open: the child serves until it closes (see _end), or this process dies.
+        with contextlib.suppress(BrokenPipeError):
+            self._process.stdin.write(self.config.to_json().encode() + b"\n")
+            self._process.stdin.flush()
 
     def _wait_until_ready(self, port_file: Path, deadline: float) -> None:
         while not port_file.exists():

@@ -33,9 +33,9 @@ def write_port_file(path: Path, port: int) -> None:
     os.replace(partial, path)
 
 
-def wait_for_signal() -> None:
-    """Block until SIGTERM or SIGINT (handlers can only be set from the main thread)."""
-    stop = threading.Event()
+def wait_for_signal(stop: threading.Event) -> None:
+    """Block until SIGTERM, SIGINT or ``stop`` (signal handlers can only be set from the main
+    thread)."""
     if threading.current_thread() is threading.main_thread():
         for signum in (signal.SIGTERM, signal.SIGINT):
             signal.signal(signum, lambda received, frame: stop.set())
@@ -44,8 +44,15 @@ def wait_for_signal() -> None:
         pass
 
 
-def serve(config: ServerConfig, *, port_file: Path | None = None, grace: float = 2.0) -> int:
-    """Serve ``config`` until a signal; returns the exit code (2: the server could not start).
+def serve(
+    config: ServerConfig,
+    *,
+    port_file: Path | None = None,
+    grace: float = 2.0,
+    stop: threading.Event | None = None,
+) -> int:
+    """Serve ``config`` until a signal (or ``stop`` is set); returns the exit code (2: the
+    server could not start).
 
     ``port_file`` receives the bound port once the server serves; in-flight calls get
     ``grace`` seconds at shutdown.
@@ -63,7 +70,7 @@ def serve(config: ServerConfig, *, port_file: Path | None = None, grace: float =
         write_port_file(port_file, server.port)
     logger.info("serving %s; stop with SIGTERM or Ctrl-C", server.endpoint)
     try:
-        wait_for_signal()
+        wait_for_signal(stop or threading.Event())
     finally:
         logger.info("shutting down")
         server.stop(grace)

@@ -82,7 +82,8 @@ class SessionWorld:
     """One session's simulator, its expert (the autopilot, restarted at every Prompt), one
     encoder per stream, and the rollout position with the last answer for retries.
 
-    The simulator and encoders are built at the first Prompt.
+    The simulator and encoders are built at the first Prompt. Streams are encoded on
+    ``encode_pool`` when encoding is slow (VP9, JPEG) and there is a pool, else one by one.
 
     Example:
         >>> from concurrent.futures import ThreadPoolExecutor
@@ -99,7 +100,7 @@ class SessionWorld:
         self,
         output_format: int,
         config: ServerConfig,
-        encode_pool: Executor,
+        encode_pool: Executor | None,
         simulator_factory: SimulatorFactory = Simulator,
     ) -> None:
         self.output_format = output_format
@@ -159,8 +160,8 @@ class SessionWorld:
             )
         result = self._simulator.step(actions)
         encode = lambda name: self._encode(name, result.rgb[name])  # noqa: E731
-        threaded = self._encoders[CAMERAS[0]].threaded
-        streams = self._encode_pool.map(encode, CAMERAS) if threaded else map(encode, CAMERAS)
+        pool = self._encode_pool if self._encoders[CAMERAS[0]].threaded else None
+        streams = map(encode, CAMERAS) if pool is None else pool.map(encode, CAMERAS)
         truth = sim_pb2.InferTruth(
             sequence_num=sequence_num,
             seed=self._seed,
@@ -217,7 +218,8 @@ class SessionWorld:
 
 
 class LocalWorlds:
-    """Sessions' worlds in the server's own process, encoding on one shared thread pool.
+    """Sessions' worlds in one process, encoding on one shared thread pool (none when the
+    config gives the process a single encoder thread).
 
     Example:
         >>> worlds = LocalWorlds(ServerConfig(width=64, height=48, api_keys=("k",)))
@@ -232,8 +234,9 @@ class LocalWorlds:
     ) -> None:
         self._config = config
         self._simulator_factory = simulator_factory
-        self._encode_pool = ThreadPoolExecutor(
-            config.resolved_encode_workers, thread_name_prefix="oasis-encode"
+        threads = config.resolved_encode_workers
+        self._encode_pool = (
+            ThreadPoolExecutor(threads, thread_name_prefix="oasis-encode") if threads > 1 else None
         )
 
     def start(self) -> None:
@@ -245,4 +248,5 @@ class LocalWorlds:
 
     def close(self) -> None:
         """Stop the encoder threads."""
-        self._encode_pool.shutdown(wait=True)
+        if self._encode_pool is not None:
+            self._encode_pool.shutdown(wait=True)

