@@ -17,8 +17,12 @@ import torch
 from gymnasium import spaces
 from tensordict import TensorDict, TensorDictBase
 
+from oasis_torchrl.envs.episodes import Prompts
 from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv, StreamLayout
-from oasis_torchrl.protocol import ACTION_DIM, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK, FPS
+
+RENDER_MODES = ("rgb_array",)
+"""What ``render()`` can return: the front camera's last frame (each row's, in a vector env)."""
 
 
 def chunk_space() -> spaces.Box:
@@ -45,6 +49,22 @@ def camera_space(streams: StreamLayout) -> spaces.Dict:
             for camera in streams.cameras
         }
     )
+
+
+def session_env(
+    num_envs: int, endpoint: str, prompts: Prompts, render_mode: str | None, **kwargs: Any
+) -> OasisEnv:
+    """The OasisEnv under a Gymnasium env, after checking ``render_mode``.
+
+    Example:
+        >>> session_env(1, LOCAL, "rural road", render_mode="human")
+        Traceback (most recent call last):
+        ...
+        ValueError: render_mode must be None or 'rgb_array', got 'human'
+    """
+    if render_mode not in (None, *RENDER_MODES):
+        raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+    return OasisEnv(endpoint, num_envs, prompts, **kwargs)
 
 
 def batch_observation(td: TensorDictBase, cameras: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -88,7 +108,7 @@ class OasisGymEnv(gym.Env):
         >>> env.close()
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": FPS}
 
     def __init__(
         self,
@@ -100,10 +120,10 @@ class OasisGymEnv(gym.Env):
         render_mode: str | None = None,
         **env_kwargs: Any,
     ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self._env = session_env(
+            1, endpoint, prompt, render_mode, reward=reward, max_steps=max_steps, **env_kwargs
+        )
         self.render_mode = render_mode
-        self._env = OasisEnv(endpoint, 1, prompt, reward=reward, max_steps=max_steps, **env_kwargs)
         self.action_space = chunk_space()
         self.observation_space = camera_space(self._env.streams)
         self._last: dict[str, np.ndarray] | None = None

@@ -25,10 +25,12 @@ from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.envs.episodes import Prompts
 from oasis_torchrl.envs.gym_adapter import (
+    RENDER_MODES,
     batch_info,
     batch_observation,
     camera_space,
     chunk_space,
+    session_env,
 )
 from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv
 from oasis_torchrl.protocol import FPS
@@ -63,7 +65,7 @@ class OasisVectorEnv(VectorEnv):
     """
 
     metadata = {
-        "render_modes": ["rgb_array"],
+        "render_modes": list(RENDER_MODES),
         "render_fps": FPS,
         "autoreset_mode": AutoresetMode.NEXT_STEP,
     }
@@ -79,13 +81,17 @@ class OasisVectorEnv(VectorEnv):
         render_mode: str | None = None,
         **env_kwargs: Any,
     ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self._env = session_env(
+            num_envs,
+            endpoint,
+            prompts,
+            render_mode,
+            reward=reward,
+            max_steps=max_steps,
+            **env_kwargs,
+        )
         self.render_mode = render_mode
         self.num_envs = num_envs
-        self._env = OasisEnv(
-            endpoint, num_envs, prompts, reward=reward, max_steps=max_steps, **env_kwargs
-        )
         self.single_action_space = chunk_space()
         self.single_observation_space = camera_space(self._env.streams)
         self.action_space = batch_space(self.single_action_space, num_envs)
