@@ -162,8 +162,9 @@ class MapView:
 
 @dataclass(frozen=True)
 class RoadMap:
-    """A scene's road (centreline samples, their headings, lane-line offsets) and obstacles, in
-    world metres; :meth:`view` cuts out and turns what a :class:`Window` around the car shows.
+    """A scene's road (centreline samples, their normals and distances along the road, the
+    offsets of the lines painted on it) and obstacles, in world metres; :meth:`view` cuts out
+    and turns what a :class:`Window` around the car shows.
 
     Example:
         >>> scene = sim_pb2.SceneResponse(centerline_x=[0.0, 2.0, 4.0], centerline_y=[0.0] * 3,
@@ -174,6 +175,7 @@ class RoadMap:
 
     centre: np.ndarray
     normal: np.ndarray
+    along: np.ndarray
     half_width: float
     line_offsets: np.ndarray
     dashed: np.ndarray
@@ -209,6 +211,9 @@ class RoadMap:
         return cls(
             centre=centre,
             normal=np.stack([-tangent[:, 1], tangent[:, 0]], -1),  # + is left
+            along=np.concatenate(
+                ([0.0], np.cumsum(np.linalg.norm(np.diff(centre, axis=0), axis=-1)))
+            ),
             half_width=half,
             line_offsets=np.array(offsets),
             dashed=np.array(dashed),
@@ -234,7 +239,7 @@ class RoadMap:
             normal = car_frame(self.normal[start:stop], np.zeros(2), heading)
             for offset, dashed in zip(self.line_offsets, self.dashed, strict=True):
                 line = centre[start:stop] + offset * normal
-                strips = _dashes(line) if dashed else [line]
+                strips = _dashes(line, self.along[start:stop]) if dashed else [line]
                 markings += strips
                 radii += [LANE_RADIUS if dashed else EDGE_RADIUS] * len(strips)
                 colors += [LANE_COLOR if dashed else EDGE_COLOR] * len(strips)
@@ -273,16 +278,21 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
-def _dashes(line: np.ndarray) -> list[np.ndarray]:
-    """A polyline ``[K, 2]`` cut into painted stretches of ``DASH``, as two-point strips."""
-    step = np.linalg.norm(np.diff(line, axis=0), axis=-1)
-    distance = np.concatenate(([0.0], np.cumsum(step)))
+def _dashes(line: np.ndarray, along: np.ndarray) -> list[np.ndarray]:
+    """A polyline ``[K, 2]`` cut into the painted stretches of ``DASH``, as two-point strips.
+
+    ``along`` is each point's distance along the road: the dashes are painted on the road, so
+    they stay put while the window moves over them.
+    """
     period = sum(DASH)
-    starts = np.arange(0.0, distance[-1], period)
-    ends = np.minimum(starts + DASH[0], distance[-1])
+    first = np.floor(along[0] / period) * period
+    starts = np.arange(first, along[-1], period)
+    ends = np.minimum(starts + DASH[0], along[-1])
+    starts = np.maximum(starts, along[0])
     keep = ends > starts
-    xs = np.interp(np.stack([starts[keep], ends[keep]], -1), distance, line[:, 0])
-    ys = np.interp(np.stack([starts[keep], ends[keep]], -1), distance, line[:, 1])
+    stretches = np.stack([starts[keep], ends[keep]], -1)
+    xs = np.interp(stretches, along, line[:, 0])
+    ys = np.interp(stretches, along, line[:, 1])
     return list(np.stack([xs, ys], axis=-1))
 
 

@@ -94,6 +94,12 @@ def test_the_window_follows_the_car_heading_up() -> None:
     lengths = np.linalg.norm(np.array([d[1] - d[0] for d in dashes]), axis=-1)
     assert len(dashes) > 5 and np.allclose([d[:, 0] for d in dashes], 0.0, atol=1e-9)
     assert np.allclose(lengths[1:-1], DASH[0])
+    for car_y in (50.0, 51.3):  # the dashes are painted on the road: they stay put as it moves
+        moved = road.view(np.array([0.0, car_y]), heading=np.pi / 2, window=window)
+        marked = zip(moved.markings, moved.marking_radii, strict=True)
+        starts = [car_y - line[0, 1] for line, radius in marked if radius == LANE_RADIUS]
+        painted_from = (np.array(starts[1:]) + 100.0) % sum(DASH)  # the road starts at y=-100
+        np.testing.assert_allclose(np.minimum(painted_from, sum(DASH) - painted_from), 0, atol=1e-6)
 
     centres = view.obstacles.ends.mean(axis=1)
     np.testing.assert_allclose(centres, [[1.75, -30.0], [0.0, 10.0]], atol=1e-9)
