@@ -576,7 +576,7 @@ class SessionPool:
     async def _wait_ready(self, channel: grpc.aio.Channel) -> None:
         try:
             await asyncio.wait_for(channel.channel_ready(), self.timeout)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             raise TransportError(
                 grpc.StatusCode.UNAVAILABLE,
                 f"no connection within the {self.timeout} s timeout",
