@@ -75,8 +75,20 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
         text=True,
     ).stdout.strip()
     Path(site, "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    install = [*pip, "--python", str(python), "install", "--no-deps", "--no-index", str(wheel)]
+    install = [
+        *pip,
+        "--python",
+        str(python),
+        "install",
+        "--no-deps",
+        "--ignore-installed",
+        "--no-index",
+        str(wheel),
+    ]
+    # --ignore-installed: the development install's metadata is visible through the .pth file,
+    # and pip would skip a wheel of the same version.
     subprocess.run(install, check=True, capture_output=True, timeout=240)
+    assert Path(site, "oasis_torchrl", "proto", "sim.proto").is_file()
     return venv / "bin"
 
 
