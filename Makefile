@@ -31,7 +31,7 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test lint protos lock bench clean-venv venv-python
+.PHONY: demo test lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
 
 venv-python:
 	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
@@ -57,6 +57,7 @@ demo: venv-python $(STAMP)
 	$(PY) -m oasis_torchrl demo output_dir=$(DEMO_OUT)
 
 test: venv-python $(STAMP)
+	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider
 
 lint: venv-python $(STAMP)
@@ -64,8 +65,8 @@ lint: venv-python $(STAMP)
 	$(VENV)/bin/ruff format --check .
 
 protos: venv-python $(STAMP)
-	$(PY) -m grpc_tools.protoc -Iprotos --python_out=. --grpc_python_out=. --pyi_out=. \
-		$$(cd protos && find . -name '*.proto' | sed 's|^\./|protos/|')
+	$(PY) -m grpc_tools.protoc -I. --python_out=. --grpc_python_out=. --pyi_out=. \
+		oasis_torchrl/proto/*.proto
 
 # The whole installed set, pinned (the project's own editable installs left out), under the
 # header comment of constraints.txt.
@@ -74,8 +75,22 @@ lock: venv-python $(STAMP)
 		$(PY) -m pip freeze --exclude-editable; } > constraints.tmp
 	mv constraints.tmp constraints.txt
 
+# The quick benchmarks (each a few minutes at most); the learning benchmark trains policies for
+# hours and has its own target.
+LEARNING_BENCH := benchmarks/learning.py
 bench: venv-python $(STAMP)
-	for script in benchmarks/*.py; do $(PY) $$script; done
+	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/*.py)); do \
+		$(PY) $$script; done
+
+bench-learning: venv-python $(STAMP)
+	$(PY) $(LEARNING_BENCH)
+
+# LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
+# the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).
+# Without them LeRobot decodes with PyAV.
+ffmpeg-libs:
+	apt-get update -q
+	apt-get install -y -q --no-install-recommends ffmpeg
 
 clean-venv:
 	rm -rf $(VENV)

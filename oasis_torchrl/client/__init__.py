@@ -4,6 +4,8 @@
   retries, JPEG, decode-time resize, seeds, ping, ground truth and depth).
 - :class:`SessionPool`: N sessions stepped concurrently over one channel, with per-row
   recovery; what the TorchRL env stands on.
+- :class:`SceneSource`: scene layouts by prompt and seed (``SimService/GetScene``), for
+  top-down views.
 
 >>> from oasis_torchrl.client import A2VClient, SessionPool, RetryPolicy
 >>> RetryPolicy().max_attempts
@@ -26,6 +28,7 @@ from oasis_torchrl.client.errors import (
 from oasis_torchrl.client.ground_truth import TRUTH_FIELDS
 from oasis_torchrl.client.pool import SessionPool
 from oasis_torchrl.client.retry import RetryPolicy
+from oasis_torchrl.client.scenes import SceneLookup, SceneSource
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION, A2VClient
 from oasis_torchrl.client.types import (
     JPEG,
@@ -63,6 +66,8 @@ __all__ = [
     "PermanentA2VError",
     "PoolStep",
     "RetryPolicy",
+    "SceneLookup",
+    "SceneSource",
     "SequenceError",
     "SessionLostError",
     "SessionPool",

@@ -84,17 +84,19 @@ def depth_maps(response: sim_pb2.DepthResponse) -> dict[str, np.ndarray]:
     }
 
 
-def raise_depth_error(error: TransportError) -> NoReturn:
-    """Re-raise a failed GetDepth, as UnsupportedFeatureError if SimService is missing.
+def raise_sim_error(error: TransportError, feature: str) -> NoReturn:
+    """Re-raise a failed ``SimService`` call (``feature`` names what it was for), as
+    UnsupportedFeatureError if the server has no SimService.
 
-    >>> raise_depth_error(TransportError(grpc.StatusCode.UNIMPLEMENTED, "", method="GetDepth"))
+    >>> error = TransportError(grpc.StatusCode.UNIMPLEMENTED, "", method="GetDepth")
+    >>> raise_sim_error(error, "depth")
     Traceback (most recent call last):
     ...
     oasis_torchrl.client.errors.UnsupportedFeatureError: depth needs oasis_torchrl.sim.v1...
     """
     if error.code() == grpc.StatusCode.UNIMPLEMENTED:
         raise UnsupportedFeatureError(
-            f"depth needs {SIM_SERVICE}, which only the embedded oasis-torchrl simulator "
+            f"{feature} needs {SIM_SERVICE}, which only the embedded oasis-torchrl simulator "
             "implements; this server does not"
         ) from error
     raise error

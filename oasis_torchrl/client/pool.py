@@ -61,7 +61,7 @@ from oasis_torchrl.client.ground_truth import (
     TRUTH_FIELDS,
     depth_maps,
     expert_chunk,
-    raise_depth_error,
+    raise_sim_error,
     truth_array,
 )
 from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
@@ -217,7 +217,7 @@ class _PoolSession:
         try:
             response, _ = await self._send(self.state.depth())
         except TransportError as error:
-            raise_depth_error(error)
+            raise_sim_error(error, "depth")
         return depth_maps(response)
 
     async def finish_quietly(self) -> None:
@@ -233,7 +233,7 @@ class _PoolSession:
             logger.debug("row %d: Finish failed (ignored): %s", self.row, error)
 
     async def _send(self, call: Call, *, timeout: float | None = None) -> tuple[Any, grpc.aio.Call]:
-        stub = self.rpc.sim if call.method == "GetDepth" else self.rpc.a2v
+        stub = self.rpc.sim if call.on_sim_service else self.rpc.a2v
         method = getattr(stub, call.method)
         return await self.rpc.call(
             method, call.method, call.request, call.metadata, timeout=timeout

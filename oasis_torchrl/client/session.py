@@ -25,20 +25,28 @@ from oasis_torchrl.client.types import FrameFormat
 from oasis_torchrl.proto import a2v_pb2, sim_pb2
 
 MetadataItems = Iterable[tuple[str, str | bytes]]
+SIM_METHODS = frozenset({"GetDepth", "GetScene"})
+"""The methods of the embedded simulator's ``SimService``; every other call is ``A2VService``'s."""
 
 
 @dataclass(frozen=True)
 class Call:
-    """One unary call to send: the method's name (an ``A2VService`` method, or ``GetDepth``
-    of ``SimService``), its request and its metadata.
+    """One unary call to send: the method's name (an ``A2VService`` method, or one of
+    :data:`SIM_METHODS`), its request and its metadata.
 
-    >>> Call("Finish", a2v_pb2.FinishRequest(session_id="s"), ()).method
-    'Finish'
+    >>> call = Call("Finish", a2v_pb2.FinishRequest(session_id="s"), ())
+    >>> call.method, call.on_sim_service
+    ('Finish', False)
     """
 
     method: str
     request: object
     metadata: wire.Metadata
+
+    @property
+    def on_sim_service(self) -> bool:
+        """Whether the call goes to ``SimService`` (else ``A2VService``)."""
+        return self.method in SIM_METHODS
 
 
 @dataclass(frozen=True)
@@ -183,6 +191,11 @@ class SessionState:
     def depth(self) -> Call:
         """The ``SimService/GetDepth`` call (the embedded simulator only)."""
         return Call("GetDepth", sim_pb2.DepthRequest(session_id=self._require_id()), self.metadata)
+
+    def scene(self) -> Call:
+        """The ``SimService/GetScene`` call: the static world of the current prompt and seed
+        (the embedded simulator only)."""
+        return Call("GetScene", sim_pb2.SceneRequest(session_id=self._require_id()), self.metadata)
 
     def finish(self) -> Call | None:
         """The Finish call of the open session, or None. The session is forgotten first, so a

@@ -10,8 +10,8 @@ Differences a caller can notice, all opt-in or strictly more robust:
 - VP9 and JPEG are both offered (``accepted_formats``; add ``FrameFormat.RAW_RGB24`` for
   uncompressed frames from the embedded server: by default this drop-in decodes what the
   official client decodes); ``resize=(h, w)`` decodes straight to that size;
-  ``prompt(..., seed=)`` picks the world; ``last_truth`` and ``depth()`` reach the embedded
-  simulator's ground truth and depth, ``ping()`` the gRPC health service.
+  ``prompt(..., seed=)`` picks the world; ``last_truth``, ``depth()`` and ``scene()`` reach the
+  embedded simulator's ground truth, depth and scene layout, ``ping()`` the gRPC health service.
 - ``close()`` inside a failing ``with`` block never hides the block's exception, and a failed
   ``__enter__`` releases the channel. The API key is masked in ``repr`` and error messages.
 """
@@ -32,7 +32,7 @@ from oasis_torchrl.client import health, wire
 from oasis_torchrl.client.channel import TlsSetting, create_channel, parse_endpoint
 from oasis_torchrl.client.decoding import decode_chunk, validate_resize
 from oasis_torchrl.client.errors import MASK, DecartRoboticsError, TransportError
-from oasis_torchrl.client.ground_truth import depth_maps, raise_depth_error
+from oasis_torchrl.client.ground_truth import depth_maps, raise_sim_error
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
 from oasis_torchrl.client.session import Call, SessionState
 from oasis_torchrl.client.types import JPEG, VP9, A2VResult, FrameConsumer, StreamInfo
@@ -219,8 +219,21 @@ class A2VClient:
         try:
             response, _ = self._send(self._state.depth())
         except TransportError as error:
-            raise_depth_error(error)
+            raise_sim_error(error, "depth")
         return depth_maps(response)
+
+    def scene(self) -> sim_pb2.SceneResponse:
+        """The static world of the current prompt and seed: road centreline and width, lanes,
+        obstacles, the size of the car (for top-down views, e.g.
+        :class:`~oasis_torchrl.client.scenes.SceneSource`).
+
+        Only the embedded simulator implements this (``oasis_torchrl.sim.v1.SimService``).
+        """
+        try:
+            response, _ = self._send(self._state.scene())
+        except TransportError as error:
+            raise_sim_error(error, "the scene")
+        return response
 
     def ping(self) -> bool:
         """Ask the server's gRPC health service whether it is SERVING (False if unreachable)."""
@@ -269,8 +282,8 @@ class A2VClient:
 
     def _send(self, call: Call) -> tuple[Any, grpc.Call | None]:
         """Send one of the session's calls; returns the response and the gRPC call, if any."""
-        if call.method == "GetDepth":
-            stub = sim_pb2_grpc.SimServiceStub(self._require_channel("depth"))
+        if call.on_sim_service:
+            stub = sim_pb2_grpc.SimServiceStub(self._require_channel(call.method))
         else:
             stub = self._stub
         method = getattr(stub, call.method)

@@ -37,12 +37,16 @@ def _replay_dataset(cfg: ViewConfig) -> None:
 
 
 def _replay_rollout(cfg: ViewConfig) -> None:
+    from oasis_torchrl.client import SceneSource
     from oasis_torchrl.viz.logger import RolloutLogger
     from oasis_torchrl.viz.options import LogOptions
     from oasis_torchrl.viz.replay import replay_rollout
 
     options = LogOptions(**_given(cfg, "rows", "jpeg_quality"))
-    with RolloutLogger(cfg.target, options, **_given(cfg, "memory_limit")) as rollout_logger:
+    scenes = SceneSource(cfg.scenes) if cfg.scenes else None
+    with RolloutLogger(
+        cfg.target, options, scenes=scenes, **_given(cfg, "memory_limit")
+    ) as rollout_logger:
         replay_rollout(cfg.path, rollout_logger)
 
 

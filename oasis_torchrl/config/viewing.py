@@ -54,6 +54,12 @@ class ViewConfig:
         None, help="memory limit of a spawned viewer, e.g. 4GB or 50% (null: rerun's 25%)"
     )
     jpeg_quality: int | None = option(None, help="JPEG quality 1-100 of frames (null: 85)")
+    scenes: str | None = option(
+        None,
+        help="an embedded server (oasis-torchrl serve) to ask a saved rollout's roads and "
+        "obstacles for the top-down view, its key in DECART_API_KEY (null: car and path only)",
+        metavar="URL",
+    )
 
     def __post_init__(self) -> None:
         if self.save is not None and self.connect is not None:

@@ -3,6 +3,7 @@
 from oasis_torchrl.envs.episodes import EpisodePlanner
 from oasis_torchrl.envs.factory import make_env, make_reward
 from oasis_torchrl.envs.gym_adapter import OasisGymEnv
+from oasis_torchrl.envs.gym_vector import OasisVectorEnv
 from oasis_torchrl.envs.oasis_env import OasisEnv, OasisWrapper, StreamLayout
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, PrivilegedState
 
@@ -11,6 +12,7 @@ __all__ = [
     "EpisodePlanner",
     "OasisEnv",
     "OasisGymEnv",
+    "OasisVectorEnv",
     "OasisWrapper",
     "PrivilegedState",
     "StreamLayout",

@@ -34,7 +34,14 @@ import torch
 from tensordict import NonTensorStack, TensorDict, TensorDictBase
 from torchrl.envs.common import _EnvWrapper
 
-from oasis_torchrl.client import TRUTH_FIELDS, PoolStep, RetryPolicy, SessionPool, SessionStatus
+from oasis_torchrl.client import (
+    TRUTH_FIELDS,
+    PoolStep,
+    RetryPolicy,
+    SceneSource,
+    SessionPool,
+    SessionStatus,
+)
 from oasis_torchrl.envs.episodes import EpisodePlanner, Prompts
 from oasis_torchrl.envs.specs import (
     EnvLayout,
@@ -211,6 +218,23 @@ class OasisWrapper(_EnvWrapper):
                 pool.close()
                 raise
         return pool
+
+    def scene_source(self) -> SceneSource:
+        """The layouts of this env's scenes, asked of its server through the protocol
+        (``SimService/GetScene``, embedded servers only): ``source(prompt, seed)``, for
+        top-down views (``RolloutLogger(..., scenes=env.scene_source())``; a ``RerunTransform``
+        takes it by itself). It reads the server's address when asked, so it may be made
+        before the env starts its server.
+
+        Example:
+            >>> from oasis_torchrl.sim.config import ServerConfig
+            >>> env = OasisEnv("local", 1, server=ServerConfig(width=64, height=48))
+            >>> _ = env.reset()
+            >>> env.scene_source()("urban street", 0).lanes > 0
+            True
+            >>> env.close()
+        """
+        return SceneSource(self._env)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
         """Finish every session, close the channel and stop the pool's server, if it has one."""

@@ -97,7 +97,7 @@ class Obstacle(_message.Message):
     def __init__(self, kind: _Optional[str] = ..., x: _Optional[float] = ..., y: _Optional[float] = ..., heading: _Optional[float] = ..., length: _Optional[float] = ..., width: _Optional[float] = ...) -> None: ...
 
 class SceneResponse(_message.Message):
-    __slots__ = ("prompt", "seed", "centerline_x", "centerline_y", "road_half_width", "lanes", "obstacles")
+    __slots__ = ("prompt", "seed", "centerline_x", "centerline_y", "road_half_width", "lanes", "obstacles", "ego_length", "ego_width", "lane_width")
     PROMPT_FIELD_NUMBER: _ClassVar[int]
     SEED_FIELD_NUMBER: _ClassVar[int]
     CENTERLINE_X_FIELD_NUMBER: _ClassVar[int]
@@ -105,6 +105,9 @@ class SceneResponse(_message.Message):
     ROAD_HALF_WIDTH_FIELD_NUMBER: _ClassVar[int]
     LANES_FIELD_NUMBER: _ClassVar[int]
     OBSTACLES_FIELD_NUMBER: _ClassVar[int]
+    EGO_LENGTH_FIELD_NUMBER: _ClassVar[int]
+    EGO_WIDTH_FIELD_NUMBER: _ClassVar[int]
+    LANE_WIDTH_FIELD_NUMBER: _ClassVar[int]
     prompt: str
     seed: int
     centerline_x: _containers.RepeatedScalarFieldContainer[float]
@@ -112,4 +115,7 @@ class SceneResponse(_message.Message):
     road_half_width: float
     lanes: int
     obstacles: _containers.RepeatedCompositeFieldContainer[Obstacle]
-    def __init__(self, prompt: _Optional[str] = ..., seed: _Optional[int] = ..., centerline_x: _Optional[_Iterable[float]] = ..., centerline_y: _Optional[_Iterable[float]] = ..., road_half_width: _Optional[float] = ..., lanes: _Optional[int] = ..., obstacles: _Optional[_Iterable[_Union[Obstacle, _Mapping]]] = ...) -> None: ...
+    ego_length: float
+    ego_width: float
+    lane_width: float
+    def __init__(self, prompt: _Optional[str] = ..., seed: _Optional[int] = ..., centerline_x: _Optional[_Iterable[float]] = ..., centerline_y: _Optional[_Iterable[float]] = ..., road_half_width: _Optional[float] = ..., lanes: _Optional[int] = ..., obstacles: _Optional[_Iterable[_Union[Obstacle, _Mapping]]] = ..., ego_length: _Optional[float] = ..., ego_width: _Optional[float] = ..., lane_width: _Optional[float] = ...) -> None: ...

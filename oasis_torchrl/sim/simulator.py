@@ -22,6 +22,7 @@ from oasis_torchrl.proto import sim_pb2
 from oasis_torchrl.protocol import CAMERAS, CHUNK, MAX_SEED
 from oasis_torchrl.sim.render import Renderer
 from oasis_torchrl.sim.scene import OBSTACLE_KINDS, Scene, cached_scene
+from oasis_torchrl.sim.vehicle import VehicleParams
 from oasis_torchrl.sim.world import FrameTruth, World
 
 __all__ = ["CAMERAS", "FrameTruth", "Simulator", "StepResult"]
@@ -55,9 +56,10 @@ class StepResult:
     truth: tuple[FrameTruth, ...]
 
 
-def scene_proto(scene: Scene) -> sim_pb2.SceneResponse:
+def scene_proto(scene: Scene, vehicle: VehicleParams | None = None) -> sim_pb2.SceneResponse:
     """The static world as ``SimService/GetScene`` reports it: centreline samples, road width,
-    lanes, obstacles, prompt and seed.
+    lanes and their width, obstacles, prompt and seed, and the size of the car driving in it
+    (``vehicle``, default :class:`VehicleParams`).
 
     Example:
         >>> proto = scene_proto(cached_scene("rural road", 3))
@@ -66,6 +68,7 @@ def scene_proto(scene: Scene) -> sim_pb2.SceneResponse:
     """
     x, y = scene.road.samples(CENTERLINE_SPACING)
     obstacles = scene.obstacles
+    vehicle = vehicle or VehicleParams()
     return sim_pb2.SceneResponse(
         prompt=scene.prompt,
         seed=scene.seed,
@@ -73,6 +76,9 @@ def scene_proto(scene: Scene) -> sim_pb2.SceneResponse:
         centerline_y=y.tolist(),
         road_half_width=scene.style.road_half_width,
         lanes=scene.style.lanes,
+        lane_width=scene.style.lane_width,
+        ego_length=vehicle.length,
+        ego_width=vehicle.width,
         obstacles=[
             sim_pb2.Obstacle(
                 kind=OBSTACLE_KINDS[kind],
@@ -258,7 +264,8 @@ class Simulator:
 
     def scene_proto(self) -> sim_pb2.SceneResponse:
         """The static world of the current scene (see :func:`scene_proto`)."""
-        return scene_proto(self.scene)
+        world = self._require_world()
+        return scene_proto(world.scene, world.params)
 
     def close(self) -> None:
         """Stop the renderer's threads (idempotent; stepping still works, single-threaded)."""

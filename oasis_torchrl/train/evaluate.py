@@ -29,6 +29,7 @@ from tensordict import NonTensorData, TensorDictBase
 from torchrl.envs import EnvBase
 from tqdm import tqdm
 
+from oasis_torchrl.client import SceneLookup
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import PIXELS
 from oasis_torchrl.train.driving import drive
@@ -203,19 +204,25 @@ class EpisodeRecorders:
     Args:
         rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra).
         lerobot: a dataset folder; episodes are appended (one row per frame at 20 fps).
+        scenes: the top-down view's scene source (``env.scene_source()``; None: car and path).
 
     Example:
         >>> recorders = EpisodeRecorders()
         >>> recorders.close()
     """
 
-    def __init__(self, rerun: str | None = None, lerobot: str | Path | None = None) -> None:
+    def __init__(
+        self,
+        rerun: str | None = None,
+        lerobot: str | Path | None = None,
+        scenes: SceneLookup | None = None,
+    ) -> None:
         self.rerun = None
         self.lerobot = None
         if rerun:
             from oasis_torchrl.viz import RolloutLogger
 
-            self.rerun = RolloutLogger(rerun)
+            self.rerun = RolloutLogger(rerun, scenes=scenes)
         if lerobot:
             from oasis_torchrl.data import LeRobotRecorder
 
@@ -290,7 +297,9 @@ class Evaluator:
             image_size=image_size,
             expert=expert,
         )
-        self.recorders = EpisodeRecorders(eval_cfg.get("rerun"), eval_cfg.get("lerobot"))
+        self.recorders = EpisodeRecorders(
+            eval_cfg.get("rerun"), eval_cfg.get("lerobot"), scenes=self.env.scene_source()
+        )
 
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
         """Run one batch of episodes per seed (``seeds``, default ``eval.seeds``); the report

@@ -19,7 +19,7 @@ from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.paths import FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.replay import load_rollout, save_rollout
-from oasis_torchrl.viz.topdown import local_scene
+from oasis_torchrl.viz.topdown import Window
 
 __all__ = [
     "FRAME_TIMELINE",
@@ -29,8 +29,8 @@ __all__ = [
     "RerunTransform",
     "RolloutLogger",
     "RowPaths",
+    "Window",
     "default_blueprint",
     "load_rollout",
-    "local_scene",
     "save_rollout",
 ]

@@ -8,7 +8,10 @@ from collections.abc import Sequence
 import rerun.blueprint as rrb
 
 from oasis_torchrl.viz.paths import ENV_ROOT, RowPaths
+from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
+BACKGROUND = (30, 34, 30)
+"""Background of the top-down view: dark green-grey, off the road."""
 RISK_SERIES = ("reward/collision_risk", "reward/near_fraction", "truth/collided", "truth/off_road")
 """Series shown in the risk plot (and kept out of the reward and truth plots)."""
 
@@ -30,23 +33,41 @@ def _time_series(paths: RowPaths) -> rrb.Horizontal:
     )
 
 
-def _side_panel(paths: RowPaths, depth_cameras: Sequence[str], topdown: bool) -> rrb.Vertical:
-    views = []
-    if topdown:
-        views.append(rrb.Spatial2DView(origin=paths.topdown(), name="top-down"))
+def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatial2DView:
+    """The top-down view: its bounds are the window around the car (the map is logged in the
+    car's frame, so the window follows the car).
+
+    Example:
+        >>> type(topdown_view(RowPaths("env", 0))).__name__
+        'Spatial2DView'
+    """
+    return rrb.Spatial2DView(
+        origin=paths.topdown(),
+        name="top-down",
+        visual_bounds=rrb.VisualBounds2D(x_range=window.x_range, y_range=window.y_range),
+        background=BACKGROUND,
+    )
+
+
+def _side_panel(
+    paths: RowPaths, depth_cameras: Sequence[str], topdown: Window | None
+) -> rrb.Vertical:
+    views: list = [topdown_view(paths, topdown)] if topdown is not None else []
     views += [
         rrb.Spatial2DView(origin=paths.depth(camera), name=f"depth {camera}")
         for camera in depth_cameras
     ]
     views.append(rrb.TextLogView(origin=paths.events, name="events"))
-    return rrb.Vertical(*views)
+    # The top-down view gets the most room: the map has to be read at a glance.
+    shares = [3 if topdown is not None and i == 0 else 1 for i in range(len(views))]
+    return rrb.Vertical(*views, row_shares=shares)
 
 
 def row_layout(
     paths: RowPaths,
     cameras: Sequence[str],
     depth_cameras: Sequence[str] = (),
-    topdown: bool = True,
+    topdown: Window | None = DEFAULT_WINDOW,
 ) -> rrb.Horizontal:
     """The layout of one row: cameras over time series, side panel on the right.
 
@@ -73,7 +94,7 @@ def default_blueprint(
     *,
     root: str = ENV_ROOT,
     depth_cameras: Sequence[str] = (),
-    topdown: bool = True,
+    topdown: Window | None = DEFAULT_WINDOW,
 ) -> rrb.Blueprint:
     """One tab per logged row (a single row gets no tabs).
 
@@ -82,7 +103,7 @@ def default_blueprint(
         cameras: camera names, left to right.
         root: entity root (``env`` for rollouts, ``episode`` for datasets).
         depth_cameras: cameras with depth maps.
-        topdown: include the top-down view.
+        topdown: the top-down view's window around the car; None leaves the view out.
 
     Example:
         >>> blueprint = default_blueprint([0, 5], ["front"])

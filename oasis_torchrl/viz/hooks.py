@@ -8,8 +8,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from tensordict import TensorDictBase
-from torchrl.envs import Transform
+from torchrl.envs import EnvBase, Transform
 
+from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.viz.logger import RolloutLogger
 
 
@@ -32,6 +33,8 @@ def reset_rows(tensordict: TensorDictBase | None, n: int) -> list[int]:
 class RerunTransform(Transform):
     """Logs every reset and step of the env it is appended to; changes nothing.
 
+    A logger without a scene source gets its env's (``env.scene_source()``, the env's own
+    server asked through the protocol) at the first reset, so the top-down view shows the road.
     Append it before transforms that drop or convert ``("pixels", camera)`` (it reads the raw
     uint8 frames). It logs in the process that steps the env, so use it on a single env (or in
     the main process), not inside ``ParallelEnv`` workers.
@@ -55,6 +58,8 @@ class RerunTransform(Transform):
     def _reset(
         self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
     ) -> TensorDictBase:
+        if self.logger.scenes is None:
+            self.logger.scenes = _scene_source_of(self.parent)
         rows = reset_rows(tensordict, int(tensordict_reset.batch_size[0]))
         self.logger.log_reset(tensordict_reset, rows)
         return tensordict_reset
@@ -62,6 +67,13 @@ class RerunTransform(Transform):
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         self.logger.log_step(next_tensordict, tensordict.get("action", None))
         return next_tensordict
+
+
+def _scene_source_of(env: EnvBase | None) -> SceneLookup | None:
+    """The scene source of the env under a transform (an OasisEnv's), if it has one."""
+    base = getattr(env, "base_env", env)
+    scene_source = getattr(base, "scene_source", None)
+    return scene_source() if callable(scene_source) else None
 
 
 class RerunFrameConsumer:

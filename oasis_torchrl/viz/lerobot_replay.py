@@ -138,7 +138,7 @@ class DatasetReplay:
 
         chosen = self.check_episodes(episodes)
         self.recording.send_blueprint(
-            default_blueprint(chosen, self.cameras, root=EPISODE_ROOT, topdown=False)
+            default_blueprint(chosen, self.cameras, root=EPISODE_ROOT, topdown=None)
         )
         dataset = LeRobotDataset(
             self.repo_id, root=self.root, episodes=chosen, video_backend="pyav"

@@ -30,6 +30,7 @@ import rerun as rr
 import torch
 from tensordict import TensorDictBase
 
+from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.recording import APPLICATION_ID, DEFAULT_MEMORY_LIMIT, open_recording
 from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
@@ -45,6 +46,11 @@ class RolloutLogger:
         target: ``"spawn"`` (start a viewer), a ``rerun+http://host:port/proxy`` URL (a running
             viewer or ``rerun --serve-grpc``), or an ``.rrd`` path.
         options: what to log (:class:`LogOptions`; e.g. ``LogOptions(rows=(0, 5))``).
+        scenes: where the top-down view's road and obstacles come from: ``scenes(prompt,
+            seed)``, e.g. ``env.scene_source()`` (the env's own server, through the protocol)
+            or a :class:`~oasis_torchrl.client.scenes.SceneSource` of a running server. None
+            (default) draws the car and its path only, unless a :class:`RerunTransform` hands
+            over its env's. Settable later as :attr:`scenes`.
         application_id: rerun application id.
         recording_id: rerun recording id (default: a fresh one).
         memory_limit: memory limit of a spawned viewer; it drops the oldest data beyond it.
@@ -55,7 +61,7 @@ class RolloutLogger:
         >>> from oasis_torchrl.sim.config import ServerConfig
         >>> env = OasisEnv("local", num_envs=2, server=ServerConfig(width=96, height=64))
         >>> path = os.path.join(tempfile.mkdtemp(), "rollout.rrd")
-        >>> with RolloutLogger(path) as rerun_logger:
+        >>> with RolloutLogger(path, scenes=env.scene_source()) as rerun_logger:
         ...     rerun_logger.log_rollout(env.rollout(3))
         >>> env.close()
         >>> os.path.getsize(path) > 0
@@ -67,6 +73,7 @@ class RolloutLogger:
         target: str | Path,
         options: LogOptions | None = None,
         *,
+        scenes: SceneLookup | None = None,
         application_id: str = APPLICATION_ID,
         recording_id: str | None = None,
         memory_limit: str = DEFAULT_MEMORY_LIMIT,
@@ -78,7 +85,7 @@ class RolloutLogger:
             recording_id=recording_id,
             memory_limit=memory_limit,
         )
-        self._writer: RecordWriter | None = RecordWriter(recording, self.options)
+        self._writer: RecordWriter | None = RecordWriter(recording, self.options, scenes)
         self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
         self._tick = 0
         self._pending_starts: np.ndarray | None = None
@@ -86,6 +93,15 @@ class RolloutLogger:
         # are torn down. A weak reference, so an open logger can still be garbage-collected.
         self._close_at_exit = functools.partial(_close_if_alive, weakref.ref(self))
         atexit.register(self._close_at_exit)
+
+    @property
+    def scenes(self) -> SceneLookup | None:
+        """Where the top-down road comes from (``scenes(prompt, seed)``; None: car and path)."""
+        return self._open_writer().scenes
+
+    @scenes.setter
+    def scenes(self, scenes: SceneLookup | None) -> None:
+        self._open_writer().scenes = scenes
 
     @property
     def recording(self) -> rr.RecordingStream:

@@ -2,16 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
-from oasis_torchrl.proto import sim_pb2
 from oasis_torchrl.protocol import FPS
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY
-from oasis_torchrl.viz.topdown import local_scene
-
-SceneSource = Callable[[str, int], "sim_pb2.SceneResponse | None"]
-"""``source(prompt, seed)``: the static world of an episode, or None when unknown."""
+from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 DEFAULT_TRUTH_SERIES = ("speed", "lateral_offset", "obstacle_distance", "collided", "off_road")
 
@@ -26,13 +21,12 @@ class LogOptions:
         jpeg_quality: JPEG quality 1-100 of logged frames; None logs raw images (large).
         all_frames: when the env returns all 4 frames of a chunk, log every one (else the last).
         depth: log ``("depth", camera)`` maps when the env provides them.
-        topdown: draw the top-down map when the env provides ground-truth poses.
+        topdown: draw the top-down view when the env provides ground-truth poses (the road
+            and obstacles when the logger has a scene source, else the car and its path).
         truth_series: ground-truth fields plotted as time series.
         fps: world frame rate; ``sim_time = frame / fps``.
-        scene_source: ``source(prompt, seed) -> SceneResponse | None`` for the top-down road
-            and obstacles; default: rebuilt locally (the embedded server's worlds are
-            deterministic). None draws only the car and its path.
-        topdown_radius: metres around the car drawn on the top-down map.
+        topdown_window: what the top-down view shows around the car (20 m behind to 60 m
+            ahead, 15 m to each side by default).
         trail_frames: positions kept for the path (a fixed-size buffer per row).
         background: encode and log on a background thread (the env does not wait for JPEG).
         max_pending: steps that may wait for the background thread before the caller blocks.
@@ -54,8 +48,7 @@ class LogOptions:
     topdown: bool = True
     truth_series: tuple[str, ...] = DEFAULT_TRUTH_SERIES
     fps: float = FPS
-    scene_source: SceneSource | None = local_scene
-    topdown_radius: float = 60.0
+    topdown_window: Window = DEFAULT_WINDOW
     trail_frames: int = 200
     background: bool = True
     max_pending: int = 2
@@ -67,8 +60,6 @@ class LogOptions:
             raise ValueError(f"rows must be non-empty and non-negative, got {self.rows}")
         if not self.fps > 0:
             raise ValueError(f"fps must be positive, got {self.fps}")
-        if not self.topdown_radius > 0:
-            raise ValueError(f"topdown_radius must be positive, got {self.topdown_radius}")
         if self.trail_frames < 2:
             raise ValueError(f"trail_frames must be >= 2, got {self.trail_frames}")
         if self.max_pending < 1:

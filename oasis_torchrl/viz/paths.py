@@ -14,11 +14,17 @@ entity                                 archetype       what
 ``<root>/<row>/state/<name>``          Scalars         ``observation.state`` of replayed datasets
 ``<root>/<row>/events``                TextLog         episode starts (prompt, seed), collisions,
                                                        episode ends
-``<root>/<row>/topdown/road``          LineStrips2D    road edges and centreline near the car
-``<root>/<row>/topdown/obstacles``     LineStrips2D    obstacle outlines near the car
+``<root>/<row>/topdown/road``          LineStrips2D    the road surface near the car (one thick
+                                                       strip along the centreline)
+``<root>/<row>/topdown/lanes``         LineStrips2D    road edges and lane lines (dashed)
+``<root>/<row>/topdown/obstacles``     LineStrips2D    obstacles, filled to size (one thick
+                                                       segment each)
 ``<root>/<row>/topdown/path``          LineStrips2D    the car's recent path
-``<root>/<row>/topdown/car``           LineStrips2D    the car's outline (red after a collision)
+``<root>/<row>/topdown/car``           LineStrips2D    the car, filled (red after a collision)
 =====================================  ==============  ==========================================
+
+The top-down layers are in the car's frame (x metres to its right, y metres behind it), logged
+every step, so the view's fixed bounds follow the car.
 
 Timelines: ``frame`` (sequence: world frames, 4 per env step) and ``sim_time`` (duration:
 ``frame / fps``).

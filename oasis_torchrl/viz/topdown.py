@@ -1,29 +1,38 @@
-"""Top-down map of the embedded simulator's world: the road, obstacles, the car and its path.
+"""The top-down view: a window that follows the car, drawn from the scene the server reports.
 
-The map is built from a ``SceneResponse`` (``sim.proto``), as answered by the embedded server's
-``SimService/GetScene`` or rebuilt locally from prompt and seed by :func:`local_scene` (worlds
-are deterministic), so both sources draw the same. Only the part near the car is drawn
-(:meth:`RoadMap.near`), which keeps each logged map small and the view zoomed on the car.
+The scene is a ``SceneResponse`` (``sim.proto``: road centreline, width, lanes, obstacles, the
+car's size), asked of the server through the protocol
+(:class:`~oasis_torchrl.client.scenes.SceneSource`). Everything is drawn in the car's frame,
+heading up: view ``x`` is metres to the car's right, view ``y`` metres behind it (rerun's 2D
+views point y down), so a fixed :class:`Window` (20 m behind to 60 m ahead by default, wide
+enough for a highway) follows the car. The road is a filled band, its edges and lane lines are
+drawn over it, obstacles and the car are filled to their real size (a line of radius half the
+width, whose round caps end at the box's ends).
 
-Rerun's 2D views point y down; :func:`to_view` negates y so that north (+y in the world) is up.
+Example:
+    >>> from oasis_torchrl.proto import sim_pb2
+    >>> scene = sim_pb2.SceneResponse(
+    ...     centerline_x=np.arange(0.0, 200.0, 2.0), centerline_y=np.zeros(100),
+    ...     road_half_width=5.0, lanes=2, lane_width=3.5, ego_length=4.5, ego_width=1.9,
+    ...     obstacles=[sim_pb2.Obstacle(kind="car", x=30.0, y=1.75, length=4.5, width=1.9)])
+    >>> view = RoadMap.from_scene(scene).view(np.array([10.0, 0.0]), heading=0.0)
+    >>> view.obstacles.ends.round(2).tolist()  # 20 m ahead (-y), 1.75 m to the left (-x)
+    [[[-1.75, -18.7], [-1.75, -21.3]]]
 """
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from oasis_torchrl.proto import sim_pb2
-from oasis_torchrl.sim.scene import cached_scene
-from oasis_torchrl.sim.simulator import scene_proto
-from oasis_torchrl.sim.vehicle import VehicleParams
 
 Color = tuple[int, int, int]
 
-EDGE_COLOR: Color = (200, 200, 200)
-CENTRE_COLOR: Color = (110, 110, 110)
+ROAD_COLOR: Color = (72, 72, 78)
+EDGE_COLOR: Color = (235, 235, 235)
+LANE_COLOR: Color = (210, 210, 150)
 PATH_COLOR: Color = (60, 220, 90)
 CAR_COLOR: Color = (255, 255, 255)
 CRASHED_COLOR: Color = (255, 40, 40)
@@ -33,94 +42,152 @@ OBSTACLE_COLORS: dict[str, Color] = {
     "pedestrian": (230, 60, 200),
 }
 OTHER_OBSTACLE_COLOR: Color = (180, 180, 60)
-CAR_SIZE = (VehicleParams().length, VehicleParams().width)
-"""``(length, width)`` of the ego car, metres."""
-_SCENE_CACHE = 16
-
-
-@functools.lru_cache(maxsize=_SCENE_CACHE)
-def local_scene(prompt: str, seed: int) -> sim_pb2.SceneResponse:
-    """The static world of ``prompt`` and ``seed`` as the embedded server reports it.
-
-    Example:
-        >>> scene = local_scene("rural road", 3)
-        >>> scene.prompt, scene.seed, len(scene.centerline_x) > 100
-        ('rural road', 3, True)
-    """
-    return scene_proto(cached_scene(prompt, int(seed)))
-
-
-def to_view(points: np.ndarray) -> np.ndarray:
-    """World ``[..., 2]`` metres to view coordinates (y negated: north up).
-
-    Example:
-        >>> to_view(np.array([[1.0, 2.0]])).tolist()
-        [[1.0, -2.0]]
-    """
-    return points * np.array([1.0, -1.0])
-
-
-def box_outlines(
-    x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray, width: np.ndarray
-) -> np.ndarray:
-    """Closed outlines ``[K, 5, 2]`` of oriented rectangles (centre, heading, length, width).
-
-    Example:
-        >>> box_outlines(*(np.array([v]) for v in (0.0, 0.0, 0.0, 4.0, 2.0)))[0, :2].tolist()
-        [[2.0, 1.0], [-2.0, 1.0]]
-    """
-    corners = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0], [1.0, 1.0]])
-    half = np.stack([np.asarray(length), np.asarray(width)], axis=-1)[:, None, :] / 2
-    local = corners[None] * half  # [K, 5, 2] along / across the heading
-    cos, sin = np.cos(heading)[:, None], np.sin(heading)[:, None]
-    world_x = x[:, None] + cos * local[..., 0] - sin * local[..., 1]
-    world_y = y[:, None] + sin * local[..., 0] + cos * local[..., 1]
-    return np.stack([world_x, world_y], axis=-1)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[start, stop)`` index ranges where ``mask`` is True."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
+CAR_SIZE = (4.5, 1.9)
+"""``(length, width)`` of the car when no scene reports it (a replay without a server), metres."""
+EDGE_RADIUS = 0.2
+LANE_RADIUS = 0.12
+PATH_RADIUS = 0.3
+DASH = (3.0, 6.0)
+"""Lane-line dashes: metres painted, metres gap."""
+DRAW_ORDER = {"road": 1.0, "lanes": 2.0, "obstacles": 3.0, "path": 4.0, "car": 5.0}
+"""Rerun draw order of each layer (higher is drawn over lower)."""
 
 
 @dataclass(frozen=True)
-class MapPatch:
-    """What to draw near the car: polylines with one colour each, obstacle outlines likewise.
+class Window:
+    """The part of the world around the car the view shows, metres in the car's frame.
 
     Example:
-        >>> patch = MapPatch([], [], obstacles=np.zeros((0, 5, 2)), obstacle_colors=[])
-        >>> len(patch.road), patch.obstacles.shape
-        (0, (0, 5, 2))
+        >>> Window().x_range, Window().y_range
+        ((-15.0, 15.0), (-60.0, 20.0))
+    """
+
+    behind: float = 20.0
+    ahead: float = 60.0
+    half_width: float = 15.0
+
+    def __post_init__(self) -> None:
+        if min(self.behind, self.ahead) < 0 or self.half_width <= 0:
+            raise ValueError(f"a top-down window needs non-negative extents, got {self}")
+
+    @property
+    def x_range(self) -> tuple[float, float]:
+        """View ``x`` (metres to the right) shown."""
+        return (-self.half_width, self.half_width)
+
+    @property
+    def y_range(self) -> tuple[float, float]:
+        """View ``y`` (metres behind; ahead is negative) shown."""
+        return (-self.ahead, self.behind)
+
+    def contains(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Which view points ``[..., 2]`` lie in the window grown by ``margin`` metres."""
+        x, y = points[..., 0], points[..., 1]
+        return (
+            (np.abs(x) <= self.half_width + margin)
+            & (y >= -self.ahead - margin)
+            & (y <= self.behind + margin)
+        )
+
+
+DEFAULT_WINDOW = Window()
+
+
+def car_frame(points: np.ndarray, car: np.ndarray, heading: float) -> np.ndarray:
+    """World points ``[..., 2]`` (metres, +y north) to view coordinates of the car at ``car``
+    heading ``heading`` (radians): x to its right, y behind it.
+
+    Example:
+        >>> north = car_frame(np.array([[1.0, 2.0], [0.0, 5.0]]), np.zeros(2), heading=np.pi / 2)
+        >>> (north.round(6) + 0.0).tolist()  # 1 m east is to the right of a car heading north
+        [[1.0, -2.0], [0.0, -5.0]]
+    """
+    offset = points - car
+    cos, sin = np.cos(heading), np.sin(heading)
+    ahead = offset[..., 0] * cos + offset[..., 1] * sin
+    left = -offset[..., 0] * sin + offset[..., 1] * cos
+    return np.stack([-left, -ahead], axis=-1)
+
+
+@dataclass(frozen=True)
+class Capsules:
+    """Filled boxes drawn as thick lines: segment ends ``[K, 2, 2]`` (view), radii, colours.
+
+    Example:
+        >>> boxes = Capsules.of_boxes(np.zeros((1, 2)), np.zeros(1), np.array([4.0]),
+        ...                           np.array([2.0]), [(255, 255, 255)])
+        >>> boxes.ends.tolist(), boxes.radii.tolist()
+        ([[[0.0, 1.0], [0.0, -1.0]]], [1.0])
+    """
+
+    ends: np.ndarray
+    radii: np.ndarray
+    colors: list[Color]
+
+    @classmethod
+    def of_boxes(
+        cls,
+        centres: np.ndarray,
+        headings: np.ndarray,
+        lengths: np.ndarray,
+        widths: np.ndarray,
+        colors: list[Color],
+    ) -> Capsules:
+        """Boxes in view coordinates: centres ``[K, 2]``, headings (0 = ahead, the view's -y,
+        counter-clockwise positive), lengths and widths ``[K]``; the caps end at the box ends."""
+        half = np.maximum(lengths - widths, 0.0)[:, None] / 2
+        along = np.stack([-np.sin(headings), -np.cos(headings)], axis=-1)
+        ends = np.stack([centres - along * half, centres + along * half], axis=1)
+        return cls(ends.reshape(-1, 2, 2), widths / 2, colors)
+
+    def __len__(self) -> int:
+        return len(self.ends)
+
+
+@dataclass(frozen=True)
+class MapView:
+    """One step's view of the map: road band, markings and obstacles, in view coordinates.
+
+    ``road`` strips are drawn with radius ``road_radius`` (the filled surface), ``markings``
+    with ``marking_radii`` and ``marking_colors``, one per strip.
     """
 
     road: list[np.ndarray]
-    road_colors: list[Color]
-    obstacles: np.ndarray
-    obstacle_colors: list[Color]
+    road_radius: float
+    markings: list[np.ndarray]
+    marking_radii: list[float]
+    marking_colors: list[Color]
+    obstacles: Capsules
 
 
 @dataclass(frozen=True)
 class RoadMap:
-    """Road polylines and obstacle outlines of one scene, in world metres.
+    """A scene's road (centreline samples, their normals and distances along the road, the
+    offsets of the lines painted on it) and obstacles, in world metres; :meth:`view` cuts out
+    and turns what a :class:`Window` around the car shows.
 
     Example:
-        >>> road = RoadMap.from_scene(local_scene("urban street", 1))
-        >>> patch = road.near(np.array([0.0, 0.0]), radius=50.0)
-        >>> len(patch.road) >= 3, patch.obstacles.shape[1:]
-        (True, (5, 2))
+        >>> scene = sim_pb2.SceneResponse(centerline_x=[0.0, 2.0, 4.0], centerline_y=[0.0] * 3,
+        ...                               road_half_width=4.0, lanes=2, lane_width=3.0)
+        >>> RoadMap.from_scene(scene).line_offsets.tolist()  # road edges, lane edges, divider
+        [-4.0, 4.0, -3.0, 3.0, 0.0]
     """
 
     centre: np.ndarray
-    left: np.ndarray
-    right: np.ndarray
-    obstacle_outlines: np.ndarray
+    normal: np.ndarray
+    along: np.ndarray
+    half_width: float
+    line_offsets: np.ndarray
+    dashed: np.ndarray
     obstacle_centres: np.ndarray
+    obstacle_headings: np.ndarray
+    obstacle_sizes: np.ndarray
     obstacle_colors: list[Color]
+    car_size: tuple[float, float]
 
     @classmethod
     def from_scene(cls, scene: sim_pb2.SceneResponse) -> RoadMap:
-        """Road edges from the centreline and half width; obstacle outlines from their boxes."""
+        """The map of a ``SceneResponse`` (a road needs at least two centreline samples)."""
         centre = np.stack([np.asarray(scene.centerline_x), np.asarray(scene.centerline_y)], -1)
         if len(centre) < 2:
             raise ValueError(
@@ -129,45 +196,104 @@ class RoadMap:
             )
         tangent = np.gradient(centre, axis=0)
         tangent /= np.maximum(np.linalg.norm(tangent, axis=-1, keepdims=True), 1e-9)
-        normal = np.stack([-tangent[:, 1], tangent[:, 0]], -1)  # + is left
-        offset = normal * scene.road_half_width
+        half = scene.road_half_width
+        offsets, dashed = [-half, half], [False, False]
+        if scene.lanes and scene.lane_width > 0:
+            lanes_half = scene.lanes * scene.lane_width / 2
+            if lanes_half < half:  # shoulders: the lane edges are lines of their own
+                offsets += [-lanes_half, lanes_half]
+                dashed += [False, False]
+            offsets += [-lanes_half + k * scene.lane_width for k in range(1, scene.lanes)]
+            dashed += [True] * (scene.lanes - 1)
         boxes = np.array(
-            [(o.x, o.y, o.heading, o.length, o.width) for o in scene.obstacles], dtype=np.float64
+            [(o.x, o.y, o.heading, o.length, o.width) for o in scene.obstacles], np.float64
         ).reshape(-1, 5)
         return cls(
             centre=centre,
-            left=centre + offset,
-            right=centre - offset,
-            obstacle_outlines=box_outlines(*boxes.T),
+            normal=np.stack([-tangent[:, 1], tangent[:, 0]], -1),  # + is left
+            along=np.concatenate(
+                ([0.0], np.cumsum(np.linalg.norm(np.diff(centre, axis=0), axis=-1)))
+            ),
+            half_width=half,
+            line_offsets=np.array(offsets),
+            dashed=np.array(dashed),
             obstacle_centres=boxes[:, :2],
+            obstacle_headings=boxes[:, 2],
+            obstacle_sizes=boxes[:, 3:],
             obstacle_colors=[
                 OBSTACLE_COLORS.get(o.kind, OTHER_OBSTACLE_COLOR) for o in scene.obstacles
             ],
+            car_size=(scene.ego_length or CAR_SIZE[0], scene.ego_width or CAR_SIZE[1]),
         )
 
-    def near(self, point: np.ndarray, radius: float) -> MapPatch:
-        """The road and obstacles within ``radius`` metres of ``point`` (world ``[2]``)."""
-        close = np.linalg.norm(self.centre - point, axis=-1) <= radius
-        road, colors = [], []
-        for start, stop in _runs(close):
+    def view(self, car: np.ndarray, heading: float, window: Window | None = None) -> MapView:
+        """What ``window`` shows around the car at world ``car`` ``[2]`` heading ``heading``."""
+        window = window or DEFAULT_WINDOW
+        centre = car_frame(self.centre, car, heading)
+        shown = window.contains(centre, margin=self.half_width + 2.0)
+        road, markings, radii, colors = [], [], [], []
+        for start, stop in _runs(shown):
             if stop - start < 2:
                 continue
-            for line, color in (
-                (self.left, EDGE_COLOR),
-                (self.right, EDGE_COLOR),
-                (self.centre, CENTRE_COLOR),
-            ):
-                road.append(line[start:stop])
-                colors.append(color)
-        near = np.flatnonzero(
-            np.linalg.norm(self.obstacle_centres - point, axis=-1) <= radius
-        ).tolist()
-        return MapPatch(
-            road=road,
-            road_colors=colors,
-            obstacles=self.obstacle_outlines[near],
-            obstacle_colors=[self.obstacle_colors[i] for i in near],
+            road.append(centre[start:stop])
+            normal = car_frame(self.normal[start:stop], np.zeros(2), heading)
+            for offset, dashed in zip(self.line_offsets, self.dashed, strict=True):
+                line = centre[start:stop] + offset * normal
+                strips = _dashes(line, self.along[start:stop]) if dashed else [line]
+                markings += strips
+                radii += [LANE_RADIUS if dashed else EDGE_RADIUS] * len(strips)
+                colors += [LANE_COLOR if dashed else EDGE_COLOR] * len(strips)
+        return MapView(
+            road, self.half_width, markings, radii, colors, self._obstacles(car, heading, window)
         )
+
+    def _obstacles(self, car: np.ndarray, heading: float, window: Window) -> Capsules:
+        centres = car_frame(self.obstacle_centres, car, heading)
+        near = np.flatnonzero(window.contains(centres, margin=self.obstacle_sizes.max(initial=0)))
+        return Capsules.of_boxes(
+            centres[near],
+            self.obstacle_headings[near] - heading,
+            self.obstacle_sizes[near, 0],
+            self.obstacle_sizes[near, 1],
+            [self.obstacle_colors[i] for i in near.tolist()],
+        )
+
+
+def car_capsule(size: tuple[float, float], color: Color) -> Capsules:
+    """The car itself: at the view's origin, heading up.
+
+    Example:
+        >>> car_capsule((4.5, 1.9), CAR_COLOR).ends[0, :, 1].round(2).tolist()
+        [1.3, -1.3]
+    """
+    length, width = size
+    return Capsules.of_boxes(
+        np.zeros((1, 2)), np.zeros(1), np.array([length]), np.array([width]), [color]
+    )
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[start, stop)`` index ranges where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _dashes(line: np.ndarray, along: np.ndarray) -> list[np.ndarray]:
+    """A polyline ``[K, 2]`` cut into the painted stretches of ``DASH``, as two-point strips.
+
+    ``along`` is each point's distance along the road: the dashes are painted on the road, so
+    they stay put while the window moves over them.
+    """
+    period = sum(DASH)
+    first = np.floor(along[0] / period) * period
+    starts = np.arange(first, along[-1], period)
+    ends = np.minimum(starts + DASH[0], along[-1])
+    starts = np.maximum(starts, along[0])
+    keep = ends > starts
+    stretches = np.stack([starts[keep], ends[keep]], -1)
+    xs = np.interp(stretches, along, line[:, 0])
+    ys = np.interp(stretches, along, line[:, 1])
+    return list(np.stack([xs, ys], axis=-1))
 
 
 class Trail:
@@ -203,11 +329,3 @@ class Trail:
         if self._count <= capacity:
             return self._buffer[: self._count].copy()
         return np.roll(self._buffer, -(self._count % capacity), axis=0)
-
-    def recent_within(self, radius: float) -> np.ndarray:
-        """The newest stretch of the trail that stays within ``radius`` of the newest point."""
-        points = self.points()
-        if len(points) == 0:
-            return points
-        far = np.flatnonzero(np.linalg.norm(points - points[-1], axis=-1) > radius)
-        return points[far[-1] + 1 :] if len(far) else points

@@ -5,7 +5,9 @@ Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 *
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
 frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
 at most a second late). Each row keeps a little state (episode number, step count, return,
-collided flag, its road map and a fixed-size path buffer), never frames.
+collided flag, its road map and a fixed-size path buffer), never frames. The top-down view is
+drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the road comes from
+``scenes(prompt, seed)`` once per episode.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import depth_archetype, image_archetype
@@ -27,11 +30,15 @@ from oasis_torchrl.viz.topdown import (
     CAR_COLOR,
     CAR_SIZE,
     CRASHED_COLOR,
+    DRAW_ORDER,
     PATH_COLOR,
+    PATH_RADIUS,
+    ROAD_COLOR,
+    Capsules,
     RoadMap,
     Trail,
-    box_outlines,
-    to_view,
+    car_capsule,
+    car_frame,
 )
 
 logger = logging.getLogger(__name__)
@@ -50,12 +57,14 @@ class _RowState:
     episode_return: float = 0.0
     collided: bool = False
     road: RoadMap | None = None
-    anchor: np.ndarray | None = None
 
 
 class RecordWriter:
     """Logs step records of env rows under ``env/<row>``; sends the default blueprint as rows,
     cameras, depth maps and the top-down view appear.
+
+    ``scenes`` (settable) is where the top-down view's road and obstacles come from, e.g. a
+    :class:`~oasis_torchrl.client.scenes.SceneSource`; None draws the car and its path only.
 
     Example:
         >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
@@ -63,9 +72,15 @@ class RecordWriter:
         >>> writer.write(record, tick=0)  # logs "episode 0 starts: 'rural road', seed 1"
     """
 
-    def __init__(self, recording: rr.RecordingStream, options: LogOptions) -> None:
+    def __init__(
+        self,
+        recording: rr.RecordingStream,
+        options: LogOptions,
+        scenes: SceneLookup | None = None,
+    ) -> None:
         self.recording = recording
         self.options = options
+        self.scenes = scenes
         self._series = SeriesBuffer(recording, options.fps)
         self._rows: dict[int, _RowState] = {}
         self._cameras: list[str] = []
@@ -121,7 +136,7 @@ class RecordWriter:
                     rows,
                     self._cameras,
                     depth_cameras=self._depth_cameras,
-                    topdown=self._topdown,
+                    topdown=self.options.topdown_window if self._topdown else None,
                 )
             )
 
@@ -135,7 +150,6 @@ class RecordWriter:
         state.episode_return = 0.0
         state.collided = False
         state.trail.clear()
-        state.anchor = None
         prompt = record.prompts[i] if record.prompts else None
         seed = int(record.seeds[i]) if record.seeds else None
         state.road = self._road(prompt, seed) if {"x", "y"} <= set(record.truth) else None
@@ -146,11 +160,11 @@ class RecordWriter:
             self._event(paths, f"episode {state.episode} starts: {prompt!r}, seed {seed}", "INFO")
         if self._topdown:
             empty = rr.LineStrips2D([])
-            self.recording.log(paths.topdown("road"), empty)
-            self.recording.log(paths.topdown("obstacles"), empty)
+            for layer in ("road", "lanes", "obstacles"):
+                self.recording.log(paths.topdown(layer), empty)
 
     def _road(self, prompt: str | None, seed: int | None) -> RoadMap | None:
-        source = self.options.scene_source
+        source = self.scenes
         if not self.options.topdown or source is None or prompt is None or seed is None:
             return None
         try:
@@ -232,28 +246,38 @@ class RecordWriter:
         car = positions[-1]
         if not np.isfinite(car).all():
             return
-        radius = self.options.topdown_radius
-        if state.road is not None and (
-            state.anchor is None or np.linalg.norm(car - state.anchor) > radius / 3
-        ):
-            self._write_road(paths, state.road, car, radius)
-            state.anchor = car
-        path = state.trail.recent_within(radius)
-        self.recording.log(
-            paths.topdown("path"), rr.LineStrips2D([to_view(path)], colors=[PATH_COLOR])
+        heading = float(truth["heading"][i, -1]) if "heading" in truth else 0.0
+        window = self.options.topdown_window
+        if state.road is not None:
+            self._write_map(paths, state.road, car, heading)
+        path = car_frame(state.trail.points(), car, heading)
+        outside = np.flatnonzero(~window.contains(path, margin=PATH_RADIUS))
+        path = path[outside[-1] + 1 :] if len(outside) else path
+        self._log_layer(paths, "path", [path], [PATH_RADIUS], [PATH_COLOR])
+        size = state.road.car_size if state.road is not None else CAR_SIZE
+        self._log_capsules(
+            paths, "car", car_capsule(size, CRASHED_COLOR if state.collided else CAR_COLOR)
         )
-        heading = truth["heading"][i, -1:] if "heading" in truth else np.zeros(1)
-        outline = box_outlines(car[:1], car[1:], heading, *(np.array([v]) for v in CAR_SIZE))
-        color = CRASHED_COLOR if state.collided else CAR_COLOR
-        self.recording.log(paths.topdown("car"), rr.LineStrips2D(to_view(outline), colors=[color]))
 
-    def _write_road(self, paths: RowPaths, road: RoadMap, car: np.ndarray, radius: float) -> None:
-        patch = road.near(car, radius)
+    def _write_map(self, paths: RowPaths, road: RoadMap, car: np.ndarray, heading: float) -> None:
+        view = road.view(car, heading, self.options.topdown_window)
+        self._log_layer(paths, "road", view.road, [view.road_radius] * len(view.road), [ROAD_COLOR])
+        self._log_layer(paths, "lanes", view.markings, view.marking_radii, view.marking_colors)
+        self._log_capsules(paths, "obstacles", view.obstacles)
+
+    def _log_capsules(self, paths: RowPaths, layer: str, capsules: Capsules) -> None:
+        self._log_layer(paths, layer, list(capsules.ends), capsules.radii, capsules.colors)
+
+    def _log_layer(
+        self,
+        paths: RowPaths,
+        layer: str,
+        strips: list[np.ndarray],
+        radii: list[float] | np.ndarray,
+        colors: list,
+    ) -> None:
+        """One top-down layer: strips in view coordinates, radii in metres (filled widths)."""
         self.recording.log(
-            paths.topdown("road"),
-            rr.LineStrips2D([to_view(line) for line in patch.road], colors=patch.road_colors),
-        )
-        self.recording.log(
-            paths.topdown("obstacles"),
-            rr.LineStrips2D(to_view(patch.obstacles), colors=patch.obstacle_colors),
+            paths.topdown(layer),
+            rr.LineStrips2D(strips, radii=radii, colors=colors, draw_order=DRAW_ORDER[layer]),
         )

@@ -52,7 +52,10 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     assert (paths["ppo_policy"] / "model.safetensors").exists()
     assert load_checkpoint(paths["ppo_checkpoint"])["frames"] == 12
     assert paths["recording"] == tmp_path / "eval.rrd"
-    assert any("front" in entity for entity in Readback(paths["recording"]).entities())
+    recording = Readback(paths["recording"])
+    assert any("front" in entity for entity in recording.entities())
+    _, roads = recording.column("env/0/topdown/road", "LineStrips2D:strips")
+    assert any(roads)  # the evaluator's env handed its scenes to the top-down view
 
 
 def test_demo_command_rejects_a_bad_key_before_writing(tmp_path: Path) -> None:

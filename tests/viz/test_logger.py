@@ -41,7 +41,8 @@ def _row_entities(row: int) -> set[str]:
     entities |= {f"{base}/reward/{name}" for name in ("total", *TERMS)}
     truth = set(LogOptions().truth_series) - {"lateral_offset"}  # not in the hand-built truth
     entities |= {f"{base}/truth/{name}" for name in truth}
-    entities |= {f"{base}/topdown/{layer}" for layer in ("road", "obstacles", "path", "car")}
+    layers = ("road", "lanes", "obstacles", "path", "car")
+    entities |= {f"{base}/topdown/{layer}" for layer in layers}
     return entities | {f"{base}/events"}
 
 
@@ -205,8 +206,10 @@ def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) ->
                 entity.split("/")[2], "TextLog:text"
             )
             assert live.column(entity, component) == replayed.column(entity, component)
+        # The transform gave the logger its env's scene source: the road is drawn
         road = live.column(f"env/{row}/topdown/road", "LineStrips2D:strips")[1]
-        assert any(len(strips) >= 3 for strips in road)  # edges and centreline near the car
+        lanes = live.column(f"env/{row}/topdown/lanes", "LineStrips2D:strips")[1]
+        assert any(road) and any(len(strips) >= 4 for strips in lanes)  # edges and lane lines
 
 
 def test_frame_consumer_of_the_sync_client(tmp_path: Path, local_server: LocalServer) -> None:

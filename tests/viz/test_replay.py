@@ -8,6 +8,10 @@ import numpy as np
 import pytest
 
 from oasis_torchrl.cli import main
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.protocol import API_KEY_ENV_VAR
+from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz.replay import load_rollout, save_rollout, source_kind
 
 from ._readback import Readback
@@ -114,6 +118,23 @@ def test_saved_rollout_rows_to_rrd(tmp_path: Path) -> None:
     assert readback.texts("env/2/events")[1][-1] == "episode 1 starts: 'road 2-1', seed 201"
     with pytest.raises(FileExistsError):
         save_rollout(rollout(1, 1), folder)
+
+
+def test_saved_rollout_gets_its_roads_from_a_server_it_is_pointed_at(
+    tmp_path: Path, local_server: LocalServer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    env = OasisEnv("local", 1, "rural road", server=ServerConfig(width=48, height=32, processes=0))
+    folder = save_rollout(env.rollout(3), tmp_path / "run")
+    env.close()
+    monkeypatch.setenv(API_KEY_ENV_VAR, local_server.api_key)
+    roads = {}
+    for name, flags in {"alone": [], "server": ["--scenes", local_server.endpoint]}.items():
+        out = tmp_path / f"{name}.rrd"
+        assert main(["view", str(folder), "--save", str(out), *flags]) == 0
+        readback = Readback(out)
+        assert readback.column("env/0/topdown/car", "LineStrips2D:strips")[1]  # always drawn
+        roads[name] = readback.column("env/0/topdown/road", "LineStrips2D:strips")[1]
+    assert not any(roads["alone"]) and any(roads["server"])
 
 
 def test_bad_paths_and_choices_exit_with_2(dataset_root: Path, tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""OasisEnv inside TorchRL collectors (single and multi-process) and the Gymnasium adapter."""
+"""OasisEnv inside TorchRL collectors (single and multi-process)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,10 @@ import functools
 import time
 
 import torch
-from gymnasium.utils.env_checker import check_env
 from tensordict import TensorDict
 from torchrl.collectors import Collector, MultiSyncCollector
 
-from oasis_torchrl.envs import OasisEnv, OasisGymEnv
+from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
 
 SMALL = ServerConfig(width=64, height=48)
@@ -70,20 +69,5 @@ def test_lost_session_is_reopened_for_its_row_only() -> None:
         assert out["truncated"].flatten().tolist() == [False, True]
         assert out["info", "session_restarts"].flatten().tolist() == [0, 1]
         assert out["pixels", "front"][1].float().mean() > 0
-    finally:
-        env.close()
-
-
-def test_gymnasium_adapter_passes_env_checker() -> None:
-    env = OasisGymEnv(prompt="rural road", server=SMALL, max_steps=5)
-    try:
-        check_env(env, skip_render_check=True)
-        obs, info = env.reset(seed=0)
-        assert set(obs) == {"left_forward", "front", "right_forward"}
-        assert obs["front"].shape == (48, 64, 3)
-        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
-        assert isinstance(reward, float)
-        assert not terminated and not truncated
-        assert "truth" in info
     finally:
         env.close()
