@@ -112,9 +112,7 @@ class DatasetLayout:
 def _action_names(actions_per_row: int) -> list[str]:
     if actions_per_row == 1:
         return list(ACTION_NAMES)
-    return [
-        f"{name}_{k}{VELOCITY_SUFFIX}" for k in range(actions_per_row) for name in WIRE_NAMES
-    ]
+    return [f"{name}_{k}{VELOCITY_SUFFIX}" for k in range(actions_per_row) for name in WIRE_NAMES]
 
 
 def build_features(layout: DatasetLayout) -> dict[str, Feature]:
