@@ -12,7 +12,7 @@ import pytest
 
 from ._cli import Display
 
-XVFB_PACKAGES = "Debian's xvfb and xdotool (apt-get install xvfb xdotool)"
+XVFB_PACKAGES = "Debian's xvfb and xdotool (apt-get install xvfb xdotool; .ci/run installs them)"
 
 
 @pytest.fixture(scope="module")
