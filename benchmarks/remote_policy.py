@@ -41,10 +41,10 @@ from tensordict import TensorDictBase
 
 from oasis_torchrl.config.policy_serving import PolicyServerConfig
 from oasis_torchrl.drivers import Driver, PolicyDriver
+from oasis_torchrl.drivers.folders import export_lerobot
 from oasis_torchrl.models import DrivingNet
-from oasis_torchrl.models.checkpoint import export_lerobot
-from oasis_torchrl.serving import RemotePolicy
-from oasis_torchrl.serving.features import as_tensordict
+from oasis_torchrl.remote import RemotePolicy
+from oasis_torchrl.remote.features import as_tensordict
 from oasis_torchrl.serving.served import ServedPolicy
 from oasis_torchrl.serving.server import PolicyServer
 

@@ -35,7 +35,7 @@ def run(cfg: DictConfig) -> int:
         2
     """
     from oasis_torchrl.drivers import load_driver
-    from oasis_torchrl.serving import RemotePolicyError
+    from oasis_torchrl.remote import RemotePolicyError
     from oasis_torchrl.train.evaluate import Evaluator
 
     try:

@@ -155,7 +155,7 @@ def run(settings: DictConfig) -> int:
         2
     """
     from oasis_torchrl.data.quiet import quiet_dataset_libraries
-    from oasis_torchrl.serving import RemotePolicyError
+    from oasis_torchrl.remote import RemotePolicyError
 
     cfg: RecordConfig = to_object(settings)
     quiet_dataset_libraries()

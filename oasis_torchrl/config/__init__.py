@@ -8,7 +8,6 @@ generated from the same dataclasses.
 
 from oasis_torchrl.config.env import EmbeddedServerConfig, EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvalConfig, EvaluationConfig
-from oasis_torchrl.config.fields import option
 from oasis_torchrl.config.loading import (
     config_names,
     load_config,
@@ -20,6 +19,7 @@ from oasis_torchrl.config.loading import (
 from oasis_torchrl.config.pipeline import DemoConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.config.training import BCConfig, BCSettings, PPOConfig, PPOSettings
+from oasis_torchrl.options import option
 
 __all__ = [
     "BCConfig",

@@ -16,8 +16,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from oasis_torchrl.config.fields import ALIASES, Alias, Leaf, Section, walk
 from oasis_torchrl.config.loading import load_config
+from oasis_torchrl.options import ALIASES, Alias, Leaf, Section, walk
 
 _DEST = "setting:"
 """Prefix of the argparse destinations that hold settings (keys may contain dots)."""

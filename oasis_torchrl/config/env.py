@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from oasis_torchrl.config.fields import option
+from oasis_torchrl.options import option
 from oasis_torchrl.protocol import FPS
 
 LOCAL = "local"

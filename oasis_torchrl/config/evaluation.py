@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig
-from oasis_torchrl.config.fields import option
+from oasis_torchrl.options import option
 
 
 @dataclass

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
-from oasis_torchrl.config.fields import option
 from oasis_torchrl.config.training import (
     BCSettings,
     BCTrainConfig,
@@ -17,6 +16,7 @@ from oasis_torchrl.config.training import (
     PPOEvaluationConfig,
     PPOSettings,
 )
+from oasis_torchrl.options import option
 
 
 @dataclass

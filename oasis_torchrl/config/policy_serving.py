@@ -8,12 +8,12 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from oasis_torchrl.config.fields import REQUIRED, Alias, option
+from oasis_torchrl.options import REQUIRED, Alias, option
 from oasis_torchrl.protocol import POLICY_SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.config import GrpcServerConfig, require_float, require_int
 
 if TYPE_CHECKING:
-    from oasis_torchrl.serving.features import Feature
+    from oasis_torchrl.remote.features import Feature
 
 
 @dataclass(frozen=True)
@@ -104,6 +104,6 @@ class ServePolicyConfig(PolicyServerConfig):
             ...                   ).input_features()[0].shape
             (2,)
         """
-        from oasis_torchrl.serving.features import Feature
+        from oasis_torchrl.remote.features import Feature
 
         return [Feature.parse(text) for text in self.inputs] or None

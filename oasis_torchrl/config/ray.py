@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from oasis_torchrl.config.fields import Alias, option
+from oasis_torchrl.options import Alias, option
 
 LOCAL_ADDRESS = "local"
 FAILURE_POLICIES = ("stop", "continue")

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from oasis_torchrl.config.env import EmbeddedServerConfig, EnvConfig
-from oasis_torchrl.config.fields import REQUIRED, Alias, option
 from oasis_torchrl.config.ray import RAY_ALIASES, RayCollectionConfig
+from oasis_torchrl.options import REQUIRED, Alias, option
 from oasis_torchrl.protocol import FPS
 
 _SIZE = re.compile(r"^(\d+)x(\d+)$")

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import ClassVar
 
-from oasis_torchrl.config.fields import Alias, option
+from oasis_torchrl.options import Alias, option
 from oasis_torchrl.sim.config import ServerConfig
 
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
-from oasis_torchrl.config.fields import option
 from oasis_torchrl.config.ray import RayCollectionConfig
+from oasis_torchrl.options import option
 
 LOGGER_BACKENDS = ("csv", "tensorboard")
 

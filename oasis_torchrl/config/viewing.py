@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from oasis_torchrl.config.fields import REQUIRED, option
+from oasis_torchrl.options import REQUIRED, option
 
 
 def parse_indices(text: str) -> list[int]:

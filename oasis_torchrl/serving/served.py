@@ -16,7 +16,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from oasis_torchrl.drivers import Driver, load_driver
 from oasis_torchrl.protocol import ACTION_DIM, ACTION_NAMES, CHUNK
-from oasis_torchrl.serving.features import (
+from oasis_torchrl.remote.features import (
     Feature,
     as_tensordict,
     features_of_spec,
@@ -43,7 +43,7 @@ class ServedPolicy:
     Example:
         >>> from oasis_torchrl.drivers import PolicyDriver
         >>> from oasis_torchrl.models import DrivingNet
-        >>> from oasis_torchrl.serving.features import as_tensordict, sample_observation
+        >>> from oasis_torchrl.remote.features import as_tensordict, sample_observation
         >>> served = ServedPolicy.of_driver(PolicyDriver.of_network(DrivingNet()), "fresh")
         >>> [feature.name for feature in served.inputs]
         ['pixels.left_forward', 'pixels.front', 'pixels.right_forward', 'state']

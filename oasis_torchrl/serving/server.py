@@ -24,12 +24,12 @@ from oasis_torchrl import __version__
 from oasis_torchrl.config.policy_serving import PolicyServerConfig
 from oasis_torchrl.proto import policy_pb2, policy_pb2_grpc
 from oasis_torchrl.protocol import API_KEY_METADATA, POLICY_SERVICE
+from oasis_torchrl.remote.features import as_tensordict, check_observation, sample_observation
+from oasis_torchrl.remote.tensors import decode_map, encode, encode_map
 from oasis_torchrl.serving.batching import PolicyRaised
-from oasis_torchrl.serving.features import as_tensordict, check_observation, sample_observation
 from oasis_torchrl.serving.host import Loader, PolicyHost
 from oasis_torchrl.serving.limits import KeyLimits
 from oasis_torchrl.serving.sessions import ActionQueues
-from oasis_torchrl.serving.tensors import decode_map, encode, encode_map
 from oasis_torchrl.sim.auth import ApiKeyAuthority
 from oasis_torchrl.sim.errors import RequestError, StatusError
 

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 
 import grpc
 
-from oasis_torchrl.config.fields import option
+from oasis_torchrl.options import option
 from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 

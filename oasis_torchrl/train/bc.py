@@ -27,8 +27,8 @@ from torchrl.record.loggers import get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config
+from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.models import make_actor_critic
-from oasis_torchrl.models.checkpoint import lerobot_plugin, load_net
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 

@@ -30,15 +30,14 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.checkpoint import (
     BEST,
     LATEST,
-    export_lerobot,
     load_checkpoint,
-    load_net,
     net_from_checkpoint,
     save_checkpoint,
 )

@@ -11,9 +11,10 @@ from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
 from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, load_driver
+from oasis_torchrl.drivers.folders import export_lerobot
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
-from oasis_torchrl.models.checkpoint import export_lerobot, save_checkpoint
+from oasis_torchrl.models.checkpoint import save_checkpoint
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.config import ServerConfig
 

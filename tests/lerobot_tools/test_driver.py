@@ -13,9 +13,9 @@ from tensordict import TensorDict
 from oasis_torchrl.commands import eval as eval_command
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import PolicyDriver, load_driver
-from oasis_torchrl.lerobot_driver import LeRobotDriver
+from oasis_torchrl.drivers.folders import export_lerobot
+from oasis_torchrl.drivers.lerobot import LeRobotDriver
 from oasis_torchrl.models import DrivingNet
-from oasis_torchrl.models.checkpoint import export_lerobot
 from oasis_torchrl.protocol import CAMERAS
 
 from ._policies import IMAGE_SIZE, act_folder

@@ -19,8 +19,8 @@ import pytest
 import torch
 
 from oasis_torchrl.config.policy_serving import PolicyServerConfig
+from oasis_torchrl.drivers.folders import export_lerobot
 from oasis_torchrl.models import DrivingNet
-from oasis_torchrl.models.checkpoint import export_lerobot
 from oasis_torchrl.proto import policy_pb2_grpc
 from oasis_torchrl.serving.host import Loader
 from oasis_torchrl.serving.served import load_served_policy

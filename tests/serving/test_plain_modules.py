@@ -20,8 +20,8 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from oasis_torchrl.client.retry import RetryPolicy
 from oasis_torchrl.commands import record as record_command
 from oasis_torchrl.config import load_config
-from oasis_torchrl.serving import PolicyError, RemotePolicy
-from oasis_torchrl.serving.features import Feature
+from oasis_torchrl.remote import PolicyError, RemotePolicy
+from oasis_torchrl.remote.features import Feature
 from oasis_torchrl.serving.served import load_served_policy
 from oasis_torchrl.serving.server import PolicyServer
 

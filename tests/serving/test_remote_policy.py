@@ -17,14 +17,14 @@ from oasis_torchrl.commands import eval as eval_command
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.envs import OasisEnv
-from oasis_torchrl.serving import (
+from oasis_torchrl.remote import (
     AuthError,
     InvalidInputError,
     RateLimitError,
     RemotePolicy,
     UnavailableError,
 )
-from oasis_torchrl.serving.features import as_tensordict
+from oasis_torchrl.remote.features import as_tensordict
 from oasis_torchrl.serving.server import PolicyServer
 from oasis_torchrl.sim.config import ServerConfig
 

@@ -11,10 +11,10 @@ import pytest
 import torch
 
 from oasis_torchrl.proto import policy_pb2, policy_pb2_grpc
-from oasis_torchrl.serving.features import Feature, sample_observation
+from oasis_torchrl.remote.features import Feature, sample_observation
+from oasis_torchrl.remote.tensors import encode, encode_map
 from oasis_torchrl.serving.served import load_served_policy
 from oasis_torchrl.serving.server import PolicyServer
-from oasis_torchrl.serving.tensors import encode, encode_map
 
 from .conftest import KEYS
 

@@ -8,7 +8,7 @@ import torch
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
 
 from oasis_torchrl.config import load_config
-from oasis_torchrl.models.checkpoint import load_net
+from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 

@@ -13,9 +13,10 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
-from oasis_torchrl.models.checkpoint import export_lerobot, load_checkpoint, load_net
+from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train.ppo import PPOTrainer, build_net
 
 from .conftest import TINY_ENV

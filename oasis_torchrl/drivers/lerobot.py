@@ -33,7 +33,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import NonTensorData, TensorDictBase
 
-from oasis_torchrl.drivers import Driver
+from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
 logger = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ class LeRobotDriver(Driver):
     Example:
         >>> import tempfile
         >>> from oasis_torchrl.models import DrivingNet
-        >>> from oasis_torchrl.models.checkpoint import export_lerobot
+        >>> from oasis_torchrl.drivers.folders import export_lerobot
         >>> folder = export_lerobot(DrivingNet(), Path(tempfile.mkdtemp()) / "policy")
         >>> driver = LeRobotDriver.load(folder)  # any LeRobot policy folder, e.g. an ACT one
         >>> pixels = {camera: np.zeros((2, 64, 96, 3), np.uint8) for camera in CAMERAS}

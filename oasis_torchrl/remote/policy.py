@@ -6,7 +6,7 @@ row's queue on the server; a row starting an episode drops its queue first), and
 LeRobot's inference calls (``select_action``, ``predict_action_chunk``, ``reset``). Transient faults
 (UNAVAILABLE, a per-key limit) are retried with capped, jittered backoff
 (:class:`~oasis_torchrl.client.retry.RetryPolicy`); failures are typed
-(:mod:`oasis_torchrl.serving.errors`). Observations are checked against the policy's inputs
+(:mod:`oasis_torchrl.remote.errors`). Observations are checked against the policy's inputs
 before they are sent, so a bad one fails with the same message without a round trip.
 """
 
@@ -34,7 +34,7 @@ from oasis_torchrl.protocol import (
     POLICY_API_KEY_ENV_VAR,
     POLICY_SCHEMES,
 )
-from oasis_torchrl.serving.errors import (
+from oasis_torchrl.remote.errors import (
     AuthError,
     InvalidInputError,
     RequestTooLargeError,
@@ -42,8 +42,8 @@ from oasis_torchrl.serving.errors import (
     is_too_large,
     typed_error,
 )
-from oasis_torchrl.serving.features import Feature, check_observation
-from oasis_torchrl.serving.tensors import decode, decode_map, encode_map
+from oasis_torchrl.remote.features import Feature, check_observation
+from oasis_torchrl.remote.tensors import decode, decode_map, encode_map
 
 _Response = TypeVar("_Response")
 Observation = Mapping[str, torch.Tensor] | TensorDictBase

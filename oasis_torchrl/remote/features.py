@@ -17,7 +17,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Composite, TensorSpec
 
 from oasis_torchrl.proto import policy_pb2
-from oasis_torchrl.serving.tensors import dtype_from_proto, dtype_name, dtype_to_proto, parse_dtype
+from oasis_torchrl.remote.tensors import dtype_from_proto, dtype_name, dtype_to_proto, parse_dtype
 
 NestedKey = str | tuple[str, ...]
 SAMPLE_RANGE = (-1.0, 1.0)
@@ -224,7 +224,7 @@ def check_observation(
         >>> check_observation({"state": torch.tensor([[0.0, float("nan")]])}, features, 8)
         Traceback (most recent call last):
         ...
-        oasis_torchrl.serving.features.InvalidObservation: feature 'state' holds nan at \
+        oasis_torchrl.remote.features.InvalidObservation: feature 'state' holds nan at \
 [0, 1] (row 0)
     """
     names = {feature.name for feature in features}

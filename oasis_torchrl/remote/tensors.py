@@ -17,7 +17,7 @@ from google.protobuf.internal.containers import MessageMap
 from oasis_torchrl.proto import policy_pb2
 
 if sys.byteorder != "little":  # the wire is little-endian; raw views would reorder bytes
-    raise ImportError("oasis_torchrl.serving supports little-endian machines only")
+    raise ImportError("oasis_torchrl.remote supports little-endian machines only")
 
 _DTYPES: dict[torch.dtype, int] = {
     torch.bool: policy_pb2.DTYPE_BOOL,

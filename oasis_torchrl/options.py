@@ -4,6 +4,9 @@ Every setting of every command is a field of a config dataclass; the field carri
 text and, where the command line spells it differently from its dotted key, the flags that set
 it. The YAML presets, ``key=value`` overrides and the generated ``--help`` all read these
 dataclasses (:mod:`oasis_torchrl.config.loading`, :mod:`oasis_torchrl.config.arguments`).
+
+A leaf module (the standard library only): the embedded server's settings
+(:mod:`oasis_torchrl.sim.config`) use it too, and :mod:`oasis_torchrl.config` builds on them.
 """
 
 from __future__ import annotations
