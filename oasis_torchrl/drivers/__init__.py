@@ -8,7 +8,7 @@ grammar that names them (:func:`load_driver`).
 - :class:`PolicyDriver`: a torch policy: the driving network of a LeRobot policy folder or a PPO
   checkpoint, any TorchScript / ``torch.save``d module, or a policy served by a policy server
   (``grpc://host:port``, :class:`~oasis_torchrl.remote.RemotePolicy`).
-- :class:`~oasis_torchrl.lerobot_driver.LeRobotDriver`: any other LeRobot policy folder (``act``,
+- :class:`~oasis_torchrl.drivers.lerobot.LeRobotDriver`: any other LeRobot policy folder (``act``,
   ``diffusion``, plugins, ...) with its saved processors, four ``select_action`` calls per chunk.
 - :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
   (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
