@@ -30,7 +30,11 @@ OUTPUT = Path("outputs/examples/rerun")
 def log_live_rollout() -> Path:
     """Two rows driven by the server's autopilot, logged as they run (one tab per row)."""
     env = OasisEnv(
-        "local", num_envs=2, prompts=["urban street", "rural road at sunset"], server=SERVER
+        "local",
+        num_envs=2,
+        prompts=["urban street", "rural road at sunset"],
+        server=SERVER,
+        expert=True,  # the autopilot drives with the server's expert
     )
     path = OUTPUT / "live.rrd"
     # The transform logs every reset and step and gives the logger the env's scene source,
@@ -45,7 +49,13 @@ def log_live_rollout() -> Path:
 def record_and_replay_dataset() -> Path:
     """A small LeRobot dataset (one row per frame), replayed into an .rrd."""
     env = OasisEnv(
-        "local", num_envs=2, prompts="highway", server=SERVER, all_frames=True, max_steps=STEPS
+        "local",
+        num_envs=2,
+        prompts="highway",
+        server=SERVER,
+        all_frames=True,
+        max_steps=STEPS,
+        expert=True,
     )
     root = OUTPUT / "drives"
     with LeRobotRecorder(root, append=(root / "meta").exists()) as recorder:

@@ -23,6 +23,8 @@ import tomllib
 ROOT = Path(__file__).resolve().parents[2]
 DISTRIBUTION_FILES = ("pyproject.toml", "README.md", "LICENSE")
 
+PROTOS = ("a2v", "common", "policy", "sim")
+
 CHECK_INSTALLED = """
 import sys
 from pathlib import Path
@@ -32,7 +34,7 @@ from oasis_torchrl.config import config_names, load_config, to_object
 from oasis_torchrl.proto import proto_sources
 
 REQUIRED = {"import-recordings": ["source=in", "root=out"], "record": ["root=out"],
-            "view": ["path=in"]}
+            "serve-policy": ["policy=in"], "view": ["path=in"]}
 
 assert Path(oasis_torchrl.__file__).is_relative_to(sys.prefix), oasis_torchrl.__file__
 print("version", oasis_torchrl.__version__)
@@ -62,7 +64,7 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (wheel,) = dist.glob("oasis_torchrl-*.whl")
     with zipfile.ZipFile(wheel) as archive:
         names = set(archive.namelist())
-    assert {f"oasis_torchrl/proto/{p}.proto" for p in ("a2v", "common", "sim")} <= names
+    assert {f"oasis_torchrl/proto/{p}.proto" for p in PROTOS} <= names
     assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
 
     venv = scratch / "venv"
@@ -107,7 +109,7 @@ def test_every_named_config_and_the_protos_load_from_the_wheel(
     lines = result.stdout.splitlines()
     version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
     assert f"version {version}" in lines  # the wheel's metadata, not a source tree's fallback
-    protos = [f"oasis_torchrl/proto/{name}.proto" for name in ("a2v", "common", "sim")]
+    protos = [f"oasis_torchrl/proto/{name}.proto" for name in PROTOS]
     assert f"protos {' '.join(protos)}" in lines
     loaded = {line.split()[1] for line in lines if line.startswith("config ")}
     assert {

@@ -139,7 +139,11 @@ def test_a_live_rollout_draws_a_readable_view(tmp_path: Path) -> None:
     """The autopilot drives 30 steps (6 s) through an urban street; the last step's view is
     drawn as rerun would and saved as ``topdown.png``."""
     env = OasisEnv(
-        "local", 1, "urban street", server=ServerConfig(width=48, height=32, processes=0)
+        "local",
+        1,
+        "urban street",
+        server=ServerConfig(width=48, height=32, processes=0),
+        expert=True,
     )
     env.set_seed(3)
     path = tmp_path / "topdown.rrd"
