@@ -21,13 +21,15 @@ from oasis_torchrl.drivers.autopilot import EXPERT_ACTION, Autopilot
 from oasis_torchrl.drivers.base import Driver, bounded
 from oasis_torchrl.drivers.folders import export_lerobot, load_net, net_from_lerobot
 from oasis_torchrl.drivers.lerobot import LeRobotDriver
-from oasis_torchrl.drivers.loading import GRAMMAR, DriverSpec, load_driver
+from oasis_torchrl.drivers.loading import AUTOPILOT, GRAMMAR, SCRIPTED, DriverSpec, load_driver
 from oasis_torchrl.drivers.policy import PolicyDriver, load_module
 from oasis_torchrl.drivers.scripted import ScriptedDriver
 
 __all__ = [
+    "AUTOPILOT",
     "EXPERT_ACTION",
     "GRAMMAR",
+    "SCRIPTED",
     "Autopilot",
     "Driver",
     "DriverSpec",
