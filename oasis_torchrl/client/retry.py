@@ -24,13 +24,10 @@ import random
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import TypeVar
 
 import grpc
 
 from oasis_torchrl.client.errors import TransportError, transport_error_from_rpc
-
-T = TypeVar("T")
 
 logger = logging.getLogger(__name__)
 
@@ -153,7 +150,7 @@ class RetryBudget:
         )
 
 
-def call_with_retry(
+def call_with_retry[T](
     call: Callable[[float | None], T],
     *,
     policy: RetryPolicy,
@@ -178,7 +175,7 @@ def call_with_retry(
         time.sleep(delay)
 
 
-async def acall_with_retry(
+async def acall_with_retry[T](
     call: Callable[[float | None], Awaitable[T]],
     *,
     policy: RetryPolicy,

@@ -15,12 +15,10 @@ import dataclasses
 import difflib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
-
-T = TypeVar("T")
 
 
 def _named() -> dict[str, type]:
@@ -176,7 +174,7 @@ def to_object(cfg: DictConfig) -> Any:
     return OmegaConf.to_object(cfg)
 
 
-def section(cfg: DictConfig, schema: type[T]) -> T:
+def section[T](cfg: DictConfig, schema: type[T]) -> T:
     """A config section as its dataclass, e.g. the ``ray`` section as the Ray settings.
 
     Example:

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager
-from typing import Any, TypeVar
+from typing import Any
 
 import grpc
 from google.protobuf import message_factory
@@ -62,7 +62,6 @@ logger = logging.getLogger(__name__)
 A2V_SERVICE = a2v_pb2.DESCRIPTOR.services_by_name["A2VService"]
 SIM_SERVICE = sim_pb2.DESCRIPTOR.services_by_name["SimService"]
 
-_Response = TypeVar("_Response")
 _SIM_STATUS = {
     common_pb2.ERROR_CODE_INVALID_API_KEY: grpc.StatusCode.UNAUTHENTICATED,
     common_pb2.ERROR_CODE_INVALID_SESSION: grpc.StatusCode.NOT_FOUND,
@@ -85,11 +84,11 @@ def _text_metadata(context: grpc.ServicerContext, key: str) -> str | None:
     return value.decode("utf-8", "replace") if isinstance(value, bytes) else value
 
 
-def _run_rpc(
+def _run_rpc[Response](
     context: grpc.ServicerContext,
-    handler: Callable[[], _Response],
-    on_request_error: Callable[[RequestError], _Response],
-) -> _Response:
+    handler: Callable[[], Response],
+    on_request_error: Callable[[RequestError], Response],
+) -> Response:
     """Run ``handler``; a :class:`RequestError` goes to ``on_request_error``, the rest aborts."""
     try:
         return handler()
@@ -291,14 +290,14 @@ class SimServicer:
         """The static world of the session's current scene."""
         return self._query("GetScene", request.session_id, context, lambda s: s.world.scene())
 
-    def _query(
+    def _query[Response](
         self,
         method: str,
         session_id: str,
         context: grpc.ServicerContext,
-        answer: Callable[[Session], _Response],
-    ) -> _Response:
-        def handler() -> _Response:
+        answer: Callable[[Session], Response],
+    ) -> Response:
+        def handler() -> Response:
             with self._gate.use(method, session_id, context) as session:
                 return answer(session)
 

@@ -14,11 +14,11 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import tomllib
 import zipfile
 from pathlib import Path
 
 import pytest
-import tomllib
 
 ROOT = Path(__file__).resolve().parents[2]
 DISTRIBUTION_FILES = ("pyproject.toml", "README.md", "LICENSE")
