@@ -26,9 +26,9 @@ from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from oasis_torchrl.models import CAMERAS, DrivingNetConfig
+from oasis_torchrl.protocol import ACTION_DIM
 
 POLICY_TYPE = "oasis"
-ACTION_DIM = 2
 LOSSES = ("nll", "l1", "mse")
 NETWORK_FIELDS = (
     "image_size",
