@@ -69,7 +69,9 @@ def _demo_ppo() -> PPOSettings:
         collector=CollectorConfig(frames_per_batch=512, total_frames=4096),
         loss=LossConfig(critic_warmup_iters=4),
         optim=OptimConfig(lr=3.0e-4, mini_batch_size=128),
-        eval=PPOEvaluationConfig(every=0, episodes=0),
+        # The fine-tuned policy replaces the clone only if it drives farther on seeds that
+        # neither training nor the final comparison uses.
+        eval=PPOEvaluationConfig(every=4, episodes=16, selection_seeds=[2000]),
     )
 
 
@@ -87,14 +89,16 @@ class DemoConfig:
         default_factory=DemonstrationsConfig, help="autopilot demonstrations"
     )
     bc: BCSettings = option(default_factory=_demo_bc, help="behaviour cloning")
-    dagger: DaggerConfig = option(default_factory=DaggerConfig, help="DAgger rounds")
+    dagger: DaggerConfig = option(
+        default_factory=lambda: DaggerConfig(rounds=2), help="DAgger rounds"
+    )
     ppo: PPOSettings = option(
         default_factory=_demo_ppo,
         help="PPO fine-tuning from the clone (the env is the shared one)",
     )
     eval: PipelineEvaluationConfig = option(
         default_factory=lambda: PipelineEvaluationConfig(
-            max_steps=100, rerun="${output_dir}/eval.rrd"
+            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd"
         ),
         help="the final comparison (the fine-tuned policy's episodes are recorded)",
     )

@@ -127,7 +127,8 @@ class PPOEvaluationConfig(EvaluationConfig):
     selection_seeds: list[int] | None = option(
         None,
         help="periodic evaluations on these seeds pick the policy kept (checkpoints/best.pt), "
-        "evaluated on `seeds` at the end",
+        "evaluated on `seeds` at the end; a warm start is rated first, so fine-tuning keeps "
+        "it unless a later policy beats it",
     )
 
     def __post_init__(self) -> None:

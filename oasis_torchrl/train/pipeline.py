@@ -178,7 +178,7 @@ def ppo_config(
     Example:
         >>> ppo = ppo_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/p"))
         >>> ppo.output_dir, ppo.init_from, ppo.eval.max_steps
-        ('/tmp/d/ppo', '/tmp/d/p', 100)
+        ('/tmp/d/ppo', '/tmp/d/p', 150)
     """
     values = {
         "seed": cfg.seed,

@@ -259,6 +259,8 @@ class PPOTrainer:
         save_config(cfg, self.output_dir / "config.yaml")
         remaining = max(cfg.collector.total_frames - self.frames, 0)
         try:
+            if self._selects_the_warm_start():
+                self._periodic_evaluation()
             if remaining:
                 self._train(remaining)
             kept, kept_checkpoint, kept_frames = self._kept_net()
@@ -268,6 +270,11 @@ class PPOTrainer:
         finally:
             self.close()
         return PPOResult(kept, kept_checkpoint or checkpoint, policy_dir, final, self.history)
+
+    def _selects_the_warm_start(self) -> bool:
+        """A warm-started run with selection seeds rates its starting policy first: fine-tuning
+        then keeps a policy only if it beats the one it started from on those seeds."""
+        return bool(self.cfg.init_from and self.cfg.eval.get("selection_seeds")) and not self.frames
 
     def _train(self, remaining: int) -> None:
         cfg = self.cfg

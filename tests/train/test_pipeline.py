@@ -27,6 +27,9 @@ TINY_PIPELINE = [
     "ppo.collector.frames_per_batch=12",
     "ppo.collector.total_frames=12",
     "ppo.optim.mini_batch_size=6",
+    "ppo.eval.episodes=1",
+    "ppo.eval.max_steps=2",
+    "ppo.eval.every=1",
     "eval.episodes=1",
     "eval.max_steps=2",
     "eval.reference=[constant:throttle=1.0]",
@@ -50,7 +53,10 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     dataset = LeRobotDataset("local/demos", root=paths["dataset"], video_backend="pyav")
     assert dataset.num_episodes == 4  # 2 demonstrations + 2 DAgger episodes
     assert (paths["ppo_policy"] / "model.safetensors").exists()
-    assert load_checkpoint(paths["ppo_checkpoint"])["frames"] == 12
+    # the fine-tuned policy is kept only if it beats the clone on the selection seeds
+    kept = load_checkpoint(paths["ppo_checkpoint"])
+    assert paths["ppo_checkpoint"].name == "best.pt" and kept["frames"] in (0, 12)
+    assert load_checkpoint(paths["ppo_checkpoint"].with_name("latest.pt"))["frames"] == 12
     assert paths["recording"] == tmp_path / "eval.rrd"
     recording = Readback(paths["recording"])
     assert any("front" in entity for entity in recording.entities())

@@ -151,6 +151,33 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
             _ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}")
 
 
+def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) -> None:
+    """Fine-tuning keeps the policy it started from unless a later one beats it on the
+    selection seeds: the warm start is rated before any update."""
+    source = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+    folder = export_lerobot(source, tmp_path / "bc_policy")
+    cfg = _ppo_config(
+        tmp_path / "run",
+        32,
+        f"init_from={folder}",
+        "eval.selection_seeds=[5]",
+        "eval.max_steps=4",
+        "eval.every=2",
+    )
+    result = PPOTrainer(cfg).run()
+
+    *periodic, final = result.history
+    assert [entry["policy_frames"] for entry in periodic] == [0, 32]
+    distances = [entry["mean_distance"] for entry in periodic]
+    best = load_checkpoint(result.checkpoint)
+    assert best["frames"] == periodic[distances.index(max(distances))]["frames"]
+    assert final["policy_frames"] == best["frames"]
+    if best["frames"] == 0:  # the warm start kept: its weights, not the updated ones
+        torch.testing.assert_close(
+            result.net.state_dict()["actor.2.bias"], source.state_dict()["actor.2.bias"]
+        )
+
+
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=(1.5, 0.3)))
     folder = export_lerobot(source, tmp_path / "bc_policy")
