@@ -1,15 +1,17 @@
-"""The world model through LeRobot's own Python interfaces: record a drive with the oasis robot
-into a LeRobot dataset, then evaluate a LeRobot policy folder in the oasis env with LeRobot's own
-evaluation loop.
+"""The world model through LeRobot's own tools: record a drive with the oasis robot into a
+LeRobot dataset, train policies on it with ``lerobot-train`` (a stock ``act`` and the project's
+``oasis``), and evaluate them in the oasis env with LeRobot's own evaluation loop.
 
-    python examples/lerobot_world_model.py --root outputs/example_drive
-    python examples/lerobot_world_model.py --root outputs/example_drive \\
+    python examples/lerobot_world_model.py --root outputs/example_drive --train act oasis
+    python examples/lerobot_world_model.py --root outputs/example_drive2 \\
         --policy outputs/act/checkpoints/last/pretrained_model
 
 The robot is what ``lerobot-record --robot.type=oasis`` drives; here a scripted driver weaves
 along the road instead of a person at the keyboard. Each recorded row holds the newest camera
 frames, the previous action as ``observation.state`` and the action applied next, the features
-of the project's own datasets. The evaluation is ``lerobot-eval --env.type=oasis`` in a few lines.
+of the project's own datasets. Training is ``lerobot-train`` itself, run as a command; ACT
+starts from scratch (``--policy.pretrained_backbone_weights=null``: no download). The evaluation
+is ``lerobot-eval --env.type=oasis`` in a few lines.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 from lerobot.configs.policies import PreTrainedConfig
@@ -78,6 +82,21 @@ def record(root: Path, episodes: int, seconds: float, seed: int) -> LeRobotDatas
     return dataset
 
 
+TRAIN_FLAGS = {"act": ["--policy.pretrained_backbone_weights=null"], "oasis": []}
+"""Extra ``lerobot-train`` flags per policy type."""
+
+
+def train(dataset: Path, policy_type: str, steps: int, output: Path) -> Path:
+    """``lerobot-train`` of a ``policy_type`` policy on the dataset; its last checkpoint."""
+    command = [sys.executable, "-m", "lerobot.scripts.lerobot_train"]
+    command += [f"--policy.type={policy_type}", *TRAIN_FLAGS[policy_type]]
+    command += ["--policy.device=cpu", "--policy.push_to_hub=false"]
+    command += ["--dataset.repo_id=local/example_drive", f"--dataset.root={dataset}"]
+    command += [f"--steps={steps}", f"--save_freq={steps}", "--batch_size=8", "--num_workers=0"]
+    subprocess.run([*command, f"--output_dir={output}"], check=True)
+    return output / "checkpoints" / "last" / "pretrained_model"
+
+
 def _policy_config(folder: str) -> PreTrainedConfig:
     """The saved config of a policy folder, to run on the CPU."""
     register_third_party_plugins()  # plugin policy types, e.g. the oasis policy
@@ -123,14 +142,22 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="length of each episode")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--policy", help="a LeRobot policy folder to evaluate in the world model")
+    parser.add_argument(
+        "--train", nargs="*", default=[], choices=sorted(TRAIN_FLAGS), help="policies to train"
+    )
+    parser.add_argument("--train-steps", type=int, default=2000, help="lerobot-train's --steps")
     parser.add_argument("--sessions", type=int, default=4, help="sessions evaluated at once")
     parser.add_argument("--episode-frames", type=int, default=200, help="frames per evaluation")
     args = parser.parse_args()
     dataset = record(args.root, args.episodes, args.seconds, args.seed)
     print(f"recorded {dataset.num_episodes} episodes, {dataset.num_frames} rows in {args.root}")
-    if args.policy:
-        metrics = evaluate(args.policy, args.sessions, args.episode_frames, args.seed)
-        print(json.dumps(metrics, indent=2))
+    folders = [args.policy] if args.policy else []
+    for policy_type in args.train:
+        output = args.root.with_name(f"{args.root.name}_{policy_type}")
+        folders.append(str(train(args.root, policy_type, args.train_steps, output)))
+    for folder in folders:
+        metrics = evaluate(folder, args.sessions, args.episode_frames, args.seed)
+        print(json.dumps({"policy": folder, **metrics}))
 
 
 if __name__ == "__main__":

@@ -43,12 +43,18 @@ def test_a_gamepad_that_is_not_there_is_named() -> None:
 
 
 @pytest.mark.timeout(900)
-def test_the_example_records_and_evaluates(tmp_path: Path) -> None:
+def test_the_example_records_trains_and_evaluates(tmp_path: Path) -> None:
     policy = act_folder(tmp_path / "act", n_action_steps=8)
     root = tmp_path / "drive"
     args = [str(EXAMPLE), "--root", str(root), "--episodes", "2", "--seconds", "0.5"]
     args += ["--policy", str(policy), "--sessions", "2", "--episode-frames", "8"]
+    args += ["--train", "oasis", "act", "--train-steps", "2"]
     done = run_tool("python", args, cli_env(tmp_path / "hf"), timeout=900)
     assert "recorded 2 episodes, 20 rows" in done.stdout
-    metrics = json.loads(done.stdout[done.stdout.index("{") :])
-    assert metrics["episodes"] == 2 and 0.0 <= metrics["collision_rate"] <= 1.0
+    reports = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    trained = [
+        tmp_path / f"drive_{kind}/checkpoints/last/pretrained_model" for kind in ("oasis", "act")
+    ]
+    assert [report["policy"] for report in reports] == [str(policy), *map(str, trained)]
+    for report in reports:
+        assert report["episodes"] == 2 and 0.0 <= report["collision_rate"] <= 1.0
