@@ -456,17 +456,31 @@ class OasisEnv(OasisWrapper):
         return self._env.server
 
 
+SPARE_SESSIONS = 4
+"""Sessions an env's own server admits beyond its rows: the scene lookups of the top-down view
+(one session at a time) and rows re-opened before the server expired their lost sessions."""
+
+
 def embedded_server(config: ServerConfig, num_envs: int) -> LocalServer | ServerProcess:
     """The embedded server of a local env: a process of its own (its workers at most one per
     row), or, with ``processes=0``, inside the stepping process. Unstarted: the env's pool
-    starts it.
+    starts it. It serves this env alone, so its session limits admit every row plus
+    :data:`SPARE_SESSIONS` whatever ``config`` says.
 
     Example:
         >>> type(embedded_server(ServerConfig(processes=0), 2)).__name__
         'LocalServer'
         >>> embedded_server(ServerConfig(), 1).config.processes
         1
+        >>> embedded_server(ServerConfig(), 32).config.max_sessions_per_key
+        36
     """
+    sessions = num_envs + SPARE_SESSIONS
+    config = replace(
+        config,
+        max_sessions=max(config.max_sessions, sessions),
+        max_sessions_per_key=max(config.max_sessions_per_key, sessions),
+    )
     if config.resolved_processes == 0:
         return LocalServer(config)
     return ServerProcess(replace(config, processes=min(config.resolved_processes, num_envs)))

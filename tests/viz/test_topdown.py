@@ -58,6 +58,18 @@ def test_a_pools_scene_source_needs_its_server_started() -> None:
         assert scenes("rural road", 1).prompt == "rural road"
 
 
+def test_an_env_at_its_servers_session_limit_still_finds_its_scenes() -> None:
+    # Every row holds a session of the key's limit; the scene lookup needs one more.
+    server = ServerConfig(width=48, height=32, processes=0, max_sessions_per_key=2)
+    env = OasisEnv("local", 2, "rural road", server=server)
+    try:
+        env.set_seed(1)
+        env.reset()
+        assert env.scene_source()("rural road", 1).prompt == "rural road"
+    finally:
+        env.close()
+
+
 def _straight_north_scene(obstacles: list[tuple[float, float]]) -> sim_pb2.SceneResponse:
     """A straight road along +y (north), 10 m wide, two 3.5 m lanes and 1.5 m shoulders."""
     y = np.arange(-100.0, 300.0, 2.0)
