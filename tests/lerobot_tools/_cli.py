@@ -85,10 +85,11 @@ class Tool:
 
 @contextmanager
 def background(tool: str, args: Sequence[str], env: dict[str, str], log: Path) -> Iterator[Tool]:
-    """Start a tool; it is stopped (interrupted, then killed) if still running at the end."""
+    """Start a tool in the log's folder (LeRobot's async tools write ``logs/`` where they run);
+    it is stopped (interrupted, then killed) if still running at the end."""
     with log.open("w") as out:
         process = subprocess.Popen(
-            command(tool, *args), env=env, stdout=out, stderr=subprocess.STDOUT
+            command(tool, *args), env=env, stdout=out, stderr=subprocess.STDOUT, cwd=log.parent
         )
     try:
         yield Tool(process, log)
