@@ -15,7 +15,8 @@
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
 ``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
-folders), ``ppo/checkpoints/latest.pt``, ``eval.rrd``, ``summary.json`` (paths, evaluations with
+folders), ``ppo/checkpoints/`` (``latest.pt``, the training state; ``best.pt``, the policy kept
+when PPO's evaluations select one), ``eval.rrd``, ``summary.json`` (paths, evaluations with
 their episodes, seconds per stage) and ``comparison.png`` (the evaluations as bars; the same
 comparison as a text table is :meth:`PipelineResult.table`). Config:
 :class:`~oasis_torchrl.config.DemoConfig`.
