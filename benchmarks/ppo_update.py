@@ -26,6 +26,7 @@ from torchrl.objectives import ClipPPOLoss
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.models.actor_critic import FRAME_STACK
 from oasis_torchrl.train.ppo_loss import PPO_TERMS, DrivingPPOLoss
 
 
@@ -40,12 +41,12 @@ def trainer_network() -> DrivingNet:
 def minibatch(net: DrivingNet, rows: int) -> TensorDictBase:
     """A collected minibatch: frames, state, privileged inputs, action, log-prob, targets."""
     height, width = net.config.image_size
-    pixels = {
-        camera: torch.randint(0, 256, (rows, 4, height, width, 3), dtype=torch.uint8)
-        for camera in net.config.cameras
+    stack = (rows, net.config.frames, height, width, 3)
+    frames = {
+        camera: torch.randint(0, 256, stack, dtype=torch.uint8) for camera in net.config.cameras
     }
     batch = TensorDict(
-        {"pixels": pixels, "state": torch.rand(rows, 2), "critic_inputs": torch.rand(rows, 4)},
+        {FRAME_STACK: frames, "state": torch.rand(rows, 2), "critic_inputs": torch.rand(rows, 4)},
         [rows],
     )
     with torch.no_grad():

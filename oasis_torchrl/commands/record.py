@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from torchrl.envs import TransformedEnv
 
     from oasis_torchrl.distributed import RayRecording
-    from oasis_torchrl.drivers import DriverSpec
+    from oasis_torchrl.drivers import Driver, DriverSpec
 
 logger = logging.getLogger(__name__)
 
@@ -65,10 +65,15 @@ def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
     return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec}
 
 
-def _make_env(cfg: RecordConfig, expert: bool) -> TransformedEnv:
+def _make_env(cfg: RecordConfig, driver: Driver) -> TransformedEnv:
     from oasis_torchrl.envs import make_env
 
-    env = make_env(cfg.env, all_frames=cfg.rows == "frame", expert=expert)
+    env = make_env(
+        cfg.env,
+        all_frames=cfg.rows == "frame",
+        frame_stack=driver.frame_stack,
+        expert=driver.needs_expert,
+    )
     env.set_seed(cfg.seed)
     return env
 
@@ -82,7 +87,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from oasis_torchrl.train.driving import drive
 
     driver = driver_spec(cfg)()
-    env = _make_env(cfg, driver.needs_expert)
+    env = _make_env(cfg, driver)
     recorder = LeRobotRecorder(
         cfg.root,
         repo_id=cfg.repo_id,

@@ -8,6 +8,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.data import Composite
 
+from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.protocol import CHUNK
 
 
@@ -28,6 +29,9 @@ class Driver(ABC):
 
     image_size: tuple[int, int] | None = None
     """``(height, width)`` of the frames the driver looks at (None: it does not look)."""
+    frame_stack: int = POLICY_FRAMES
+    """Frames one chunk apart the driver reads per camera (``("frame_stack", <camera>)``):
+    build its env with that stack depth."""
     needs_expert: bool = False
     """Whether the driver drives with the embedded server's expert: build its env with
     ``expert=True``."""

@@ -15,7 +15,9 @@ from torchrl.data import Composite
 from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models import DrivingNet, make_deterministic_actor, observation_spec
+from oasis_torchrl.models.actor_critic import FRAME_STACK
 from oasis_torchrl.models.checkpoint import load_checkpoint, net_from_checkpoint
+from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.remote import RemotePolicy
 
@@ -76,6 +78,7 @@ class PolicyDriver(Driver):
         module: the policy.
         in_keys: inputs of a plain module.
         image_size: see :attr:`Driver.image_size`.
+        frame_stack: see :attr:`Driver.frame_stack`.
         observation_spec: see :attr:`Driver.observation_spec`.
         chunk_actions: see :class:`Driver`.
 
@@ -95,6 +98,7 @@ class PolicyDriver(Driver):
         in_keys: Sequence[str | tuple[str, ...]] | None = None,
         *,
         image_size: tuple[int, int] | None = None,
+        frame_stack: int = POLICY_FRAMES,
         observation_spec: Composite | None = None,
         chunk_actions: bool = True,
     ) -> None:
@@ -102,6 +106,7 @@ class PolicyDriver(Driver):
         self.module = module.eval()
         self.in_keys = list(in_keys) if in_keys is not None else None
         self.image_size = image_size
+        self.frame_stack = frame_stack
         self.observation_spec = observation_spec
 
     @classmethod
@@ -111,12 +116,13 @@ class PolicyDriver(Driver):
 
         Example:
             >>> driver = PolicyDriver.of_network(DrivingNet())
-            >>> driver.image_size, driver.observation_spec["state"].shape
-            ((64, 96), torch.Size([2]))
+            >>> driver.image_size, driver.frame_stack, driver.observation_spec["state"].shape
+            ((64, 96), 2, torch.Size([2]))
         """
         return cls(
             make_deterministic_actor(net),
             image_size=tuple(net.config.image_size),
+            frame_stack=net.config.frames,
             observation_spec=observation_spec(net),
             **kwargs,
         )
@@ -140,7 +146,8 @@ class PolicyDriver(Driver):
         """The policy a policy server serves (``grpc://host:port``, ``grpcs://`` with TLS; the
         key from ``$OASIS_POLICY_API_KEY``), at its image size."""
         policy = RemotePolicy(url)
-        return cls(policy, image_size=policy.image_size, **kwargs)
+        frame_stack = policy.frame_stack or POLICY_FRAMES
+        return cls(policy, image_size=policy.image_size, frame_stack=frame_stack, **kwargs)
 
     def _inputs(self, td: TensorDictBase) -> list[torch.Tensor]:
         if self.in_keys is not None:
@@ -149,9 +156,22 @@ class PolicyDriver(Driver):
         pixels = [("pixels", c) for c in CAMERAS if ("pixels", c) in keys]
         return [td.get(key) for key in pixels] + [td.get("state")]
 
+    def _check_frame_stack(self, td: TensorDictBase) -> None:
+        """Name the missing frame stack (a bare ``OasisEnv``) instead of a bare KeyError."""
+        wanted = [] if self.observation_spec is None else self.observation_spec.keys(True, True)
+        stacked = [key for key in wanted if isinstance(key, tuple) and key[0] == FRAME_STACK]
+        missing = [key for key in stacked if key not in td.keys(True)]
+        if missing:
+            raise ValueError(
+                f"the policy reads {missing[0]} (frames one chunk apart), which the env does not "
+                "give: build it with oasis_torchrl.envs.make_env, or append "
+                "oasis_torchrl.envs.ChunkFrameStack(env.layout.cameras) to it"
+            )
+
     @torch.no_grad()
     def chunks(self, td: TensorDictBase) -> torch.Tensor:
         """Run the policy on ``td``."""
+        self._check_frame_stack(td)
         if isinstance(self.module, TensorDictModuleBase):
             action = self.module(td.clone(False)).get("action")
         else:

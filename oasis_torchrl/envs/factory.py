@@ -4,11 +4,14 @@ and Ray workers.
 
 The env decodes frames straight to ``env.image_size`` (the policy's input size; ``null``: the
 server's) and by default returns all 4 frames of each chunk as uint8 ``("pixels", <camera>)``
-``[N, 4, H, W, 3]``: the policy modules convert the frames they use
-(:mod:`oasis_torchrl.models.actor_critic`), so collector batches stay compact, and recorded
-episodes get one row per frame. A reward sum (``"episode_reward"``) and a step count are added,
-and on request :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (``"critic_inputs"``:
-ground truth for an asymmetric critic).
+``[N, 4, H, W, 3]``, so recorded episodes get one row per frame (``all_frames=False``: the
+chunk's last frame, which is all a policy reads). Every env also carries the policies' frame
+stack, ``("frame_stack", <camera>)`` ``[N, frame_stack, H, W, 3]``: the last frame of each of
+the last chunks (:class:`~oasis_torchrl.envs.transforms.ChunkFrameStack`); the policy modules
+convert the frames they use (:mod:`oasis_torchrl.models.actor_critic`), so collector batches
+stay compact uint8. A reward sum (``"episode_reward"``) and a step count are added, and on
+request :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (``"critic_inputs"``: ground
+truth for an asymmetric critic).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ from torchrl.envs import Compose, RewardSum, StepCounter, TransformedEnv
 from oasis_torchrl.config.env import LOCAL, REWARD_KINDS, EnvConfig, RewardConfig
 from oasis_torchrl.envs.episodes import Prompts, episode_prompts
 from oasis_torchrl.envs.oasis_env import OasisEnv
-from oasis_torchrl.envs.transforms import PrivilegedState
+from oasis_torchrl.envs.transforms import ChunkFrameStack, PrivilegedState
+from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.rewards import (
     ClearanceShaping,
     DepthCollisionReward,
@@ -65,6 +69,7 @@ def make_env(
     max_steps: int | None = None,
     image_size: Sequence[int] | None = None,
     all_frames: bool = True,
+    frame_stack: int | None = POLICY_FRAMES,
     privileged: bool = False,
     **env_kwargs: Any,
 ) -> TransformedEnv:
@@ -75,6 +80,8 @@ def make_env(
         num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
             uses one row per episode, fixed per-row prompts and the policy's image size).
         all_frames: all 4 frames of each chunk (one dataset row per frame), or the last.
+        frame_stack: depth of the policies' frame stack (the network's ``frames``); None:
+            no stack (append a :class:`ChunkFrameStack` later, e.g. once the network is known).
         privileged: add :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (needs ground
             truth: the embedded server).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
@@ -85,6 +92,8 @@ def make_env(
         >>> env.close()
         >>> td["next", "pixels", "front"].shape, td["next", "step_count"][0, -1].item()
         (torch.Size([2, 3, 4, 64, 96, 3]), 3)
+        >>> td["next", "frame_stack", "front"].shape
+        torch.Size([2, 3, 2, 64, 96, 3])
     """
     if privileged and not env_kwargs.get("ground_truth", cfg.endpoint == LOCAL):
         raise ValueError(
@@ -107,6 +116,8 @@ def make_env(
         **env_kwargs,
     )
     transforms = [RewardSum(), StepCounter()]
+    if frame_stack is not None:
+        transforms.insert(0, ChunkFrameStack(env.layout.cameras, depth=frame_stack))
     if privileged:
         transforms.append(PrivilegedState())
     return TransformedEnv(env, Compose(*transforms))

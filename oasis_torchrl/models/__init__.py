@@ -11,7 +11,7 @@ from oasis_torchrl.models.actor_critic import (
     observation_keys,
     observation_spec,
 )
-from oasis_torchrl.models.config import POLICY_IMAGE_SIZE, DrivingNetConfig
+from oasis_torchrl.models.config import POLICY_FRAMES, POLICY_IMAGE_SIZE, DrivingNetConfig
 from oasis_torchrl.models.encoder import MultiCameraEncoder
 from oasis_torchrl.models.network import DrivingNet
 from oasis_torchrl.protocol import CAMERAS, CHUNK
@@ -19,6 +19,7 @@ from oasis_torchrl.protocol import CAMERAS, CHUNK
 __all__ = [
     "CAMERAS",
     "CHUNK",
+    "POLICY_FRAMES",
     "POLICY_IMAGE_SIZE",
     "ActorCritic",
     "DrivingNet",

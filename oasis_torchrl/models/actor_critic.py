@@ -1,11 +1,11 @@
 """TorchRL modules around :class:`~oasis_torchrl.models.DrivingNet`: the PPO actor and critic.
 
 Keys in: each camera's frames and ``"state"`` ``[*B, 2]``. Frames are read from
-``("pixels", <camera>)`` by default: the env's uint8 ``[*B, 4, H, W, 3]`` (``all_frames=True``,
-as :func:`oasis_torchrl.envs.make_env` makes it) or ``[*B, H, W, 3]``, converted to float by
-the encoder, so rollouts store compact uint8 frames; ``image_key="images"`` reads float
-``[*B, (K,) 3, H, W]`` in ``[0, 1]`` instead (e.g. TorchRL's ``ToTensorImage`` writing
-``("images", <camera>)``).
+``("frame_stack", <camera>)`` by default: uint8 ``[*B, K, H, W, 3]``, the last frame of each of
+the last ``K`` chunks, oldest first (:class:`oasis_torchrl.envs.transforms.ChunkFrameStack`,
+which :func:`oasis_torchrl.envs.make_env` adds), converted to float by the encoder, so rollouts
+store compact uint8 frames; ``image_key="images"`` reads float ``[*B, (K,) 3, H, W]`` in
+``[0, 1]`` instead (e.g. TorchRL's ``ToTensorImage`` writing ``("images", <camera>)``).
 With ``critic_inputs`` configured, the critic also reads ``"critic_inputs"`` ``[*B, k]``.
 Keys out: ``"features"`` (shared), the chunk distribution's parameters (``"loc"``,
 ``"scale"``, and ``"logits"`` for the mixture head), ``"action"`` ``[*B, 4, 2]``,
@@ -25,6 +25,9 @@ from torchrl.modules import ActorValueOperator, ProbabilisticActor, ValueOperato
 from oasis_torchrl.models.network import DrivingNet
 
 PIXELS = "pixels"
+"""The env's frames of a chunk: ``("pixels", <camera>)``."""
+FRAME_STACK = "frame_stack"
+"""The frames a policy reads, one chunk apart: ``("frame_stack", <camera>)``."""
 IMAGES = "images"
 STATE = "state"
 FEATURES = "features"
@@ -75,17 +78,17 @@ class _Value(nn.Module):
         return self.net.value(features, extra)
 
 
-def observation_keys(net: DrivingNet, image_key: str = PIXELS) -> list[str | tuple[str, str]]:
+def observation_keys(net: DrivingNet, image_key: str = FRAME_STACK) -> list[str | tuple[str, str]]:
     """The observation keys the network reads, in its order.
 
     Example:
-        >>> observation_keys(DrivingNet())
-        [('pixels', 'left_forward'), ('pixels', 'front'), ('pixels', 'right_forward'), 'state']
+        >>> observation_keys(DrivingNet())[1:]
+        [('frame_stack', 'front'), ('frame_stack', 'right_forward'), 'state']
     """
     return [(image_key, camera) for camera in net.config.cameras] + [STATE]
 
 
-def make_deterministic_actor(net: DrivingNet, image_key: str = PIXELS) -> TensorDictModule:
+def make_deterministic_actor(net: DrivingNet, image_key: str = FRAME_STACK) -> TensorDictModule:
     """The actor that deploys: observations -> ``"action"``, the chunk ``tanh(loc)`` (what the
     PPO actor gives under ``ExplorationType.DETERMINISTIC``, without building a distribution
     and its log-probability on every call).
@@ -94,8 +97,8 @@ def make_deterministic_actor(net: DrivingNet, image_key: str = PIXELS) -> Tensor
         >>> from tensordict import TensorDict
         >>> from oasis_torchrl.models import DrivingNetConfig
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
-        >>> frames = torch.zeros(3, 4, 32, 48, 3, dtype=torch.uint8)
-        >>> td = TensorDict({"pixels": {c: frames for c in net.config.cameras},
+        >>> frames = torch.zeros(3, 2, 32, 48, 3, dtype=torch.uint8)
+        >>> td = TensorDict({"frame_stack": {c: frames for c in net.config.cameras},
         ...                  "state": torch.zeros(3, 2)}, batch_size=[3])
         >>> make_deterministic_actor(net)(td)["action"].shape
         torch.Size([3, 4, 2])
@@ -106,19 +109,19 @@ def make_deterministic_actor(net: DrivingNet, image_key: str = PIXELS) -> Tensor
 
 
 def observation_spec(net: DrivingNet) -> Composite:
-    """What the actor reads of one row (no batch dimensions): the last ``frames`` uint8 frames
-    of each camera (``("pixels", <camera>)``, ``[frames, H, W, 3]``) and ``"state"``.
+    """What the actor reads of one row (no batch dimensions): ``frames`` uint8 frames one chunk
+    apart of each camera (``("frame_stack", <camera>)``, ``[frames, H, W, 3]``) and ``"state"``.
 
     Example:
         >>> spec = observation_spec(DrivingNet())
-        >>> spec["pixels", "front"].shape, spec["state"].shape
+        >>> spec["frame_stack", "front"].shape, spec["state"].shape
         (torch.Size([2, 64, 96, 3]), torch.Size([2]))
     """
     cfg = net.config
     frame = Bounded(0, 255, (cfg.frames, *cfg.image_size, 3), dtype=torch.uint8)
     return Composite(
         {
-            PIXELS: Composite({camera: frame.clone() for camera in cfg.cameras}),
+            FRAME_STACK: Composite({camera: frame.clone() for camera in cfg.cameras}),
             STATE: Bounded(-1.0, 1.0, (cfg.state_dim,)),
         }
     )
@@ -156,20 +159,21 @@ class ActorCritic:
         return self.operator.module[0]
 
 
-def make_actor_critic(net: DrivingNet, image_key: str = PIXELS) -> ActorCritic:
+def make_actor_critic(net: DrivingNet, image_key: str = FRAME_STACK) -> ActorCritic:
     """Wrap ``net`` as the TorchRL actor and critic of the PPO recipe.
 
     Args:
         net: the network (shared by the three modules).
-        image_key: ``"pixels"`` (uint8 env frames) or ``"images"`` (float, see module doc).
+        image_key: ``"frame_stack"`` (uint8 env frames) or ``"images"`` (float, see module
+            doc).
 
     Example:
         >>> from tensordict import TensorDict
         >>> from oasis_torchrl.models import DrivingNetConfig
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
         >>> modules = make_actor_critic(net)
-        >>> frames = torch.zeros(3, 4, 32, 48, 3, dtype=torch.uint8)
-        >>> td = TensorDict({"pixels": {c: frames for c in net.config.cameras},
+        >>> frames = torch.zeros(3, 2, 32, 48, 3, dtype=torch.uint8)
+        >>> td = TensorDict({"frame_stack": {c: frames for c in net.config.cameras},
         ...                  "state": torch.zeros(3, 2)}, batch_size=[3])
         >>> td = modules.policy(td)
         >>> td["action"].shape, td["action_log_prob"].shape

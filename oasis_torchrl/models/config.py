@@ -11,6 +11,8 @@ from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 """Default ``(height, width)`` the network sees."""
+POLICY_FRAMES = 2
+"""Default frames per camera the network sees, one chunk apart."""
 MAX_INIT_ACTION = 0.99
 """Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
 TANH_NORMAL = "tanh_normal"
@@ -27,9 +29,13 @@ class DrivingNetConfig:
         cameras: camera names, in the order the network reads them.
         image_size: ``(height, width)`` of the images (any size works: the encoder pools to a
             fixed grid; this is the size the policies resize to).
-        frames: consecutive frames per camera the network sees, oldest first (stacked along
-            the channels). Two frames show motion: a single frame cannot tell a standing car
-            from a moving one, and the speed decides whether to accelerate or brake.
+        frames: frames per camera the network sees, one chunk (4 world frames) apart: the
+            last frame of each of the last ``frames`` chunks, oldest first (stacked along the
+            channels). Two frames show motion: a single frame cannot tell a standing car from
+            a moving one, and the speed decides whether to accelerate or brake. One chunk apart
+            because that is what a policy has seen at a chunk boundary in LeRobot's per-frame
+            loops (:mod:`oasis_torchrl.envs.per_frame`), and what TorchRL envs give
+            (:class:`oasis_torchrl.envs.transforms.ChunkFrameStack`).
         shared_encoder: one convolutional encoder for every camera (``True``) or one per camera.
         encoder_channels: channels of the three convolutions (a 4x4 stride-4 patch stem, then
             3x3 stride 2, then 3x3 stride 1).
@@ -78,7 +84,7 @@ class DrivingNetConfig:
 
     cameras: tuple[str, ...] = CAMERAS
     image_size: tuple[int, int] = POLICY_IMAGE_SIZE
-    frames: int = 2
+    frames: int = POLICY_FRAMES
     shared_encoder: bool = True
     encoder_channels: tuple[int, int, int] = (24, 48, 64)
     pool_grid: tuple[int, int] = (4, 6)

@@ -41,9 +41,10 @@ location the bounded head reaches (full throttle, exactly 1, would need an infin
 class DrivingNet(nn.Module):
     """Camera frames and the previous action in; an action chunk distribution and a value out.
 
-    Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` (the
-    last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when ``frames`` is 1, or the
-    env's uint8 frames in the same shapes with the colour last (``[*B, K, H, W, 3]``); the state
+    Images per camera are float in ``[0, 1]``, ``[*B, K, 3, H, W]`` with ``K >= frames`` frames
+    one chunk apart (the last ``frames`` are used, oldest first), or ``[*B, 3, H, W]`` when
+    ``frames`` is 1, or the env's uint8 frames in the same shapes with the colour last
+    (``[*B, K, H, W, 3]``, :class:`~oasis_torchrl.envs.transforms.ChunkFrameStack`); the state
     is ``[*B, state_dim]``. ``features`` (shared) = camera features ++ state (if ``use_state``).
     The actor MLP gives the chunk distribution's parameters (:meth:`action_params`): ``loc``
     ``[..., 4, 2]`` (before the tanh) for the tanh-normal head; ``logits`` ``[..., K]`` and ``loc``

@@ -281,6 +281,15 @@ class RemotePolicy(TensorDictModuleBase):
                 return feature.shape[-3], feature.shape[-2]
         return None
 
+    @property
+    def frame_stack(self) -> int | None:
+        """Frames per camera the policy reads (the leading axis of its ``[K, H, W, 3]`` image
+        inputs), or None if it reads single frames or no image."""
+        for feature in self.description.inputs:
+            if feature.dtype == torch.uint8 and len(feature.shape) == 4 and feature.shape[-1] == 3:
+                return feature.shape[0]
+        return None
+
     # -- TorchRL ---------------------------------------------------------------------------
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:

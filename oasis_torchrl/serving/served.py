@@ -46,7 +46,7 @@ class ServedPolicy:
         >>> from oasis_torchrl.remote.features import as_tensordict, sample_observation
         >>> served = ServedPolicy.of_driver(PolicyDriver.of_network(DrivingNet()), "fresh")
         >>> [feature.name for feature in served.inputs]
-        ['pixels.left_forward', 'pixels.front', 'pixels.right_forward', 'state']
+        ['frame_stack.left_forward', 'frame_stack.front', 'frame_stack.right_forward', 'state']
         >>> served.chunk_size, served.n_action_steps
         (4, 4)
     """

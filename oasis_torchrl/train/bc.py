@@ -206,7 +206,11 @@ class BCTrainer:
         net = self.policy.model.eval()
         image_size = tuple(net.config.image_size)
         with Evaluator(
-            self.cfg.env, self.cfg.eval, image_size=image_size, progress=self.cfg.progress
+            self.cfg.env,
+            self.cfg.eval,
+            image_size=image_size,
+            frame_stack=net.config.frames,
+            progress=self.cfg.progress,
         ) as evaluator:
             report = evaluator.evaluate(make_actor_critic(net).policy)
         for name, value in report.summary().items():

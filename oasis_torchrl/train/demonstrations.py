@@ -18,7 +18,6 @@ Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one r
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,8 +26,9 @@ from omegaconf import DictConfig
 from tensordict import TensorDictBase
 from tqdm import tqdm
 
-from oasis_torchrl.drivers import Autopilot
+from oasis_torchrl.drivers import Autopilot, Driver
 from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
@@ -100,7 +100,7 @@ def record_demonstrations(
     episodes: int,
     seed: int,
     noise: ActionNoise,
-    learner: Callable[[TensorDictBase], TensorDictBase] | None = None,
+    learner: Driver | None = None,
     progress: bool = True,
 ) -> Path:
     """Record ``episodes`` autopilot-labelled episodes at ``root`` (appended if it exists).
@@ -111,7 +111,7 @@ def record_demonstrations(
         episodes: complete episodes to write (episodes still running at the end are dropped).
         seed: seeds the env's episodes and the noise.
         noise: the executed-action noise (all zeros records clean demonstrations).
-        learner: a policy ``td -> td`` (run deterministically) whose actions are executed
+        learner: a driver (run deterministically) whose actions are executed
             instead of the autopilot's (DAgger); the labels stay the autopilot's.
         progress: show a progress bar.
 
@@ -121,7 +121,8 @@ def record_demonstrations(
     """
     from oasis_torchrl.data import LeRobotRecorder
 
-    env = make_env(env_cfg, expert=True)
+    frame_stack = POLICY_FRAMES if learner is None else learner.frame_stack
+    env = make_env(env_cfg, frame_stack=frame_stack, expert=True)
     env.set_seed(seed)
     rows = int(env.batch_size[0])
     expert = Autopilot()

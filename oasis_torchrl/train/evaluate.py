@@ -31,7 +31,8 @@ from tqdm import tqdm
 
 from oasis_torchrl.client import SceneLookup
 from oasis_torchrl.envs.factory import make_env
-from oasis_torchrl.models.actor_critic import PIXELS
+from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
+from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
@@ -136,7 +137,8 @@ def rollout_episodes(
         >>> rollout.batch_size, ("next", "pixels") in rollout.keys(True)
         (torch.Size([2, 3]), False)
     """
-    dropped = () if keep_pixels else (PIXELS, (NEXT, PIXELS))
+    frames = (FRAME_STACK, (NEXT, FRAME_STACK))
+    dropped = frames if keep_pixels else (*frames, PIXELS, (NEXT, PIXELS))
     ended = torch.zeros(int(env.batch_size[0]), dtype=torch.bool)
     steps: list[TensorDictBase] = []
 
@@ -281,6 +283,7 @@ class Evaluator:
         eval_cfg: DictConfig,
         *,
         image_size: tuple[int, int] | None = None,
+        frame_stack: int = POLICY_FRAMES,
         expert: bool = False,
         progress: bool = True,
     ) -> None:
@@ -295,6 +298,9 @@ class Evaluator:
             prompts=row_prompts,
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
+            # Recorders keep every frame; the metrics and the policies need the last alone.
+            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot")),
+            frame_stack=frame_stack,
             expert=expert,
         )
         self.recorders = EpisodeRecorders(

@@ -248,6 +248,7 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
             cfg.env,
             eval_cfg,
             image_size=driver.image_size,
+            frame_stack=driver.frame_stack,
             expert=driver.needs_expert,
             progress=cfg.progress,
         ) as evaluator:

@@ -32,7 +32,7 @@ from tqdm import tqdm
 from oasis_torchrl.config import save_config, section
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.factory import make_env
-from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
+from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.checkpoint import (
     BEST,
@@ -170,10 +170,14 @@ class PPOTrainer:
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
         self.best_selection: float | None = resumed.get("best_selection")
-        self.env = make_env(cfg.env, privileged=uses_ground_truth(cfg))
+        # The last frame of each chunk is all the policy reads: the server sends only that.
+        self.env = make_env(
+            cfg.env, all_frames=False, frame_stack=None, privileged=uses_ground_truth(cfg)
+        )
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
+        self.env.append_transform(ChunkFrameStack(cameras, depth=self.net.config.frames))
         self.modules = make_actor_critic(self.net)
         self.loss = DrivingPPOLoss(
             self.modules,
@@ -327,7 +331,13 @@ class PPOTrainer:
             ray_cfg = section(cfg.ray, RayCollectionConfig)
             return RayCollection(
                 ray_cfg,
-                env_factory(cfg.env, ray_cfg, privileged=uses_ground_truth(cfg)),
+                env_factory(
+                    cfg.env,
+                    ray_cfg,
+                    all_frames=False,
+                    frame_stack=self.net.config.frames,
+                    privileged=uses_ground_truth(cfg),
+                ),
                 self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
@@ -498,7 +508,12 @@ class PPOTrainer:
         on ``seeds`` (default ``eval.seeds``) and add its report (aggregates and episodes) to
         the history."""
         if self._evaluator is None:
-            self._evaluator = Evaluator(self.cfg.env, self.cfg.eval, progress=self.cfg.progress)
+            self._evaluator = Evaluator(
+                self.cfg.env,
+                self.cfg.eval,
+                frame_stack=self.net.config.frames,
+                progress=self.cfg.progress,
+            )
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
         seeds = tuple(int(seed) for seed in (seeds or self.cfg.eval.seeds))
         net.eval()

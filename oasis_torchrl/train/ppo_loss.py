@@ -40,8 +40,8 @@ class DrivingPPOLoss(nn.Module):
         >>> from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
         >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48), critic_inputs=4, aux_outputs=4))
         >>> modules = make_actor_critic(net)
-        >>> frames = torch.zeros(6, 4, 32, 48, 3, dtype=torch.uint8)
-        >>> batch = TensorDict({"pixels": {c: frames for c in net.config.cameras},
+        >>> frames = torch.zeros(6, 2, 32, 48, 3, dtype=torch.uint8)
+        >>> batch = TensorDict({"frame_stack": {c: frames for c in net.config.cameras},
         ...     "state": torch.zeros(6, 2), "critic_inputs": torch.zeros(6, 4)}, [6])
         >>> with torch.no_grad():
         ...     batch = modules.policy(batch)

@@ -2,10 +2,17 @@
 
 Inputs: ``observation.images.<camera>`` (any number of cameras; the world model's three are
 ``left_forward``, ``front``, ``right_forward``) and ``observation.state`` (the previous
-``[throttle, steering]``), over the last ``n_obs_steps`` frames (2 by default: two consecutive
-frames show the motion a single frame cannot). Output: ``action`` ``[throttle, steering]`` per
-row at the world model's 20 fps; the policy predicts ``chunk_size`` of them per call (4 = one
-world-model call).
+``[throttle, steering]``), over ``n_obs_steps`` frames one world-model chunk apart (2 by
+default: the current frame and the one 4 rows earlier show the motion a single frame cannot).
+Output: ``action`` ``[throttle, steering]`` per row at the world model's 20 fps; the policy
+predicts ``chunk_size`` of them per call (4 = one world-model call).
+
+Why one chunk apart: in LeRobot's per-frame loops over the world model (``lerobot-eval``,
+``lerobot-record``, ``lerobot-rollout`` with ``--env.type=oasis`` or ``--robot.type=oasis``)
+a new frame arrives every 4 ticks (:mod:`oasis_torchrl.envs.per_frame`), so at a chunk boundary
+the two newest frames a policy has seen are the last frames of the two previous chunks. The
+same spacing in training (these delta indices), in TorchRL (``ChunkFrameStack``) and here makes
+one policy act the same in every tool.
 
 Normalisation runs in LeRobot's processor pipeline (:mod:`.processor_oasis`). The defaults are
 ``IDENTITY`` on purpose: images arrive in ``[0, 1]`` and the network centres them itself, and
@@ -26,9 +33,11 @@ from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from oasis_torchrl.models import CAMERAS, DrivingNetConfig
-from oasis_torchrl.protocol import ACTION_DIM
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 
 POLICY_TYPE = "oasis"
+FRAME_SPACING = CHUNK
+"""Rows (world frames at 20 fps) between two frames the policy sees: one world-model chunk."""
 LOSSES = ("nll", "l1", "mse")
 NETWORK_FIELDS = (
     "image_size",
@@ -86,7 +95,8 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
     ``image_size`` is also the size the preprocessor resizes frames to.
 
     Args:
-        n_obs_steps: consecutive frames per camera the network sees (its ``frames``).
+        n_obs_steps: frames per camera the network sees, :data:`FRAME_SPACING` rows apart (its
+            ``frames``).
         chunk_size: actions predicted per call.
         n_action_steps: actions of each chunk executed before predicting again.
         loss: behaviour-cloning loss on the chunk: ``"nll"`` (the negative log-likelihood of
@@ -104,7 +114,7 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
     Example:
         >>> config = OasisConfig(device="cpu")
         >>> config.type, config.observation_delta_indices, config.action_delta_indices
-        ('oasis', [-1, 0], [0, 1, 2, 3])
+        ('oasis', [-4, 0], [0, 1, 2, 3])
         >>> config.head == DrivingNetConfig().head
         True
     """
@@ -221,8 +231,11 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
 
     @property
     def observation_delta_indices(self) -> list[int] | None:
-        """The last ``n_obs_steps`` rows (None: only the current one)."""
-        return list(range(1 - self.n_obs_steps, 1)) if self.n_obs_steps > 1 else None
+        """``n_obs_steps`` rows :data:`FRAME_SPACING` apart, the current one last (None: only
+        the current one)."""
+        if self.n_obs_steps == 1:
+            return None
+        return list(range((1 - self.n_obs_steps) * FRAME_SPACING, 1, FRAME_SPACING))
 
     @property
     def action_delta_indices(self) -> list[int]:

@@ -8,10 +8,12 @@ each manoeuvre and commits to one), or a regression of the deterministic chunk;
 ``predict_action_chunk`` returns the chunk the policy commits to and ``select_action`` serves it
 one action at a time from a queue.
 
-Batches carry ``n_obs_steps`` frames per camera (``[B, n_obs_steps, 3, H, W]``, LeRobot's
-observation delta indices) and states ``[B, n_obs_steps, 2]`` (the last one is used).
-``select_action`` gets one observation per call, as an env or robot gives it, and keeps the
-last ``n_obs_steps`` itself (the first observation after a reset fills the history).
+Batches carry ``n_obs_steps`` frames per camera, ``FRAME_SPACING`` rows apart
+(``[B, n_obs_steps, 3, H, W]``, LeRobot's observation delta indices) and states
+``[B, n_obs_steps, 2]`` (the last one is used). ``select_action`` gets one observation per
+call, as an env or robot gives it, and keeps the observations of the last
+``(n_obs_steps - 1) * FRAME_SPACING + 1`` calls itself to pick the same spacing (the first
+observation after a reset fills the history).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_policy_oasis.configuration_oasis import POLICY_TYPE, OasisConfig
+from lerobot_policy_oasis.configuration_oasis import FRAME_SPACING, POLICY_TYPE, OasisConfig
 from oasis_torchrl.models import DrivingNet
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
@@ -91,15 +93,17 @@ class OasisPolicy(PreTrainedPolicy):
         return self.model.features(images, state[:, -1] if state.dim() == 3 else state)
 
     def _remember(self, observation: dict[str, Tensor]) -> dict[str, Tensor]:
-        """Add one observation to the history; the last ``n_obs_steps``, stacked on dim 1."""
+        """Add one observation to the history; ``n_obs_steps`` of them ``FRAME_SPACING`` calls
+        apart, the newest last, stacked on dim 1."""
+        length = (self.config.n_obs_steps - 1) * FRAME_SPACING + 1
         stacked = {}
         for key in [*self._image_keys, OBS_STATE]:
             value = self._get(observation, key)
-            history = self._history.setdefault(key, deque(maxlen=self.config.n_obs_steps))
+            history = self._history.setdefault(key, deque(maxlen=length))
             if not history:
-                history.extend([value] * (self.config.n_obs_steps - 1))
+                history.extend([value] * (length - 1))
             history.append(value)
-            stacked[key] = torch.stack(list(history), dim=1)
+            stacked[key] = torch.stack(list(history)[::FRAME_SPACING], dim=1)
         return stacked
 
     @torch.no_grad()

@@ -103,11 +103,15 @@ def test_one_grammar_names_every_driver(tmp_path: Path) -> None:
     for saved in (checkpoint, folder):  # the driving network: deterministic, at its size
         driver = load_driver(saved)
         assert driver.image_size == (32, 48)
-        frames = torch.randint(0, 255, (2, 4, 32, 48, 3), dtype=torch.uint8)
-        pixels = {camera: frames for camera in CAMERAS}
-        observation = TensorDict(pixels=pixels, state=torch.zeros(2, 2), batch_size=[2])
+        frames = torch.randint(0, 255, (2, 2, 32, 48, 3), dtype=torch.uint8)
+        stack = {camera: frames for camera in CAMERAS}
+        observation = TensorDict(frame_stack=stack, state=torch.zeros(2, 2), batch_size=[2])
         first, second = (driver(observation.clone())["action"] for _ in range(2))
         assert torch.equal(first, second)
+        bare_env = TensorDict(pixels=stack, state=torch.zeros(2, 2), batch_size=[2])
+        missing = r"reads \('frame_stack', '\w+'\) \(frames one chunk apart\).*make_env"
+        with pytest.raises(ValueError, match=missing):
+            driver(bare_env)
     assert isinstance(load_driver(scripted, in_keys=["state"]), PolicyDriver)
     with pytest.raises(ValueError, match="is none of 'autopilot', 'scripted:<script>'"):
         load_driver("autopilt")

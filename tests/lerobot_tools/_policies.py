@@ -1,4 +1,5 @@
-"""Stock LeRobot policy folders built in-process (no training, no downloads) for tests."""
+"""LeRobot policy folders built in-process (no training, no downloads) for tests: a stock ACT
+and the project's own policy."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ from lerobot.policies.act.configuration_act import ACTConfig
 from lerobot.policies.act.modeling_act import ACTPolicy
 from lerobot.policies.factory import make_pre_post_processors
 
+from oasis_torchrl.drivers.folders import export_lerobot
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.protocol import CAMERAS
 
 IMAGE_SIZE = (64, 96)
@@ -50,3 +53,16 @@ def act_folder(folder: Path, *, n_action_steps: int = 4, seed: int = 0) -> Path:
     preprocessor.save_pretrained(folder)
     postprocessor.save_pretrained(folder)
     return folder
+
+
+def oasis_folder(folder: Path, *, seed: int = 0) -> Path:
+    """The project's policy around 0.6 throttle, with its actor's last layer far above a fresh
+    one's (which starts near one chunk for every input), so that its actions swing with the
+    frames it sees: the same policy fed other frames drives other distances. A unimodal head,
+    so its chunk is continuous in them."""
+    torch.manual_seed(seed)
+    config = DrivingNetConfig(image_size=IMAGE_SIZE, head="tanh_normal", init_action=(0.6, 0.0))
+    net = DrivingNet(config)
+    last = net.actor[-1]
+    torch.nn.init.normal_(last.weight, std=30.0 / last.in_features**0.5)
+    return export_lerobot(net, folder)

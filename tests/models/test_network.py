@@ -26,12 +26,12 @@ def _frames(batch: tuple[int, ...], frames: int = 2, cameras: int = 3) -> list[t
 
 
 def _pixels(net: DrivingNet, batch: int) -> TensorDict:
-    """Env-style observation: uint8 [B, 4, H, W, 3] per camera and a state."""
-    pixels = {
-        camera: torch.randint(0, 256, (batch, 4, *SIZE, 3), dtype=torch.uint8)
+    """Env-style observation: the frame stack, uint8 [B, 2, H, W, 3] per camera, and a state."""
+    stack = {
+        camera: torch.randint(0, 256, (batch, 2, *SIZE, 3), dtype=torch.uint8)
         for camera in net.config.cameras
     }
-    return TensorDict({"pixels": pixels, "state": torch.rand(batch, 2) * 2 - 1}, [batch])
+    return TensorDict({"frame_stack": stack, "state": torch.rand(batch, 2) * 2 - 1}, [batch])
 
 
 def _trained_looking(net: DrivingNet) -> DrivingNet:
@@ -121,7 +121,9 @@ def test_deterministic_actor_is_the_bc_chunk(head: str) -> None:
     policy = make_actor_critic(net).policy
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         action = policy(td.clone())["action"]
-        frames = [td["pixels", camera].movedim(-1, -3) / 255.0 for camera in net.config.cameras]
+        frames = [
+            td["frame_stack", camera].movedim(-1, -3) / 255.0 for camera in net.config.cameras
+        ]
         chunk = net(frames, td["state"])  # what LeRobot's float images give
     torch.testing.assert_close(action, chunk, atol=1e-5, rtol=1e-4)
     assert chunk.abs().max() < 1 and chunk.std() > 0.1

@@ -43,7 +43,7 @@ def _observation(size: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
 
 
 def _stacked(*observations: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Consecutive observations stacked on dim 1, as a dataset batch holds them."""
+    """Observations stacked on dim 1, as a dataset batch holds them."""
     return {key: torch.stack([o[key] for o in observations], dim=1) for key in observations[0]}
 
 
@@ -69,21 +69,31 @@ def test_select_action_serves_the_queued_chunk_and_remembers_frames() -> None:
     chunk = policy.predict_action_chunk(_stacked(steps[0], steps[0]))  # reset: no motion yet
     served = [policy.select_action(step) for step in steps[:4]]
     torch.testing.assert_close(torch.stack(served, dim=1), chunk)  # later observations queued
-    # The next chunk sees the previous frame and the current one.
-    expected = policy.predict_action_chunk(_stacked(steps[3], steps[4]))[:, 0]
+    # The next chunk sees the observation one chunk (4 calls) earlier and the current one.
+    expected = policy.predict_action_chunk(_stacked(steps[0], steps[4]))[:, 0]
     torch.testing.assert_close(policy.select_action(steps[4]), expected)
+    assert not torch.allclose(
+        expected, policy.predict_action_chunk(_stacked(steps[3], steps[4]))[:, 0]
+    )
     policy.reset()
     torch.testing.assert_close(policy.select_action(steps[0]), chunk[:, 0])
 
 
 def test_n_action_steps_limits_the_queue() -> None:
     policy = _policy(n_action_steps=2)
-    first, second, third = (_observation(seed=k) for k in range(3))
-    chunk = policy.predict_action_chunk(_stacked(first, first))
-    served = [policy.select_action(first), policy.select_action(second)]
+    steps = [_observation(seed=k) for k in range(7)]
+    chunk = policy.predict_action_chunk(_stacked(steps[0], steps[0]))
+    served = [policy.select_action(steps[0]), policy.select_action(steps[1])]
     torch.testing.assert_close(torch.stack(served, dim=1), chunk[:, :2])
-    expected = policy.predict_action_chunk(_stacked(second, third))[:, 0]
-    torch.testing.assert_close(policy.select_action(third), expected)
+    # Before 4 calls, the history before the episode's first observation is that observation.
+    expected = policy.predict_action_chunk(_stacked(steps[0], steps[2]))[:, 0]
+    torch.testing.assert_close(policy.select_action(steps[2]), expected)
+    policy.select_action(steps[3])
+    expected = policy.predict_action_chunk(_stacked(steps[0], steps[4]))[:, 0]
+    torch.testing.assert_close(policy.select_action(steps[4]), expected)
+    policy.select_action(steps[5])
+    expected = policy.predict_action_chunk(_stacked(steps[2], steps[6]))[:, 0]
+    torch.testing.assert_close(policy.select_action(steps[6]), expected)
 
 
 def test_save_and_load_round_trip(tmp_path: Path) -> None:

@@ -10,13 +10,14 @@ from pathlib import Path
 
 import pytest
 import torch
+from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from oasis_torchrl.client.retry import RetryPolicy
 from oasis_torchrl.commands import eval as eval_command
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import PolicyDriver, load_driver
-from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.envs import ChunkFrameStack, OasisEnv
 from oasis_torchrl.remote import (
     AuthError,
     InvalidInputError,
@@ -157,6 +158,7 @@ def test_a_rollout_driven_remotely_equals_the_in_process_one(
         "local", num_envs=4, prompts="urban", server=ServerConfig(width=96, height=64),
         all_frames=True, max_steps=50,
     )  # fmt: skip
+    env = TransformedEnv(env, ChunkFrameStack(env.layout.cameras))  # what the network reads
     try:
         local = _rollout(env, PolicyDriver.load(policy_folder), steps=12)
         with RemotePolicy(policy_server.endpoint, api_key=KEYS[0]) as remote:

@@ -49,10 +49,11 @@ def test_describe_status_and_ping_of_a_policy_folder(
     stub = stub_factory(policy_server)
     described = stub.Describe(policy_pb2.DescribeRequest(), metadata=AUTH, timeout=10)
     inputs = {f.name: Feature.from_proto(f) for f in described.inputs}
-    assert inputs["pixels.front"].describe() == "pixels.front: uint8 [2, 64, 96, 3]"
-    assert (inputs["pixels.front"].low, inputs["pixels.front"].high) == (0.0, 255.0)
+    assert inputs["frame_stack.front"].describe() == "frame_stack.front: uint8 [2, 64, 96, 3]"
+    assert (inputs["frame_stack.front"].low, inputs["frame_stack.front"].high) == (0.0, 255.0)
     assert inputs["state"].describe() == "state: float32 [2]"
-    assert list(inputs) == ["pixels.left_forward", "pixels.front", "pixels.right_forward", "state"]
+    cameras = ["left_forward", "front", "right_forward"]
+    assert list(inputs) == [*(f"frame_stack.{camera}" for camera in cameras), "state"]
     action = Feature.from_proto(described.action)
     assert (action.shape, action.names, described.chunk_size) == ((2,), ("throttle", "steering"), 4)
     assert described.policy == "policy"
@@ -92,9 +93,9 @@ def test_bad_observations_name_the_feature_shape_and_dtype(
         lambda: predict({**good, "state": good["state"].double()}), invalid, "'state'", "float32"
     )
     _fails(
-        lambda: predict({**good, "pixels.front": good["pixels.front"][:, :1]}),
+        lambda: predict({**good, "frame_stack.front": good["frame_stack.front"][:, :1]}),
         invalid,
-        "'pixels.front'",
+        "'frame_stack.front'",
         "[rows, 2, 64, 96, 3] = [2, 2, 64, 96, 3], got [2, 1, 64, 96, 3]",
     )
     nan_state = good["state"].clone()
