@@ -228,6 +228,11 @@ class BCPolicyConfig:
         help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
         "normalised)",
     )
+    aux_weight: float = option(
+        0.0,
+        help="weight of the auxiliary loss: predict each frame's privileged state (obstacle "
+        "distances, lane offset, speed) from the cameras; needs a dataset that stores it",
+    )
     optimizer_lr: float = option(1.0e-3, help="learning rate")
     optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
     optimizer_grad_clip_norm: float = option(10.0, help="gradient clipping")

@@ -43,10 +43,12 @@ from tensordict import NonTensorData, TensorDictBase
 
 from oasis_torchrl.data.features import SEED_KEY, DatasetLayout, image_key
 from oasis_torchrl.data.images import resize_frames
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY, privileged_state
 from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 PIXELS = "pixels"
 NEXT = "next"
+TRUTH = "truth"
 
 
 @dataclass(frozen=True)
@@ -103,12 +105,15 @@ def _cameras(batch: TensorDictBase) -> tuple[str, ...]:
     return (*known, *sorted(set(names) - set(known)))
 
 
-def infer_layout(batch: TensorDictBase, image_size: tuple[int, int] | None = None) -> DatasetLayout:
+def infer_layout(
+    batch: TensorDictBase, image_size: tuple[int, int] | None = None, privileged: bool = False
+) -> DatasetLayout:
     """The dataset layout a batch calls for: cameras, frame size, rows per step.
 
     Args:
         batch: env steps ``[..., T]`` as :mod:`oasis_torchrl.envs.specs` lays them out.
         image_size: stored ``(height, width)``; default: the frames' own size.
+        privileged: store each frame's ``privileged_state`` (from the batch's ground truth).
 
     Example:
         >>> from tensordict import TensorDict
@@ -125,7 +130,7 @@ def infer_layout(batch: TensorDictBase, image_size: tuple[int, int] | None = Non
     chunked = action.dim() == 4
     actions_per_row = 1 if frame_rows or not chunked else action.shape[-2]
     size = image_size or tuple(pixels.shape[-3:-1])
-    return DatasetLayout(cameras, size, actions_per_row=actions_per_row)
+    return DatasetLayout(cameras, size, actions_per_row=actions_per_row, with_privileged=privileged)
 
 
 def rows_per_step(batch: TensorDictBase) -> int:
@@ -166,6 +171,19 @@ def _frames(
             f"got {tuple(root.shape)}"
         )
     return resize_frames(images.cpu(), size)
+
+
+def _privileged(steps: TensorDictBase, rows: int) -> torch.Tensor:
+    """``[B, T, R, 6]``: the privileged state of each row's frame (see the mapping table)."""
+    truth = {}
+    for field in PRIVILEGED_FIELDS:
+        root = _get(steps, (TRUTH, field), "the ground truth of the privileged state")
+        if rows > 1:
+            after = _get(steps, (NEXT, TRUTH, field), "the ground truth after each action")
+            truth[field] = torch.cat([root[:, :, -1:], after[:, :, :-1]], dim=2)
+        else:
+            truth[field] = root[:, :, -1:]
+    return privileged_state({field: value.cpu() for field, value in truth.items()})
 
 
 def _actions(steps: TensorDictBase, rows: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -255,6 +273,8 @@ def batch_to_rows(
         reward = _get(steps, (NEXT, "reward"), "the chunk reward").detach().cpu().float()
         columns[REWARD] = _on_last_row(reward.reshape(*steps.batch_size, 1), rows).numpy()
     columns[DONE] = _on_last_row(done.bool(), rows).numpy()
+    if layout.with_privileged:
+        columns[PRIVILEGED_KEY] = _privileged(steps, rows).numpy()
     seeds = _get(steps, SEED_KEY, "the world seed of each episode").cpu().reshape(*steps.batch_size)
     if layout.with_seed:
         columns[SEED_KEY] = seeds.reshape(*steps.batch_size, 1, 1).expand(-1, -1, rows, 1).numpy()

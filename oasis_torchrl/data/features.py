@@ -18,6 +18,11 @@ key                                dtype       shape          meaning
 ``next.done``                      bool        ``(1,)``       the episode ends after this row
 ``episode_seed``                   int64       ``(1,)``       world seed (rollouts): with the task
                                                               it rebuilds the scene
+``privileged_state``               float32     ``(6,)``       on request, the simulator's state of
+                                                              this frame (speed, lane offset,
+                                                              heading error, obstacle distances
+                                                              ahead, left and right; scaled): an
+                                                              auxiliary target, no policy input
 ``task``                           string                     the episode's prompt
 =================================  ==========  =============  =====================================
 
@@ -44,6 +49,7 @@ from lerobot.utils.constants import (
     REWARD,
 )
 
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 from oasis_torchrl.protocol import ACTION_NAMES as WIRE_NAMES
 from oasis_torchrl.protocol import CHUNK
 
@@ -77,6 +83,8 @@ class DatasetLayout:
             the chunk flattened).
         with_reward: include ``next.reward`` (rollouts have one; human recordings do not).
         with_seed: include ``episode_seed``.
+        with_privileged: include ``privileged_state`` (needs the embedded server's ground
+            truth; :mod:`oasis_torchrl.models.privileged`).
 
     Example:
         >>> layout = DatasetLayout(("front",), (48, 64), actions_per_row=1)
@@ -90,6 +98,7 @@ class DatasetLayout:
     actions_per_row: int = 1
     with_reward: bool = True
     with_seed: bool = True
+    with_privileged: bool = False
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -139,6 +148,12 @@ def build_features(layout: DatasetLayout) -> dict[str, Feature]:
     features[DONE] = {"dtype": "bool", "shape": (1,), "names": None}
     if layout.with_seed:
         features[SEED_KEY] = {"dtype": "int64", "shape": (1,), "names": None}
+    if layout.with_privileged:
+        features[PRIVILEGED_KEY] = {
+            "dtype": "float32",
+            "shape": (len(PRIVILEGED_FIELDS),),
+            "names": list(PRIVILEGED_FIELDS),
+        }
     return features
 
 

@@ -65,6 +65,8 @@ class LeRobotRecorder:
         buffer_bytes: memory for the rows of running episodes, shared by the env rows; an
             episode past its share keeps its frames in a spill file instead.
         spill_dir: folder for spill files (default: beside ``root``).
+        privileged: also store each frame's ``privileged_state`` (needs ground truth: the
+            embedded server), the target of the oasis policy's auxiliary loss.
 
     Example (as a collector hook: ``Collector(env, policy, ..., post_collect_hook=recorder)``):
         >>> import tempfile
@@ -91,6 +93,7 @@ class LeRobotRecorder:
         keep_unfinished: bool = True,
         buffer_bytes: int = DEFAULT_BUFFER_BYTES,
         spill_dir: str | Path | None = None,
+        privileged: bool = False,
     ) -> None:
         if max_episodes is not None and max_episodes < 1:
             raise ValueError(f"max_episodes must be >= 1, got {max_episodes}")
@@ -103,6 +106,7 @@ class LeRobotRecorder:
         self.max_episodes = max_episodes
         self.keep_unfinished = keep_unfinished
         self.buffer_bytes = buffer_bytes
+        self.privileged = privileged
         self.dataset: LeRobotDataset | None = None
         self._existing = (0, 0)  # (episodes, rows) already in an appended dataset
         self.layout: DatasetLayout | None = None
@@ -146,7 +150,7 @@ class LeRobotRecorder:
             raise RuntimeError("the recorder is closed")
         if self.full:
             return 0
-        layout = self.layout or infer_layout(batch, self.image_size)
+        layout = self.layout or infer_layout(batch, self.image_size, self.privileged)
         features = self._features or build_features(layout)
         rows = batch_to_rows(batch, layout, self._source_size)
         check_columns(rows.columns, features, leading=3)

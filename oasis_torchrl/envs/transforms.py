@@ -9,6 +9,7 @@ from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs import Transform
 
 from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FRAME_STACK, PIXELS
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, privileged_state
 
 
 class ChunkFrameStack(Transform):
@@ -95,24 +96,11 @@ class ChunkFrameStack(Transform):
         return observation_spec
 
 
-PRIVILEGED_FIELDS = (
-    "speed",
-    "lateral_offset",
-    "heading_error",
-    "obstacle_distance",
-    "obstacle_distance_left",
-    "obstacle_distance_right",
-)
-_PRIVILEGED_SCALE = torch.tensor([10.0, 4.0, 1.0, 60.0, 60.0, 60.0])
-"""Rough magnitudes: m/s, m, rad, then metres (the obstacle distances are capped at 60 m, as
-where no obstacle is: the critic and the auxiliary head need to know which lane is open)."""
-_FIRST_DISTANCE = PRIVILEGED_FIELDS.index("obstacle_distance")
-
-
 class PrivilegedState(Transform):
     """Writes ``"critic_inputs"`` ``[N, 6]``: the last frame's ground truth in
-    :data:`PRIVILEGED_FIELDS` (speed, lateral offset, heading error, obstacle distances ahead,
-    one lane left and one lane right), scaled to about unit size.
+    :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (speed, lateral offset, heading
+    error, obstacle distances ahead, one lane left and one lane right), scaled to about unit size
+    (:func:`~oasis_torchrl.models.privileged.privileged_state`).
 
     For an asymmetric actor-critic on the embedded server: the critic may use the simulator's
     state, the actor (what is deployed) only sees the cameras and the previous action.
@@ -131,11 +119,8 @@ class PrivilegedState(Transform):
         super().__init__(in_keys=in_keys, out_keys=[CRITIC_INPUTS])
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
-        last = torch.stack([next_tensordict.get(key)[..., -1] for key in self.in_keys], dim=-1)
-        distances = last[..., _FIRST_DISTANCE:]
-        distances.copy_(distances.nan_to_num(posinf=60.0).clamp(max=60.0))
-        scale = _PRIVILEGED_SCALE.to(last.device)
-        return next_tensordict.set(CRITIC_INPUTS, (last / scale).nan_to_num(0.0))
+        last = {key[-1]: next_tensordict.get(key)[..., -1] for key in self.in_keys}
+        return next_tensordict.set(CRITIC_INPUTS, privileged_state(last))
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Add ``"critic_inputs"`` to a TensorDict outside an env (e.g. a stored batch)."""

@@ -29,6 +29,7 @@ from tqdm import tqdm
 from oasis_torchrl.config import save_config
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.models import make_actor_critic
+from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 
@@ -177,10 +178,10 @@ class BCTrainer:
             range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress
         ) as bar:
             for step in bar:
-                batch = self.preprocessor(next(batches))
+                batch = self._preprocessed(next(batches))
                 for key in self.image_keys:
                     batch[key] = random_shift(batch[key], cfg.shift_pad)
-                loss, _ = self.policy.forward(batch)
+                loss, info = self.policy.forward(batch)
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)
@@ -190,10 +191,20 @@ class BCTrainer:
                 if step % cfg.log_every == 0 or step == cfg.steps:
                     self.logger.log_scalar("bc/loss", value, step=step)
                     self.logger.log_scalar("bc/grad_norm", float(grad_norm), step=step)
+                    if "aux_loss" in info:
+                        self.logger.log_scalar("bc/aux_loss", info["aux_loss"], step=step)
                     bar.set_postfix(loss=f"{average:.4f}")
                 if cfg.save_every and step % cfg.save_every == 0:
                     self.save(self.output_dir / "policy")
         return average
+
+    def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:
+        """The batch through the policy's preprocessor, the privileged state kept beside it
+        (LeRobot's processors drop the columns they do not know)."""
+        batch = self.preprocessor(raw)
+        if PRIVILEGED_KEY in raw:
+            batch[PRIVILEGED_KEY] = raw[PRIVILEGED_KEY]
+        return batch
 
     def save(self, path: Path) -> Path:
         """Write the LeRobot policy folder: weights, config and both processors."""

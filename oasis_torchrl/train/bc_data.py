@@ -4,10 +4,11 @@
 sample, which costs far more than a training step of the oasis network.
 :class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass through LeRobot's
 own decoder, keeps the frames as uint8, and serves the same sample dict
-(``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``, the
-``<key>_is_pad`` masks and the indices) by LeRobot's delta-index rules: a key with delta
-indices stacks the rows at those offsets within the same episode, clamped at its ends and
-marked as padding there (e.g. the previous frame and the next 4 actions).
+(``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``,
+``privileged_state`` where recorded, the ``<key>_is_pad`` masks and the indices) by LeRobot's
+delta-index rules: a key with delta indices stacks the rows at those offsets within the same
+episode, clamped at its ends and marked as padding there (e.g. the frame one chunk earlier and
+the next 4 actions).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from oasis_torchrl.data.loading import default_video_backend
+from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 
 logger = logging.getLogger(__name__)
 
@@ -51,8 +53,11 @@ class InMemoryBCDataset(Dataset):
         self.camera_keys = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
         delta_indices = get_delta_indices(dataset.delta_timestamps, dataset.fps)
         self.deltas = {key: torch.tensor(d) for key, d in delta_indices.items()}
-        columns = dataset.hf_dataset.with_format("torch", columns=list(_COLUMNS))[:]
-        self.columns = {key: torch.as_tensor(columns[key]) for key in _COLUMNS}
+        # The privileged state, where recorded, is the auxiliary head's target.
+        names = [*_COLUMNS, *([PRIVILEGED_KEY] if PRIVILEGED_KEY in dataset.features else [])]
+        columns = dataset.hf_dataset.with_format("torch", columns=names)[:]
+        self.columns = {key: torch.as_tensor(columns[key]) for key in names}
+        self.row_keys = [OBS_STATE, ACTION, *names[len(_COLUMNS) :]]
         # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
         # indices (what episode bounds use) to positions in it.
         self._position = {
@@ -100,7 +105,7 @@ class InMemoryBCDataset(Dataset):
     def __getitem__(self, position: int) -> dict[str, Any]:
         index = int(self.columns["index"][position])
         start, end = self.bounds[int(self.columns["episode_index"][position])]
-        sources = {**self.frames, OBS_STATE: self.columns[OBS_STATE], ACTION: self.columns[ACTION]}
+        sources = {**self.frames, **{key: self.columns[key] for key in self.row_keys}}
         sample: dict[str, Any] = {}
         for key, source in sources.items():
             deltas = self.deltas.get(key)

@@ -12,7 +12,8 @@ With a ``learner``, the learner's own (noisy) actions are executed instead, stil
 the autopilot: a DAgger round (Ross et al., 2011), which collects the states the clone itself
 reaches, e.g. an obstacle seen late at full speed, with what the expert would do there.
 
-Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one row per frame.
+Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one row per frame,
+with each frame's privileged state (the target of behaviour cloning's auxiliary loss).
 """
 
 from __future__ import annotations
@@ -128,7 +129,9 @@ def record_demonstrations(
     expert = Autopilot()
     process = NoiseProcess(noise, rows, seed)
     append = (Path(root) / "meta" / "info.json").exists()
-    recorder = LeRobotRecorder(root, max_episodes=episodes, keep_unfinished=False, append=append)
+    recorder = LeRobotRecorder(
+        root, max_episodes=episodes, keep_unfinished=False, append=append, privileged=True
+    )
 
     def act(td: TensorDictBase) -> TensorDictBase:
         label = expert(td.clone(False)).get("action")

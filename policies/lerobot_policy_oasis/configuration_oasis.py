@@ -33,6 +33,7 @@ from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from oasis_torchrl.models import CAMERAS, DrivingNetConfig
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 
 POLICY_TYPE = "oasis"
@@ -56,8 +57,8 @@ NETWORK_FIELDS = (
 )
 """The :class:`DrivingNetConfig` fields a LeRobot config sets as its own. The others come from
 LeRobot's fields (``frames``: ``n_obs_steps``, ``chunk``: ``chunk_size``, ``cameras`` and
-``state_dim``: the input features) or belong to PPO's training-only heads (``critic_inputs``,
-``aux_outputs``)."""
+``state_dim``: the input features, ``aux_outputs``: ``aux_weight``) or belong to PPO's
+training-only critic (``critic_inputs``)."""
 
 
 def _network_fields() -> type:
@@ -109,6 +110,12 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             follows the dimension that varies most: in autopilot demonstrations throttle (std
             ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
             obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
+        aux_weight: weight of an auxiliary loss (0: none): the network's auxiliary head
+            predicts each frame's privileged state (``privileged_state``: speed, lane offset,
+            heading error, obstacle distances ahead, left and right, recorded by the embedded
+            server) from the camera features, mean squared error. Dense labels on every frame
+            teach the encoder to see obstacles and free lanes, which the rare lane changes of
+            the action labels alone do not; at deployment the head is unused.
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
 
     Example:
@@ -126,6 +133,7 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
 
     loss: str = "nll"
     action_loss_weights: tuple[float, float] = (1.0, 1.0)
+    aux_weight: float = 0.0
     optimizer_lr: float = 1e-3
     optimizer_weight_decay: float = 1e-4
     optimizer_grad_clip_norm: float = 10.0
@@ -144,6 +152,8 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             )
         if self.loss not in LOSSES:
             raise ValueError(f"OasisConfig.loss must be one of {LOSSES}, got {self.loss!r}")
+        if not self.aux_weight >= 0:
+            raise ValueError(f"OasisConfig.aux_weight must be >= 0, got {self.aux_weight}")
         weights = tuple(self.action_loss_weights)
         if len(weights) != ACTION_DIM or min(weights) < 0 or max(weights) == 0:
             raise ValueError(
@@ -170,6 +180,7 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
                 "state_dim": self.robot_state_feature.shape[0],
                 "chunk": self.chunk_size,
                 "action_dim": ACTION_DIM,
+                "aux_outputs": len(PRIVILEGED_FIELDS) if self.aux_weight else 0,
             }
         )
 

@@ -29,6 +29,7 @@ from torch import Tensor, nn
 
 from lerobot_policy_oasis.configuration_oasis import FRAME_SPACING, POLICY_TYPE, OasisConfig
 from oasis_torchrl.models import DrivingNet
+from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
 
@@ -70,12 +71,14 @@ class OasisPolicy(PreTrainedPolicy):
         self._history: dict[str, deque[Tensor]] = {}
 
     def get_optim_params(self) -> Iterator[nn.Parameter]:
-        """The parameters behaviour cloning trains: the encoder and the actor, and with the
-        likelihood loss the distribution's scale."""
+        """The parameters behaviour cloning trains: the encoder and the actor, with the
+        likelihood loss the distribution's scale, with ``aux_weight`` the auxiliary head."""
         yield from self.model.encoder.parameters()
         yield from self.model.actor.parameters()
         if self.config.loss == "nll":
             yield self.model.log_scale
+        if self.model.aux is not None:
+            yield from self.model.aux.parameters()
 
     def reset(self) -> None:
         """Drop queued actions and past observations (call at every episode start)."""
@@ -152,5 +155,22 @@ class OasisPolicy(PreTrainedPolicy):
             weights = error.new_tensor(self.config.action_loss_weights)
             weighted = (error * weights).sum(-1) / weights.sum()
             per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+        info = {f"{self.config.loss}_loss": per_sample.mean().item()}
+        if self.config.aux_weight:
+            aux = self._aux_loss(batch, features)
+            per_sample = per_sample + self.config.aux_weight * aux
+            info["aux_loss"] = aux.mean().item()
         loss = per_sample if reduction == "none" else per_sample.mean()
-        return loss, {f"{self.config.loss}_loss": per_sample.mean().item()}
+        return loss, info
+
+    def _aux_loss(self, batch: dict[str, Tensor], features: Tensor) -> Tensor:
+        """Per-sample mean squared error of the auxiliary head against ``privileged_state``."""
+        target = batch.get(PRIVILEGED_KEY)
+        if target is None:
+            raise KeyError(
+                f"aux_weight={self.config.aux_weight} needs batch[{PRIVILEGED_KEY!r}]: a dataset "
+                "that stores the privileged state (the pipeline's demonstrations do), trained "
+                "with oasis-torchrl train bc (LeRobot's processors drop columns they do not "
+                "know), or aux_weight=0"
+            )
+        return (self.model.predict_aux(features) - target.to(features.dtype)).square().mean(-1)

@@ -11,6 +11,9 @@ import torch
 
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.data.images import resize_frames
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY, privileged_state
+from oasis_torchrl.sim.config import ServerConfig
 
 from ._fake_env import CAMERAS, FakeEnvRun, action, frame
 from ._readback import episodes, expected_frame_rows, open_dataset, psnr
@@ -167,3 +170,29 @@ def test_long_episodes_spill_to_disk_and_come_back_whole(tmp_path: Path) -> None
         np.testing.assert_array_equal(episode.columns["action"], expected["action"])
     sample = dataset[stored[1].start + 9]
     assert psnr(sample["observation.images.right_forward"], frame(0, 0, 12, 2)) > MIN_PSNR
+
+
+def test_the_privileged_state_of_each_frame_is_stored(tmp_path: Path) -> None:
+    """Each row's ``privileged_state`` is the ground truth of that row's frame: row ``4t`` the
+    previous chunk's last frame, row ``4t+j`` frame ``j-1`` of the chunk (the image rule)."""
+    env = OasisEnv(
+        "local", num_envs=1, prompts="urban", server=ServerConfig(width=48, height=32),
+        all_frames=True, max_steps=3,
+    )  # fmt: skip
+    try:
+        env.set_seed(4)
+        rollout = env.rollout(3, lambda td: td.set("action", torch.full((1, 4, 2), 0.7)))
+    finally:
+        env.close()
+    root = tmp_path / "privileged"
+    with LeRobotRecorder(root, privileged=True) as recorder:
+        assert recorder.write(rollout) == 1
+    stored = np.stack(open_dataset(root).hf_dataset[PRIVILEGED_KEY])
+    truth = {field: rollout["next", "truth", field][0] for field in PRIVILEGED_FIELDS}
+    after = privileged_state(truth)  # [3 steps, 4 frames, 6]
+    first = privileged_state({f: rollout["truth", f][0, 0, -1] for f in PRIVILEGED_FIELDS})
+    expected = torch.cat([first[None], after.flatten(0, 1)[:-1]])  # the frame before each action
+    np.testing.assert_allclose(stored, expected.numpy(), rtol=1e-6)
+    assert stored.shape == (12, len(PRIVILEGED_FIELDS)) and np.ptp(stored[:, 0]) > 0  # it moved
+    with pytest.raises(KeyError, match=r"'truth', 'speed'\) \(the ground truth"):
+        LeRobotRecorder(tmp_path / "none", privileged=True).write(rollout.exclude("truth"))

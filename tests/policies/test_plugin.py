@@ -14,6 +14,8 @@ from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
 
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
+
 CAMERAS = ("left_forward", "front", "right_forward")
 SIZE = (32, 48)
 VENV_BIN = Path(sys.executable).parent
@@ -131,6 +133,27 @@ def test_forward_masks_padded_actions(loss: str) -> None:
     # The likelihood fits the distribution's scale too; the regression leaves it alone.
     trained = {id(parameter) for parameter in policy.get_optim_params()}
     assert (id(policy.model.log_scale) in trained) == (loss == "nll")
+
+
+def test_the_auxiliary_loss_predicts_the_privileged_state() -> None:
+    policy = _policy(aux_weight=0.5)
+    assert policy.model.config.aux_outputs == len(PRIVILEGED_FIELDS)
+    batch = _stacked(_observation(seed=0), _observation(seed=1))
+    batch["action"] = policy.predict_action_chunk(batch).clone()
+    with pytest.raises(KeyError, match=r"needs batch\['privileged_state'\].*aux_weight=0"):
+        policy.forward(batch)
+    batch[PRIVILEGED_KEY] = torch.rand(2, len(PRIVILEGED_FIELDS))
+    loss, info = policy.forward(batch)
+    expected = (policy.model.predict_aux(policy._features(batch)) - batch[PRIVILEGED_KEY]).square()
+    assert info["aux_loss"] == pytest.approx(expected.mean().item(), rel=1e-5)
+    assert loss.item() == pytest.approx(info["nll_loss"] + 0.5 * info["aux_loss"], rel=1e-5)
+    loss.backward()
+    assert policy.model.aux[0].weight.grad.abs().sum() > 0
+    assert {id(p) for p in policy.model.aux.parameters()} <= {
+        id(p) for p in policy.get_optim_params()
+    }
+    with pytest.raises(ValueError, match="aux_weight must be >= 0"):
+        _config(aux_weight=-1.0)
 
 
 def test_the_policy_config_is_the_networks() -> None:

@@ -21,7 +21,8 @@ TINY_ENV = [
 
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Two 4-step autopilot episodes, frame rows (16 rows each) at 32x48."""
+    """Two 4-step autopilot episodes, frame rows (16 rows each) at 32x48, with the privileged
+    state."""
     root = tmp_path_factory.mktemp("bc") / "drives"
     env = OasisEnv(
         "local",
@@ -33,7 +34,7 @@ def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
         expert=True,
     )
     try:
-        with LeRobotRecorder(root) as recorder:
+        with LeRobotRecorder(root, privileged=True) as recorder:
             recorder.write(env.rollout(4, Autopilot(), break_when_any_done=False))
     finally:
         env.close()

@@ -52,6 +52,17 @@ def test_bc_steps_train_the_actor_and_save_a_lerobot_policy(
     torch.testing.assert_close(net.state_dict()["actor.2.bias"], after["actor.2.bias"])
 
 
+def test_the_auxiliary_loss_trains_the_auxiliary_head(tiny_dataset: Path, tmp_path: Path) -> None:
+    trainer = BCTrainer(_bc_config(tiny_dataset, tmp_path, "policy.aux_weight=1.0"))
+    before = trainer.policy.model.aux[0].weight.clone()
+    result = trainer.run()
+    assert not torch.equal(before, result.policy.model.aux[0].weight)
+    logged = (tmp_path / "logs" / "bc" / "scalars" / "bc" / "aux_loss.csv").read_text().split()
+    assert len(logged) == 4 and all(float(line.split(",")[1]) > 0 for line in logged)
+    net = load_net(result.policy_dir)  # a policy folder with its auxiliary head still loads
+    assert net.config.aux_outputs == 6
+
+
 def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: Path) -> None:
     dataset = open_dataset(_bc_config(tiny_dataset, tmp_path).dataset, OasisConfig(device="cpu"))
     cached = InMemoryBCDataset(dataset, progress=False)
