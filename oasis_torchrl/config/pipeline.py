@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
 from oasis_torchrl.config.training import (
+    BCPolicyConfig,
     BCSettings,
     BCTrainConfig,
     CollectorConfig,
@@ -61,7 +62,13 @@ class PipelineEvaluationConfig(EvaluationConfig):
 
 
 def _demo_bc() -> BCSettings:
-    return BCSettings(train=BCTrainConfig(steps=1500))
+    # The auxiliary loss on the demonstrations' privileged state teaches the encoder obstacles
+    # and free lanes; with it, the previous action as an input lets a clone finish a lane change
+    # it started instead of steering back halfway. Measured (BENCHMARKS.md, "The main job"):
+    # together they moved the clone most; the previous action alone did not move it.
+    return BCSettings(
+        policy=BCPolicyConfig(aux_weight=1.0, use_state=True), train=BCTrainConfig(steps=1500)
+    )
 
 
 def _demo_ppo() -> PPOSettings:
