@@ -1,7 +1,8 @@
 """Learning benchmark: do the policies really learn to drive in the world model?
 
-On the embedded server, "urban" prompt, the demo's resolution (96x64 frames, 64x96 policy
-images), fixed evaluation seeds, one episode per env row of up to ``--max-steps`` chunks:
+On the embedded server, with the demo's training scenes (``DemoConfig.env.prompts``) and
+resolution (96x64 frames, 64x96 policy images), evaluated on the "urban" prompt on fixed seeds,
+one episode per env row of up to ``--max-steps`` chunks:
 
 1. references: the autopilot (privileged expert) and constant actions (straight ahead, a sweep
    of throttles; the best one is "the best constant action");
