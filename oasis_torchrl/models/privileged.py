@@ -30,7 +30,7 @@ _FIRST_DISTANCE = PRIVILEGED_FIELDS.index("obstacle_distance")
 
 def privileged_state(truth: Mapping[str, torch.Tensor]) -> torch.Tensor:
     """``[..., 6]`` float32: the :data:`PRIVILEGED_FIELDS` of ``truth`` (each ``[...]``) scaled
-    to about unit size; no obstacle (infinite or NaN distance) reads as 60 m, other NaN as 0.
+    to about unit size; no obstacle (an infinite distance) reads as 60 m, unknown (NaN) as 0.
 
     Example:
         >>> truth = {field: torch.tensor([2.0, 30.0]) for field in PRIVILEGED_FIELDS}
@@ -42,6 +42,6 @@ def privileged_state(truth: Mapping[str, torch.Tensor]) -> torch.Tensor:
     if missing:
         raise KeyError(f"the privileged state needs ground truth {missing}")
     raw = torch.stack([truth[field].to(torch.float32) for field in PRIVILEGED_FIELDS], dim=-1)
-    distances = raw[..., _FIRST_DISTANCE:].nan_to_num(MAX_DISTANCE, posinf=MAX_DISTANCE)
+    distances = raw[..., _FIRST_DISTANCE:].nan_to_num(0.0, posinf=MAX_DISTANCE)
     raw = torch.cat([raw[..., :_FIRST_DISTANCE], distances.clamp(max=MAX_DISTANCE)], dim=-1)
     return (raw / _SCALE.to(raw.device)).nan_to_num(0.0)
