@@ -164,13 +164,19 @@ def _frames(
         images = root.unsqueeze(2)
     elif root.dim() == 6:
         after = _get(steps, (NEXT, PIXELS, camera), "the frames after each action")
-        images = torch.cat([root[:, :, -1:], after[:, :, :-1]], dim=2)
+        images = _frame_rows(root, after)
     else:
         raise ValueError(
             f"('pixels', {camera!r}) must be [B, T, H, W, 3] or [B, T, 4, H, W, 3], "
             f"got {tuple(root.shape)}"
         )
     return resize_frames(images.cpu(), size)
+
+
+def _frame_rows(root: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
+    """Per-frame values ``[B, T, 4, ...]`` of each frame row (the table): the root observation's
+    last frame, then the chunk's frames before its last."""
+    return torch.cat([root[:, :, -1:], after[:, :, :-1]], dim=2)
 
 
 def _privileged(steps: TensorDictBase, rows: int) -> torch.Tensor:
@@ -180,7 +186,7 @@ def _privileged(steps: TensorDictBase, rows: int) -> torch.Tensor:
         root = _get(steps, (TRUTH, field), "the ground truth of the privileged state")
         if rows > 1:
             after = _get(steps, (NEXT, TRUTH, field), "the ground truth after each action")
-            truth[field] = torch.cat([root[:, :, -1:], after[:, :, :-1]], dim=2)
+            truth[field] = _frame_rows(root, after)
         else:
             truth[field] = root[:, :, -1:]
     return privileged_state({field: value.cpu() for field, value in truth.items()})

@@ -108,6 +108,8 @@ class PolicyDriver(Driver):
         self.image_size = image_size
         self.frame_stack = frame_stack
         self.observation_spec = observation_spec
+        read = [] if observation_spec is None else observation_spec.keys(True, True)
+        self._stack_keys = [key for key in read if isinstance(key, tuple) and key[0] == FRAME_STACK]
 
     @classmethod
     def of_network(cls, net: DrivingNet, **kwargs: object) -> PolicyDriver:
@@ -158,9 +160,7 @@ class PolicyDriver(Driver):
 
     def _check_frame_stack(self, td: TensorDictBase) -> None:
         """Name the missing frame stack (a bare ``OasisEnv``) instead of a bare KeyError."""
-        wanted = [] if self.observation_spec is None else self.observation_spec.keys(True, True)
-        stacked = [key for key in wanted if isinstance(key, tuple) and key[0] == FRAME_STACK]
-        missing = [key for key in stacked if key not in td.keys(True)]
+        missing = [key for key in self._stack_keys if key not in td.keys(True)]
         if missing:
             raise ValueError(
                 f"the policy reads {missing[0]} (frames one chunk apart), which the env does not "

@@ -51,6 +51,10 @@ class ChunkFrameStack(Transform):
         )
         self.depth = depth
 
+    def _repeated(self, newest: torch.Tensor) -> torch.Tensor:
+        """A stack of ``newest`` (``[*B, 1, H, W, 3]``) alone: a fresh episode's."""
+        return newest.expand(*newest.shape[:-4], self.depth, *newest.shape[-3:])
+
     @staticmethod
     def _newest(frames: torch.Tensor, batch_dims: int) -> torch.Tensor:
         """The chunk's last frame ``[*B, 1, H, W, 3]`` of ``[*B, (4,) H, W, 3]`` frames."""
@@ -64,7 +68,7 @@ class ChunkFrameStack(Transform):
             newest = self._newest(next_tensordict.get(in_key), batch_dims)
             previous = tensordict.get(out_key, None)
             if previous is None:  # stepped from an observation without a stack: start one
-                stack = newest.expand(*newest.shape[:-4], self.depth, *newest.shape[-3:])
+                stack = self._repeated(newest)
             else:
                 stack = torch.cat([previous[..., 1:, :, :, :], newest], dim=-4)
             next_tensordict.set(out_key, stack.contiguous())
@@ -77,7 +81,7 @@ class ChunkFrameStack(Transform):
         reset = None if tensordict is None else tensordict.get("_reset", None)
         for in_key, out_key in zip(self.in_keys, self.out_keys, strict=True):
             newest = self._newest(tensordict_reset.get(in_key), batch_dims)
-            stack = newest.expand(*newest.shape[:-4], self.depth, *newest.shape[-3:]).contiguous()
+            stack = self._repeated(newest).contiguous()
             previous = None if reset is None else tensordict.get(out_key, None)
             if previous is not None and previous.shape == stack.shape:
                 running = ~reset.reshape(*stack.shape[:batch_dims])

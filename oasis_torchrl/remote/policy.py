@@ -276,18 +276,21 @@ class RemotePolicy(TensorDictModuleBase):
     def image_size(self) -> tuple[int, int] | None:
         """``(height, width)`` of the frames the policy looks at (channels-last images), or
         None if it reads no image."""
-        for feature in self.description.inputs:
-            if feature.dtype == torch.uint8 and len(feature.shape) >= 3 and feature.shape[-1] == 3:
-                return feature.shape[-3], feature.shape[-2]
-        return None
+        image = self._image_shape()
+        return None if image is None else (image[-3], image[-2])
 
     @property
     def frame_stack(self) -> int | None:
         """Frames per camera the policy reads (the leading axis of its ``[K, H, W, 3]`` image
         inputs), or None if it reads single frames or no image."""
+        image = self._image_shape()
+        return image[0] if image is not None and len(image) == 4 else None
+
+    def _image_shape(self) -> tuple[int, ...] | None:
+        """The shape of the policy's first channels-last uint8 image input, if any."""
         for feature in self.description.inputs:
-            if feature.dtype == torch.uint8 and len(feature.shape) == 4 and feature.shape[-1] == 3:
-                return feature.shape[0]
+            if feature.dtype == torch.uint8 and len(feature.shape) >= 3 and feature.shape[-1] == 3:
+                return tuple(feature.shape)
         return None
 
     # -- TorchRL ---------------------------------------------------------------------------
