@@ -213,14 +213,29 @@ class DrivingNet(nn.Module):
         return self.aux(features[..., : self.encoder.out_features])
 
     def with_training_heads(self, critic_inputs: int, aux_outputs: int) -> DrivingNet:
-        """A copy with fresh training-only heads, a critic taking ``critic_inputs`` extra
-        inputs and an auxiliary head of ``aux_outputs`` (encoder, actor and scale kept), e.g.
-        to fine-tune a cloned policy with privileged state, or ``(0, 0)`` to deploy it."""
+        """A copy with a critic taking ``critic_inputs`` extra inputs and an auxiliary head of
+        ``aux_outputs`` (encoder, actor and scale kept), e.g. to fine-tune a cloned policy with
+        privileged state, or ``(0, 0)`` to deploy it. A head whose size changes starts afresh;
+        one whose size stays keeps its weights (a clone's auxiliary head goes on into PPO).
+
+        Example:
+            >>> clone = DrivingNet(DrivingNetConfig(aux_outputs=6))
+            >>> tuned = clone.with_training_heads(6, 6)
+            >>> torch.equal(tuned.aux[0].weight, clone.aux[0].weight)
+            True
+        """
         config = dataclasses.replace(
             self.config, critic_inputs=critic_inputs, aux_outputs=aux_outputs
         )
         net = DrivingNet(config)
         net.load_policy_weights(self)
+        kept = (
+            ("critic", critic_inputs, self.config.critic_inputs),
+            ("aux", aux_outputs, self.config.aux_outputs),
+        )
+        for head, size, before in kept:
+            if size == before and getattr(self, head) is not None:
+                getattr(net, head).load_state_dict(getattr(self, head).state_dict())
         return net
 
     def load_policy_weights(self, other: DrivingNet) -> None:
@@ -236,6 +251,23 @@ class DrivingNet(nn.Module):
         unexpected = [key for key in missing if not key.startswith(training_only)]
         if unexpected:
             raise ValueError(f"the source network lacks {unexpected}")
+
+    def warm_start(self, other: DrivingNet) -> None:
+        """Go on from ``other``: every weight when the two share one architecture (a DAgger
+        round keeps the auxiliary head its previous round trained), else the acting parts
+        (:meth:`load_policy_weights`).
+
+        Example:
+            >>> net, trained = DrivingNet(DrivingNetConfig(aux_outputs=6)), DrivingNet(
+            ...     DrivingNetConfig(aux_outputs=6))
+            >>> net.warm_start(trained)
+            >>> torch.equal(net.aux[0].weight, trained.aux[0].weight)
+            True
+        """
+        if other.config == self.config:
+            self.load_state_dict(other.state_dict())
+        else:
+            self.load_policy_weights(other)
 
     def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """The deterministic chunk ``[..., chunk, action_dim]`` in ``[-1, 1]``

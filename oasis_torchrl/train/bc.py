@@ -137,7 +137,7 @@ class BCTrainer:
         dataset = open_dataset(cfg.dataset, self.policy_config)
         self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)
         if cfg.init_from:  # fine-tune (e.g. a DAgger round) instead of starting afresh
-            self.policy.model.load_policy_weights(load_net(cfg.init_from))
+            self.policy.model.warm_start(load_net(cfg.init_from))
         self.preprocessor, self.postprocessor = make_pre_post_processors(
             self.policy_config, dataset_stats=dataset.meta.stats
         )

@@ -228,6 +228,16 @@ def test_privileged_critic_takes_extra_inputs_and_the_aux_head_predicts_them() -
     assert modules.value(modules.policy(td))["state_value"].shape == (3, 1)
 
 
+def test_training_heads_keep_their_weights_only_where_their_size_stays() -> None:
+    clone = DrivingNet(DrivingNetConfig(image_size=SIZE, aux_outputs=4))
+    tuned = clone.with_training_heads(4, 4)  # the critic grows, the auxiliary head stays
+    torch.testing.assert_close(tuned.aux[0].weight, clone.aux[0].weight)
+    assert not torch.equal(tuned.critic[2].weight, clone.critic[2].weight)
+    again = tuned.with_training_heads(4, 2)
+    torch.testing.assert_close(again.critic[2].weight, tuned.critic[2].weight)
+    assert again.aux[-1].weight.shape[0] == 2
+
+
 def test_the_mixture_commits_to_the_most_probable_component() -> None:
     torch.manual_seed(0)
     net = _trained_looking(DrivingNet(DrivingNetConfig(image_size=SIZE, components=3)))

@@ -63,6 +63,18 @@ def test_the_auxiliary_loss_trains_the_auxiliary_head(tiny_dataset: Path, tmp_pa
     assert net.config.aux_outputs == 6
 
 
+def test_a_warm_start_goes_on_with_the_auxiliary_head(tiny_dataset: Path, tmp_path: Path) -> None:
+    first = BCTrainer(_bc_config(tiny_dataset, tmp_path / "a", "policy.aux_weight=1.0")).run()
+    again = BCTrainer(
+        _bc_config(
+            tiny_dataset, tmp_path / "b", "policy.aux_weight=1.0", f"init_from={first.policy_dir}"
+        )
+    )
+    trained = first.policy.model.state_dict()
+    for key, value in again.policy.model.state_dict().items():
+        torch.testing.assert_close(value, trained[key], msg=key)
+
+
 def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: Path) -> None:
     dataset = open_dataset(_bc_config(tiny_dataset, tmp_path).dataset, OasisConfig(device="cpu"))
     cached = InMemoryBCDataset(dataset, progress=False)
