@@ -429,7 +429,8 @@ def plot_report(
         kept_policies = [(kept, "*", "kept")]
         if stage == "ppo_scratch" and "ppo_scratch_early" in report:
             early = report["ppo_scratch_early"]
-            kept_policies.append((early, "P", f"kept within {early['policy_frames']}"))
+            budget = report["settings"]["ppo_early_frames"]
+            kept_policies.append((early, "P", f"kept within {budget:,} env steps"))
         for entry, marker, what in kept_policies:
             distances.plot(
                 entry["policy_frames"],
