@@ -65,7 +65,9 @@ def _demo_bc() -> BCSettings:
     # The auxiliary loss on the demonstrations' privileged state teaches the encoder obstacles
     # and free lanes from every frame, not only from the rare lane changes (BENCHMARKS.md, "The
     # main job"). The previous action stays out: it helped on one seed and not on others.
-    return BCSettings(policy=BCPolicyConfig(aux_weight=1.0), train=BCTrainConfig(steps=1500))
+    # 1000 steps, not more: longer training memorised the demonstrations, and the time buys
+    # DAgger episodes instead.
+    return BCSettings(policy=BCPolicyConfig(aux_weight=1.0), train=BCTrainConfig(steps=1000))
 
 
 def _demo_ppo() -> PPOSettings:
@@ -112,7 +114,10 @@ class DemoConfig:
     )
     bc: BCSettings = option(default_factory=_demo_bc, help="behaviour cloning")
     dagger: DaggerConfig = option(
-        default_factory=lambda: DaggerConfig(rounds=2), help="DAgger rounds"
+        # 32 episodes a round: the states the clone reaches, labelled, are what teach it to avoid
+        # obstacles (BENCHMARKS.md, "The main job").
+        default_factory=lambda: DaggerConfig(rounds=2, episodes=32),
+        help="DAgger rounds",
     )
     ppo: PPOSettings = option(
         default_factory=_demo_ppo,
