@@ -228,14 +228,7 @@ class DrivingNet(nn.Module):
             self.config, critic_inputs=critic_inputs, aux_outputs=aux_outputs
         )
         net = DrivingNet(config)
-        net.load_policy_weights(self)
-        kept = (
-            ("critic", critic_inputs, self.config.critic_inputs),
-            ("aux", aux_outputs, self.config.aux_outputs),
-        )
-        for head, size, before in kept:
-            if size == before and getattr(self, head) is not None:
-                getattr(net, head).load_state_dict(getattr(self, head).state_dict())
+        net.warm_start(self)
         return net
 
     def load_policy_weights(self, other: DrivingNet) -> None:
@@ -253,9 +246,9 @@ class DrivingNet(nn.Module):
             raise ValueError(f"the source network lacks {unexpected}")
 
     def warm_start(self, other: DrivingNet) -> None:
-        """Go on from ``other``: every weight when the two share one architecture (a DAgger
-        round keeps the auxiliary head its previous round trained), else the acting parts
-        (:meth:`load_policy_weights`).
+        """Go on from ``other``: its acting parts (:meth:`load_policy_weights`) and each
+        training-only head of the same size here (a DAgger round keeps the auxiliary head its
+        previous round trained); a head of another size keeps this network's weights.
 
         Example:
             >>> net, trained = DrivingNet(DrivingNetConfig(aux_outputs=6)), DrivingNet(
@@ -264,10 +257,14 @@ class DrivingNet(nn.Module):
             >>> torch.equal(net.aux[0].weight, trained.aux[0].weight)
             True
         """
-        if other.config == self.config:
-            self.load_state_dict(other.state_dict())
-        else:
-            self.load_policy_weights(other)
+        self.load_policy_weights(other)
+        sizes = (
+            ("critic", self.config.critic_inputs, other.config.critic_inputs),
+            ("aux", self.config.aux_outputs, other.config.aux_outputs),
+        )
+        for head, size, other_size in sizes:
+            if size == other_size and getattr(self, head) is not None:
+                getattr(self, head).load_state_dict(getattr(other, head).state_dict())
 
     def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """The deterministic chunk ``[..., chunk, action_dim]`` in ``[-1, 1]``
