@@ -231,24 +231,11 @@ class DrivingNet(nn.Module):
         net.warm_start(self)
         return net
 
-    def load_policy_weights(self, other: DrivingNet) -> None:
-        """Copy ``other``'s encoder, actor and scale (what acts) into this network; the
-        training-only heads (critic, auxiliary) are kept. Both must share the architecture of
-        the acting parts."""
-        training_only = ("critic.", "aux.")
-        acting = {k: v for k, v in other.state_dict().items() if not k.startswith(training_only)}
-        try:
-            missing, _ = self.load_state_dict(acting, strict=False)
-        except RuntimeError as error:
-            raise ValueError(f"the networks' acting parts differ: {error}") from error
-        unexpected = [key for key in missing if not key.startswith(training_only)]
-        if unexpected:
-            raise ValueError(f"the source network lacks {unexpected}")
-
     def warm_start(self, other: DrivingNet) -> None:
-        """Go on from ``other``: its acting parts (:meth:`load_policy_weights`) and each
-        training-only head of the same size here (a DAgger round keeps the auxiliary head its
-        previous round trained); a head of another size keeps this network's weights.
+        """Go on from ``other``: its encoder, actor and scale (what acts), which must share this
+        network's architecture, and each training-only head (critic, auxiliary) of the same
+        size here (a DAgger round keeps the auxiliary head its previous round trained); a head
+        of another size keeps this network's weights.
 
         Example:
             >>> net, trained = DrivingNet(DrivingNetConfig(aux_outputs=6)), DrivingNet(
@@ -257,14 +244,19 @@ class DrivingNet(nn.Module):
             >>> torch.equal(net.aux[0].weight, trained.aux[0].weight)
             True
         """
-        self.load_policy_weights(other)
         sizes = (
-            ("critic", self.config.critic_inputs, other.config.critic_inputs),
-            ("aux", self.config.aux_outputs, other.config.aux_outputs),
+            ("critic.", self.config.critic_inputs, other.config.critic_inputs),
+            ("aux.", self.config.aux_outputs, other.config.aux_outputs),
         )
-        for head, size, other_size in sizes:
-            if size == other_size and getattr(self, head) is not None:
-                getattr(self, head).load_state_dict(getattr(other, head).state_dict())
+        resized = tuple(head for head, size, other_size in sizes if size != other_size)
+        kept = {k: v for k, v in other.state_dict().items() if not k.startswith(resized)}
+        try:
+            missing, _ = self.load_state_dict(kept, strict=False)
+        except RuntimeError as error:
+            raise ValueError(f"the networks' acting parts differ: {error}") from error
+        unexpected = [key for key in missing if not key.startswith(resized)]
+        if unexpected:
+            raise ValueError(f"the source network lacks {unexpected}")
 
     def forward(self, images: Sequence[torch.Tensor], state: torch.Tensor) -> torch.Tensor:
         """The deterministic chunk ``[..., chunk, action_dim]`` in ``[-1, 1]``

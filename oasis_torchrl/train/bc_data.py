@@ -54,10 +54,11 @@ class InMemoryBCDataset(Dataset):
         delta_indices = get_delta_indices(dataset.delta_timestamps, dataset.fps)
         self.deltas = {key: torch.tensor(d) for key, d in delta_indices.items()}
         # The privileged state, where recorded, is the auxiliary head's target.
-        names = [*_COLUMNS, *([PRIVILEGED_KEY] if PRIVILEGED_KEY in dataset.features else [])]
+        targets = [PRIVILEGED_KEY] if PRIVILEGED_KEY in dataset.features else []
+        names = [*_COLUMNS, *targets]
         columns = dataset.hf_dataset.with_format("torch", columns=names)[:]
         self.columns = {key: torch.as_tensor(columns[key]) for key in names}
-        self.row_keys = [OBS_STATE, ACTION, *names[len(_COLUMNS) :]]
+        self.row_keys = [OBS_STATE, ACTION, *targets]
         # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
         # indices (what episode bounds use) to positions in it.
         self._position = {
