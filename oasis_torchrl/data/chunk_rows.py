@@ -180,7 +180,8 @@ def _frame_rows(root: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
 
 
 def _privileged(steps: TensorDictBase, rows: int) -> torch.Tensor:
-    """``[B, T, R, 6]``: the privileged state of each row's frame (see the mapping table)."""
+    """``[B, T, R, len(PRIVILEGED_FIELDS)]``: the privileged state of each row's frame (see
+    the mapping table)."""
     truth = {}
     for field in PRIVILEGED_FIELDS:
         root = _get(steps, (TRUTH, field), "the ground truth of the privileged state")

@@ -102,8 +102,9 @@ class ChunkFrameStack(Transform):
 
 class PrivilegedState(Transform):
     """Writes ``"critic_inputs"`` ``[N, 6]``: the last frame's ground truth in
-    :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (speed, lateral offset, heading
-    error, obstacle distances ahead, one lane left and one lane right), scaled to about unit size
+    :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (speed, offsets on the road
+    and in the lane, the lanes beside, obstacle distances ahead in the car's path, its lane and
+    the lanes left and right), scaled to about unit size
     (:func:`~oasis_torchrl.models.privileged.privileged_state`).
 
     For an asymmetric actor-critic on the embedded server: the critic may use the simulator's
@@ -112,7 +113,7 @@ class PrivilegedState(Transform):
     Example:
         >>> from tensordict import TensorDict
         >>> truth = {field: torch.full((2, 4), 2.0) for field in PRIVILEGED_FIELDS}
-        >>> truth["obstacle_distance_right"][0] = float("inf")
+        >>> truth["lane_obstacle_distance_right"][0] = float("inf")
         >>> out = PrivilegedState()(TensorDict({"truth": truth}, [2]))
         >>> out["critic_inputs"][:, -1].tolist()
         [1.0, 0.03333333507180214]

@@ -24,7 +24,7 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1doasis_torchrl/proto/sim.proto\x12\x14oasis_torchrl.sim.v1\"\x95\x02\n\nFrameTruth\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\x12\r\n\x05speed\x18\x04 \x01(\x01\x12\x10\n\x08\x64istance\x18\x05 \x01(\x01\x12\x10\n\x08progress\x18\x06 \x01(\x01\x12\x16\n\x0elateral_offset\x18\x07 \x01(\x01\x12\x15\n\rheading_error\x18\x08 \x01(\x01\x12\x10\n\x08\x63ollided\x18\t \x01(\x08\x12\x19\n\x11obstacle_distance\x18\n \x01(\x01\x12\x10\n\x08off_road\x18\x0b \x01(\x08\x12\x1e\n\x16obstacle_distance_left\x18\x0c \x01(\x01\x12\x1f\n\x17obstacle_distance_right\x18\r \x01(\x01\"z\n\nInferTruth\x12\x14\n\x0csequence_num\x18\x01 \x01(\x04\x12\x0c\n\x04seed\x18\x02 \x01(\x04\x12\x30\n\x06\x66rames\x18\x03 \x03(\x0b\x32 .oasis_torchrl.sim.v1.FrameTruth\x12\x16\n\x0e\x65xpert_actions\x18\x04 \x03(\x02\"\"\n\x0c\x44\x65pthRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\"J\n\x08\x44\x65pthMap\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0e\n\x06height\x18\x02 \x01(\r\x12\r\n\x05width\x18\x03 \x01(\r\x12\x11\n\tdepth_f16\x18\x04 \x01(\x0c\"S\n\rDepthResponse\x12\x14\n\x0csequence_num\x18\x01 \x01(\x04\x12,\n\x04maps\x18\x02 \x03(\x0b\x32\x1e.oasis_torchrl.sim.v1.DepthMap\"\"\n\x0cSceneRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\"^\n\x08Obstacle\x12\x0c\n\x04kind\x18\x01 \x01(\t\x12\t\n\x01x\x18\x02 \x01(\x01\x12\t\n\x01y\x18\x03 \x01(\x01\x12\x0f\n\x07heading\x18\x04 \x01(\x01\x12\x0e\n\x06length\x18\x05 \x01(\x01\x12\r\n\x05width\x18\x06 \x01(\x01\"\xef\x01\n\rSceneResponse\x12\x0e\n\x06prompt\x18\x01 \x01(\t\x12\x0c\n\x04seed\x18\x02 \x01(\x04\x12\x14\n\x0c\x63\x65nterline_x\x18\x03 \x03(\x01\x12\x14\n\x0c\x63\x65nterline_y\x18\x04 \x03(\x01\x12\x17\n\x0froad_half_width\x18\x05 \x01(\x01\x12\r\n\x05lanes\x18\x06 \x01(\r\x12\x31\n\tobstacles\x18\x07 \x03(\x0b\x32\x1e.oasis_torchrl.sim.v1.Obstacle\x12\x12\n\nego_length\x18\x08 \x01(\x01\x12\x11\n\tego_width\x18\t \x01(\x01\x12\x12\n\nlane_width\x18\n \x01(\x01\x32\xb6\x01\n\nSimService\x12S\n\x08GetDepth\x12\".oasis_torchrl.sim.v1.DepthRequest\x1a#.oasis_torchrl.sim.v1.DepthResponse\x12S\n\x08GetScene\x12\".oasis_torchrl.sim.v1.SceneRequest\x1a#.oasis_torchrl.sim.v1.SceneResponseb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1doasis_torchrl/proto/sim.proto\x12\x14oasis_torchrl.sim.v1\"\xbe\x03\n\nFrameTruth\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\x12\r\n\x05speed\x18\x04 \x01(\x01\x12\x10\n\x08\x64istance\x18\x05 \x01(\x01\x12\x10\n\x08progress\x18\x06 \x01(\x01\x12\x16\n\x0elateral_offset\x18\x07 \x01(\x01\x12\x15\n\rheading_error\x18\x08 \x01(\x01\x12\x10\n\x08\x63ollided\x18\t \x01(\x08\x12\x19\n\x11obstacle_distance\x18\n \x01(\x01\x12\x10\n\x08off_road\x18\x0b \x01(\x08\x12\x1e\n\x16obstacle_distance_left\x18\x0c \x01(\x01\x12\x1f\n\x17obstacle_distance_right\x18\r \x01(\x01\x12\x13\n\x0blane_offset\x18\x0e \x01(\x01\x12\x12\n\nlanes_left\x18\x0f \x01(\r\x12\x13\n\x0blanes_right\x18\x10 \x01(\r\x12\x1e\n\x16lane_obstacle_distance\x18\x11 \x01(\x01\x12#\n\x1blane_obstacle_distance_left\x18\x12 \x01(\x01\x12$\n\x1clane_obstacle_distance_right\x18\x13 \x01(\x01\"z\n\nInferTruth\x12\x14\n\x0csequence_num\x18\x01 \x01(\x04\x12\x0c\n\x04seed\x18\x02 \x01(\x04\x12\x30\n\x06\x66rames\x18\x03 \x03(\x0b\x32 .oasis_torchrl.sim.v1.FrameTruth\x12\x16\n\x0e\x65xpert_actions\x18\x04 \x03(\x02\"\"\n\x0c\x44\x65pthRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\"J\n\x08\x44\x65pthMap\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0e\n\x06height\x18\x02 \x01(\r\x12\r\n\x05width\x18\x03 \x01(\r\x12\x11\n\tdepth_f16\x18\x04 \x01(\x0c\"S\n\rDepthResponse\x12\x14\n\x0csequence_num\x18\x01 \x01(\x04\x12,\n\x04maps\x18\x02 \x03(\x0b\x32\x1e.oasis_torchrl.sim.v1.DepthMap\"\"\n\x0cSceneRequest\x12\x12\n\nsession_id\x18\x01 \x01(\t\"^\n\x08Obstacle\x12\x0c\n\x04kind\x18\x01 \x01(\t\x12\t\n\x01x\x18\x02 \x01(\x01\x12\t\n\x01y\x18\x03 \x01(\x01\x12\x0f\n\x07heading\x18\x04 \x01(\x01\x12\x0e\n\x06length\x18\x05 \x01(\x01\x12\r\n\x05width\x18\x06 \x01(\x01\"\xef\x01\n\rSceneResponse\x12\x0e\n\x06prompt\x18\x01 \x01(\t\x12\x0c\n\x04seed\x18\x02 \x01(\x04\x12\x14\n\x0c\x63\x65nterline_x\x18\x03 \x03(\x01\x12\x14\n\x0c\x63\x65nterline_y\x18\x04 \x03(\x01\x12\x17\n\x0froad_half_width\x18\x05 \x01(\x01\x12\r\n\x05lanes\x18\x06 \x01(\r\x12\x31\n\tobstacles\x18\x07 \x03(\x0b\x32\x1e.oasis_torchrl.sim.v1.Obstacle\x12\x12\n\nego_length\x18\x08 \x01(\x01\x12\x11\n\tego_width\x18\t \x01(\x01\x12\x12\n\nlane_width\x18\n \x01(\x01\x32\xb6\x01\n\nSimService\x12S\n\x08GetDepth\x12\".oasis_torchrl.sim.v1.DepthRequest\x1a#.oasis_torchrl.sim.v1.DepthResponse\x12S\n\x08GetScene\x12\".oasis_torchrl.sim.v1.SceneRequest\x1a#.oasis_torchrl.sim.v1.SceneResponseb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -32,21 +32,21 @@ _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'oasis_torchrl.proto.sim_pb2
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
   _globals['_FRAMETRUTH']._serialized_start=56
-  _globals['_FRAMETRUTH']._serialized_end=333
-  _globals['_INFERTRUTH']._serialized_start=335
-  _globals['_INFERTRUTH']._serialized_end=457
-  _globals['_DEPTHREQUEST']._serialized_start=459
-  _globals['_DEPTHREQUEST']._serialized_end=493
-  _globals['_DEPTHMAP']._serialized_start=495
-  _globals['_DEPTHMAP']._serialized_end=569
-  _globals['_DEPTHRESPONSE']._serialized_start=571
-  _globals['_DEPTHRESPONSE']._serialized_end=654
-  _globals['_SCENEREQUEST']._serialized_start=656
-  _globals['_SCENEREQUEST']._serialized_end=690
-  _globals['_OBSTACLE']._serialized_start=692
-  _globals['_OBSTACLE']._serialized_end=786
-  _globals['_SCENERESPONSE']._serialized_start=789
-  _globals['_SCENERESPONSE']._serialized_end=1028
-  _globals['_SIMSERVICE']._serialized_start=1031
-  _globals['_SIMSERVICE']._serialized_end=1213
+  _globals['_FRAMETRUTH']._serialized_end=502
+  _globals['_INFERTRUTH']._serialized_start=504
+  _globals['_INFERTRUTH']._serialized_end=626
+  _globals['_DEPTHREQUEST']._serialized_start=628
+  _globals['_DEPTHREQUEST']._serialized_end=662
+  _globals['_DEPTHMAP']._serialized_start=664
+  _globals['_DEPTHMAP']._serialized_end=738
+  _globals['_DEPTHRESPONSE']._serialized_start=740
+  _globals['_DEPTHRESPONSE']._serialized_end=823
+  _globals['_SCENEREQUEST']._serialized_start=825
+  _globals['_SCENEREQUEST']._serialized_end=859
+  _globals['_OBSTACLE']._serialized_start=861
+  _globals['_OBSTACLE']._serialized_end=955
+  _globals['_SCENERESPONSE']._serialized_start=958
+  _globals['_SCENERESPONSE']._serialized_end=1197
+  _globals['_SIMSERVICE']._serialized_start=1200
+  _globals['_SIMSERVICE']._serialized_end=1382
 # @@protoc_insertion_point(module_scope)

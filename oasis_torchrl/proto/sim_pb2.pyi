@@ -7,7 +7,7 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class FrameTruth(_message.Message):
-    __slots__ = ("x", "y", "heading", "speed", "distance", "progress", "lateral_offset", "heading_error", "collided", "obstacle_distance", "off_road", "obstacle_distance_left", "obstacle_distance_right")
+    __slots__ = ("x", "y", "heading", "speed", "distance", "progress", "lateral_offset", "heading_error", "collided", "obstacle_distance", "off_road", "obstacle_distance_left", "obstacle_distance_right", "lane_offset", "lanes_left", "lanes_right", "lane_obstacle_distance", "lane_obstacle_distance_left", "lane_obstacle_distance_right")
     X_FIELD_NUMBER: _ClassVar[int]
     Y_FIELD_NUMBER: _ClassVar[int]
     HEADING_FIELD_NUMBER: _ClassVar[int]
@@ -21,6 +21,12 @@ class FrameTruth(_message.Message):
     OFF_ROAD_FIELD_NUMBER: _ClassVar[int]
     OBSTACLE_DISTANCE_LEFT_FIELD_NUMBER: _ClassVar[int]
     OBSTACLE_DISTANCE_RIGHT_FIELD_NUMBER: _ClassVar[int]
+    LANE_OFFSET_FIELD_NUMBER: _ClassVar[int]
+    LANES_LEFT_FIELD_NUMBER: _ClassVar[int]
+    LANES_RIGHT_FIELD_NUMBER: _ClassVar[int]
+    LANE_OBSTACLE_DISTANCE_FIELD_NUMBER: _ClassVar[int]
+    LANE_OBSTACLE_DISTANCE_LEFT_FIELD_NUMBER: _ClassVar[int]
+    LANE_OBSTACLE_DISTANCE_RIGHT_FIELD_NUMBER: _ClassVar[int]
     x: float
     y: float
     heading: float
@@ -34,7 +40,13 @@ class FrameTruth(_message.Message):
     off_road: bool
     obstacle_distance_left: float
     obstacle_distance_right: float
-    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., heading: _Optional[float] = ..., speed: _Optional[float] = ..., distance: _Optional[float] = ..., progress: _Optional[float] = ..., lateral_offset: _Optional[float] = ..., heading_error: _Optional[float] = ..., collided: _Optional[bool] = ..., obstacle_distance: _Optional[float] = ..., off_road: _Optional[bool] = ..., obstacle_distance_left: _Optional[float] = ..., obstacle_distance_right: _Optional[float] = ...) -> None: ...
+    lane_offset: float
+    lanes_left: int
+    lanes_right: int
+    lane_obstacle_distance: float
+    lane_obstacle_distance_left: float
+    lane_obstacle_distance_right: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., heading: _Optional[float] = ..., speed: _Optional[float] = ..., distance: _Optional[float] = ..., progress: _Optional[float] = ..., lateral_offset: _Optional[float] = ..., heading_error: _Optional[float] = ..., collided: _Optional[bool] = ..., obstacle_distance: _Optional[float] = ..., off_road: _Optional[bool] = ..., obstacle_distance_left: _Optional[float] = ..., obstacle_distance_right: _Optional[float] = ..., lane_offset: _Optional[float] = ..., lanes_left: _Optional[int] = ..., lanes_right: _Optional[int] = ..., lane_obstacle_distance: _Optional[float] = ..., lane_obstacle_distance_left: _Optional[float] = ..., lane_obstacle_distance_right: _Optional[float] = ...) -> None: ...
 
 class InferTruth(_message.Message):
     __slots__ = ("sequence_num", "seed", "frames", "expert_actions")

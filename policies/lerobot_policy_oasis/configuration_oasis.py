@@ -111,11 +111,12 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
             obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
         aux_weight: weight of an auxiliary loss (0: none): the network's auxiliary head
-            predicts each frame's privileged state (``privileged_state``: speed, lane offset,
-            heading error, obstacle distances ahead, left and right, recorded by the embedded
-            server) from the camera features, mean squared error. Dense labels on every frame
-            teach the encoder to see obstacles and free lanes, which the rare lane changes of
-            the action labels alone do not; at deployment the head is unused.
+            predicts each frame's privileged state (``privileged_state``: speed, offsets, heading
+            error, obstacle distances ahead in the car's path, its lane and the lanes beside it,
+            recorded by the embedded server) from the camera features, mean squared error.
+            Dense labels on every frame teach the encoder to see obstacles and free lanes, which
+            the rare lane changes of the action labels alone do not; at deployment the head is
+            unused.
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
 
     Example:

@@ -29,7 +29,7 @@ from torch import Tensor, nn
 
 from lerobot_policy_oasis.configuration_oasis import FRAME_SPACING, POLICY_TYPE, OasisConfig
 from oasis_torchrl.models import DrivingNet
-from oasis_torchrl.models.privileged import PRIVILEGED_KEY
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
 
@@ -173,4 +173,11 @@ class OasisPolicy(PreTrainedPolicy):
                 "with oasis-torchrl train bc (LeRobot's processors drop columns they do not "
                 "know), or aux_weight=0"
             )
-        return (self.model.predict_aux(features) - target.to(features.dtype)).square().mean(-1)
+        predicted = self.model.predict_aux(features)
+        if target.shape[-1] != predicted.shape[-1]:
+            raise ValueError(
+                f"the dataset's {PRIVILEGED_KEY} has {target.shape[-1]} numbers per frame, the "
+                f"auxiliary head predicts {predicted.shape[-1]} ({', '.join(PRIVILEGED_FIELDS)}): "
+                "record the dataset again with this version, or train with aux_weight=0"
+            )
+        return (predicted - target.to(features.dtype)).square().mean(-1)

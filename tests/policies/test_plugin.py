@@ -142,6 +142,9 @@ def test_the_auxiliary_loss_predicts_the_privileged_state() -> None:
     batch["action"] = policy.predict_action_chunk(batch).clone()
     with pytest.raises(KeyError, match=r"needs batch\['privileged_state'\].*aux_weight=0"):
         policy.forward(batch)
+    batch[PRIVILEGED_KEY] = torch.rand(2, 6)  # a dataset recorded with an older state
+    with pytest.raises(ValueError, match="has 6 numbers per frame, the auxiliary head predicts 10"):
+        policy.forward(batch)
     batch[PRIVILEGED_KEY] = torch.rand(2, len(PRIVILEGED_FIELDS))
     loss, info = policy.forward(batch)
     expected = (policy.model.predict_aux(policy._features(batch)) - batch[PRIVILEGED_KEY]).square()

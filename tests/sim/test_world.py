@@ -8,7 +8,8 @@ import math
 import pytest
 
 from oasis_torchrl.sim.scene import Scene, build_scene, obstacles_at
-from oasis_torchrl.sim.world import World
+from oasis_torchrl.sim.vehicle import VehicleState
+from oasis_torchrl.sim.world import FrameTruth, World
 
 
 def scene_with_car_ahead(distance: float) -> Scene:
@@ -80,3 +81,42 @@ def test_side_distances_report_the_lanes_beside_the_car() -> None:
         if truth.progress > 40.0:
             break
     assert truth.obstacle_distance_left == math.inf and not truth.collided
+
+
+def test_lane_distances_follow_the_lanes_not_the_car() -> None:
+    scene = build_scene("rural", 0)  # two lanes: the car starts in the right one
+    style = scene.style
+    right_lane, left_lane = style.lane_offset(0), style.lane_offset(1)
+    scene = scene.with_obstacles(obstacles_at(scene.road, ["car"], [30.0], [left_lane]))
+    world = World(scene, dt=0.05)
+    ahead = 30.0 - 2.2 - 2.25  # obstacle centre minus its half length and the car's
+
+    def standing_at(lateral: float) -> FrameTruth:
+        x, y, heading = scene.road.pose_at(0.0, lateral)
+        world.state = VehicleState(float(x), float(y), float(heading), 0.0)
+        return world.advance(0.0, 0.0)
+
+    start = standing_at(right_lane)
+    assert (start.lanes_left, start.lanes_right, start.lane_offset) == (1, 0, pytest.approx(0))
+    assert start.lane_obstacle_distance == math.inf
+    assert start.lane_obstacle_distance_left == pytest.approx(ahead, abs=0.3)
+    assert start.lane_obstacle_distance_right == 0.0  # no lane there
+    # Most of the way to the lane line: the car's path grazes the obstacle, its lane is clear and
+    # the lane to the left is still the one with the obstacle.
+    shifted = standing_at(right_lane + 0.45 * style.lane_width)
+    assert shifted.lane_offset == pytest.approx(0.45 * style.lane_width)
+    assert shifted.obstacle_distance == pytest.approx(ahead, abs=0.3)
+    assert shifted.lane_obstacle_distance == math.inf
+    assert shifted.lane_obstacle_distance_left == pytest.approx(ahead, abs=0.3)
+    # Past the line the car is in the left lane: the obstacle is in its own lane now.
+    crossed = standing_at(right_lane + 0.55 * style.lane_width)
+    assert (crossed.lanes_left, crossed.lanes_right) == (0, 1)
+    assert crossed.lane_offset == pytest.approx(-0.45 * style.lane_width)
+    assert crossed.lane_obstacle_distance == pytest.approx(ahead, abs=0.3)
+    assert crossed.lane_obstacle_distance_left == 0.0
+    assert crossed.lane_obstacle_distance_right == math.inf
+    message = crossed.to_proto()
+    assert (message.lanes_right, message.lane_obstacle_distance) == (
+        1,
+        crossed.lane_obstacle_distance,
+    )

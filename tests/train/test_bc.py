@@ -9,6 +9,7 @@ from lerobot_policy_oasis import OasisConfig, OasisPolicy
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers.folders import load_net
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 
@@ -60,7 +61,7 @@ def test_the_auxiliary_loss_trains_the_auxiliary_head(tiny_dataset: Path, tmp_pa
     logged = (tmp_path / "logs" / "bc" / "scalars" / "bc" / "aux_loss.csv").read_text().split()
     assert len(logged) == 4 and all(float(line.split(",")[1]) > 0 for line in logged)
     net = load_net(result.policy_dir)  # a policy folder with its auxiliary head still loads
-    assert net.config.aux_outputs == 6
+    assert net.config.aux_outputs == len(PRIVILEGED_FIELDS)
 
 
 def test_a_warm_start_goes_on_with_the_auxiliary_head(tiny_dataset: Path, tmp_path: Path) -> None:

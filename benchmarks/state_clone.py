@@ -1,0 +1,172 @@
+"""What a clone needs to know: behaviour cloning of the autopilot from privileged state vectors.
+
+The camera clones learn, beside the actions, to predict the simulator's privileged state (the
+auxiliary loss), and PPO's critic reads it. Which numbers that state holds decides what the
+encoder is taught to see. This script asks how far a clone gets that is handed such a state
+exactly, with no perception at all: if even it cannot imitate the autopilot, the state leaves out
+what the autopilot decides on.
+
+Every run records autopilot demonstrations on the main job's training scenes
+(``TRAINING_PROMPTS``) with the physics alone (no frames rendered), each executed action with
+Gaussian noise so the demonstrations show recoveries, and fits one MLP per state set and seed to
+the autopilot's chunk of 4 actions (L1 loss, as a unimodal clone). The clones then drive the
+learning benchmark's evaluation (urban, 32 episodes on seed 1000, up to 150 chunks) beside the
+autopilot on the same episodes; the figure is the mean distance before a collision. State sets:
+
+- ``car_centred``: the privileged state before this script (speed, lateral offset, heading
+  error, obstacle distance in the car's path, in strips one lane width left and right of the car);
+- ``lane_centred``: :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (the offset in the
+  car's lane, the lanes on each side, obstacle distances in the car's lane and the lanes beside).
+
+Usage: ``python benchmarks/state_clone.py [--demos 64 --seeds 0 1]``; prints JSON (about 10 min
+on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from dataclasses import asdict
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from oasis_torchrl.config.pipeline import TRAINING_PROMPTS
+from oasis_torchrl.envs.episodes import EpisodePlanner
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, privileged_state
+from oasis_torchrl.sim.autopilot import Autopilot
+from oasis_torchrl.sim.simulator import Simulator
+from oasis_torchrl.sim.world import FrameTruth
+
+STATE_SETS = {
+    "car_centred": (
+        "speed",
+        "lateral_offset",
+        "heading_error",
+        "obstacle_distance",
+        "obstacle_distance_left",
+        "obstacle_distance_right",
+    ),
+    "lane_centred": PRIVILEGED_FIELDS,
+}
+
+
+def state_of(truth: FrameTruth, fields: Sequence[str]) -> torch.Tensor:
+    """``[len(fields)]``: the scaled privileged state of one frame's truth."""
+    values = {name: torch.tensor(float(value)) for name, value in asdict(truth).items()}
+    return privileged_state(values, fields)
+
+
+def record(
+    episodes: int, max_steps: int, noise: float, seed: int
+) -> list[tuple[FrameTruth, np.ndarray]]:
+    """Autopilot drives on the training scenes: the truth at every chunk start and the chunk the
+    autopilot chose there; the executed chunk carries Gaussian noise (std ``noise``)."""
+    rng = np.random.default_rng(seed)
+    simulator = Simulator(96, 64)
+    rows = []
+    for episode in tqdm(range(episodes), desc="demonstrations", unit="episode"):
+        simulator.reset(TRAINING_PROMPTS[episode % len(TRAINING_PROMPTS)], int(rng.integers(2**62)))
+        pilot = Autopilot(simulator)
+        for _ in range(max_steps):
+            truth, chunk = simulator.truth, pilot.act()
+            rows.append((truth, chunk))
+            executed = np.clip(chunk + noise * rng.standard_normal(chunk.shape), -1.0, 1.0)
+            if simulator.step(executed.astype(np.float32), render=False).truth[-1].collided:
+                break
+    return rows
+
+
+def fit(
+    rows: list[tuple[FrameTruth, np.ndarray]], fields: Sequence[str], steps: int, seed: int
+) -> nn.Module:
+    """An MLP from the state to the chunk (tanh-bounded), fitted with L1 on minibatches of 256."""
+    torch.manual_seed(seed)
+    states = torch.stack([state_of(truth, fields) for truth, _ in rows])
+    chunks = torch.tensor(np.stack([chunk.reshape(-1) for _, chunk in rows]))
+    net = nn.Sequential(
+        nn.Linear(len(fields), 256),
+        nn.ReLU(),
+        nn.Linear(256, 256),
+        nn.ReLU(),
+        nn.Linear(256, chunks.shape[1]),
+        nn.Tanh(),
+    )
+    optimiser = torch.optim.Adam(net.parameters(), lr=1e-3)
+    for _ in range(steps):
+        batch = torch.randint(0, len(states), (256,))
+        loss = (net(states[batch]) - chunks[batch]).abs().mean()
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    return net.eval()
+
+
+def drive(
+    driver: nn.Module | None, fields: Sequence[str], prompt: str, seed: int, max_steps: int
+) -> tuple[float, bool]:
+    """Distance and collision of one episode of a clone (``None``: the autopilot)."""
+    simulator = Simulator(96, 64)
+    simulator.reset(prompt, seed)
+    pilot = Autopilot(simulator)
+    for _ in range(max_steps):
+        chunk = pilot.act()
+        if driver is not None:
+            with torch.no_grad():
+                chunk = driver(state_of(simulator.truth, fields)[None])[0].reshape(-1, 2).numpy()
+        truth = simulator.step(chunk.astype(np.float32), render=False).truth[-1]
+        if truth.collided:
+            return truth.distance, True
+    return simulator.truth.distance, False
+
+
+def evaluate(
+    driver: nn.Module | None, fields: Sequence[str], args: argparse.Namespace
+) -> dict[str, float]:
+    """Mean distance and collision rate on the evaluation's episodes (the env's own seeding)."""
+    planner = EpisodePlanner(args.eval_prompt, num_rows=args.episodes)
+    planner.set_seed(args.eval_seed)
+    prompts, seeds = planner.next_episodes(range(args.episodes))
+    results = [
+        drive(driver, fields, prompt, seed, args.max_steps)
+        for prompt, seed in zip(prompts, seeds, strict=True)
+    ]
+    return {
+        "mean_distance": float(np.mean([distance for distance, _ in results])),
+        "collision_rate": float(np.mean([hit for _, hit in results])),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--demos", type=int, default=64, help="demonstration episodes")
+    parser.add_argument("--noise", type=float, default=0.05, help="executed-action noise std")
+    parser.add_argument("--steps", type=int, default=4000, help="training steps per clone")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="one run per seed")
+    parser.add_argument("--episodes", type=int, default=32)
+    parser.add_argument("--eval-seed", type=int, default=1000)
+    parser.add_argument("--eval-prompt", default="urban")
+    parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
+    args = parser.parse_args()
+
+    autopilot = evaluate(None, (), args)
+    report: dict[str, object] = {"settings": vars(args), "autopilot": autopilot}
+    for seed in args.seeds:
+        rows = record(args.demos, args.max_steps, args.noise, seed)
+        for name, fields in STATE_SETS.items():
+            result = evaluate(fit(rows, fields, args.steps, seed), fields, args)
+            result["vs_autopilot"] = result["mean_distance"] / autopilot["mean_distance"]
+            report.setdefault(name, {"fields": list(fields), "runs": []})["runs"].append(
+                {"seed": seed, **result}
+            )
+    for name in STATE_SETS:
+        runs = report[name]["runs"]
+        report[name]["mean_vs_autopilot"] = float(np.mean([run["vs_autopilot"] for run in runs]))
+    print(json.dumps(report, indent=2))
+
+
+if __name__ == "__main__":
+    main()
