@@ -18,8 +18,13 @@ autopilot on the same episodes; the figure is the mean distance before a collisi
 - ``lane_centred``: :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (the offset in the
   car's lane, the lanes on each side, obstacle distances in the car's lane and the lanes beside).
 
-Usage: ``python benchmarks/state_clone.py [--demos 64 --seeds 0 1]``; prints JSON (about 10 min
-on 2 cores).
+With ``--camera-clone POLICY`` (a camera clone with its auxiliary head: a BC policy folder of
+the main job or the learning benchmark, e.g. ``bc/round_2/policy``), the lane-centred clones also
+drive on the state that camera clone's auxiliary head reads from the cameras, on the embedded
+server, beside the camera clone itself: how well the cameras tell the clone what it needs.
+
+Usage: ``python benchmarks/state_clone.py [--demos 64 --seeds 0 1 --camera-clone POLICY]``;
+prints JSON (about 10 min on 2 cores, and 3 min per run with a camera clone).
 """
 
 from __future__ import annotations
@@ -34,12 +39,18 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+from oasis_torchrl.config import load_config
 from oasis_torchrl.config.pipeline import TRAINING_PROMPTS
+from oasis_torchrl.drivers.folders import load_net
+from oasis_torchrl.drivers.policy import PolicyDriver
 from oasis_torchrl.envs.episodes import EpisodePlanner
+from oasis_torchrl.models import DrivingNet, observation_spec
+from oasis_torchrl.models.actor_critic import observation_keys
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, privileged_state
 from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.world import FrameTruth
+from oasis_torchrl.train.evaluate import Evaluator
 
 STATE_SETS = {
     "car_centred": (
@@ -140,6 +151,56 @@ def evaluate(
     }
 
 
+class PredictedStateDriver(nn.Module):
+    """A state clone that reads the state a camera network's auxiliary head predicts."""
+
+    def __init__(self, net: DrivingNet, state_clone: nn.Module) -> None:
+        super().__init__()
+        self.net, self.state_clone = net, state_clone
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        *images, state = inputs
+        predicted = self.net.predict_aux(self.net.features(images, state))
+        return self.state_clone(predicted).reshape(len(state), -1, 2)
+
+
+def evaluate_on_cameras(drivers: dict[str, PolicyDriver], args: argparse.Namespace) -> dict:
+    """Mean distance and collision rate of each driver on the embedded server, on the same
+    episodes as :func:`evaluate`."""
+    overrides = [f"eval.episodes={args.episodes}", f"eval.seeds=[{args.eval_seed}]"]
+    overrides += [f"eval.prompts=[{args.eval_prompt}]", f"eval.max_steps={args.max_steps}"]
+    cfg = load_config("demo", [*overrides, "progress=false"])
+    results = {}
+    for name, driver in drivers.items():
+        with Evaluator(
+            cfg.env, cfg.eval, image_size=driver.image_size, frame_stack=driver.frame_stack
+        ) as evaluator:
+            report = evaluator.evaluate(driver)
+        results[name] = {
+            "mean_distance": report.mean_distance,
+            "collision_rate": report.collision_rate,
+        }
+    return results
+
+
+def camera_drivers(path: str, state_clone: nn.Module) -> dict[str, PolicyDriver]:
+    """The camera clone at ``path`` and ``state_clone`` on its predicted state."""
+    net = load_net(path).eval()
+    if net.config.aux_outputs != len(PRIVILEGED_FIELDS):
+        raise ValueError(
+            f"{path} has no auxiliary head for the {len(PRIVILEGED_FIELDS)} privileged fields "
+            f"(aux_outputs={net.config.aux_outputs}): train it with policy.aux_weight > 0"
+        )
+    predicted = PolicyDriver(
+        PredictedStateDriver(net, state_clone),
+        in_keys=observation_keys(net),
+        image_size=tuple(net.config.image_size),
+        frame_stack=net.config.frames,
+        observation_spec=observation_spec(net),
+    )
+    return {"camera_clone": PolicyDriver.of_network(net), "on_predicted_state": predicted}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demos", type=int, default=64, help="demonstration episodes")
@@ -150,6 +211,7 @@ def main() -> None:
     parser.add_argument("--eval-seed", type=int, default=1000)
     parser.add_argument("--eval-prompt", default="urban")
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
+    parser.add_argument("--camera-clone", help="a camera clone's policy folder (see above)")
     args = parser.parse_args()
 
     autopilot = evaluate(None, (), args)
@@ -157,8 +219,12 @@ def main() -> None:
     for seed in args.seeds:
         rows = record(args.demos, args.max_steps, args.noise, seed)
         for name, fields in STATE_SETS.items():
-            result = evaluate(fit(rows, fields, args.steps, seed), fields, args)
+            clone = fit(rows, fields, args.steps, seed)
+            result = evaluate(clone, fields, args)
             result["vs_autopilot"] = result["mean_distance"] / autopilot["mean_distance"]
+            if args.camera_clone and fields == PRIVILEGED_FIELDS:
+                drivers = camera_drivers(args.camera_clone, clone)
+                result["cameras"] = evaluate_on_cameras(drivers, args)
             report.setdefault(name, {"fields": list(fields), "runs": []})["runs"].append(
                 {"seed": seed, **result}
             )
