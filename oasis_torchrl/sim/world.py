@@ -283,9 +283,9 @@ class World:
         left and the one to its right (0 where there is no such lane).
 
         Lane-centred, they say what a driver decides on (is my lane blocked, is the next one
-        open) the same way whatever the car's position within its lane; measured, a clone fed
-        these (with the lanes on each side and the offset in the lane) imitated the autopilot
-        far better than one fed the car-centred strips.
+        open) the same way whatever the car's position within its lane: a clone of the autopilot
+        fed these (with the lanes on each side and the offset in the lane) drove 96% of its
+        distance, one fed the car-centred strips 64% (``benchmarks/state_clone.py``).
         """
         style = self.scene.style
         lanes = np.array([lane, lane + 1, lane - 1])
