@@ -77,13 +77,13 @@ lock: venv-python $(STAMP)
 
 # The quick benchmarks (each a few minutes at most); the learning benchmark trains policies for
 # hours and has its own target.
-LEARNING_BENCH := benchmarks/learning.py
+LEARNING_BENCH := benchmarks/learning.py benchmarks/state_clone.py
 bench: venv-python $(STAMP)
 	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/*.py)); do \
 		$(PY) $$script; done
 
 bench-learning: venv-python $(STAMP)
-	$(PY) $(LEARNING_BENCH)
+	set -e; for script in $(LEARNING_BENCH); do $(PY) $$script; done
 
 # LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
 # the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).
