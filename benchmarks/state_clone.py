@@ -36,6 +36,7 @@ from dataclasses import asdict
 
 import numpy as np
 import torch
+from omegaconf import OmegaConf
 from torch import nn
 from tqdm import tqdm
 
@@ -167,9 +168,13 @@ class PredictedStateDriver(nn.Module):
 def evaluate_on_cameras(drivers: dict[str, PolicyDriver], args: argparse.Namespace) -> dict:
     """Mean distance and collision rate of each driver on the embedded server, on the same
     episodes as :func:`evaluate`."""
-    overrides = [f"eval.episodes={args.episodes}", f"eval.seeds=[{args.eval_seed}]"]
-    overrides += [f"eval.prompts=[{args.eval_prompt}]", f"eval.max_steps={args.max_steps}"]
-    cfg = load_config("demo", [*overrides, "progress=false"])
+    scenes = {
+        "prompts": [args.eval_prompt],
+        "episodes": args.episodes,
+        "seeds": [args.eval_seed],
+        "max_steps": args.max_steps,
+    }
+    cfg = OmegaConf.merge(load_config("demo", ["progress=false"]), {"eval": scenes})
     results = {}
     for name, driver in drivers.items():
         with Evaluator(
