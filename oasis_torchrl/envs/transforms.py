@@ -101,7 +101,7 @@ class ChunkFrameStack(Transform):
 
 
 class PrivilegedState(Transform):
-    """Writes ``"critic_inputs"`` ``[N, 6]``: the last frame's ground truth in
+    """Writes ``"critic_inputs"`` ``[N, len(PRIVILEGED_FIELDS)]``: the last frame's ground truth in
     :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (speed, offsets on the road
     and in the lane, the lanes beside, obstacle distances ahead in the car's path, its lane and
     the lanes left and right), scaled to about unit size

@@ -89,7 +89,7 @@ class Autopilot:
         world = self._simulator.world
         if world.scene is not self._scene or world.steps == 0:
             self._scene = world.scene
-            self._lane = self._nearest_lane(world.truth.lateral_offset)
+            self._lane = self._scene.style.nearest_lane(world.truth.lateral_offset)
         state = world.state
         actions = np.zeros((CHUNK, 2), dtype=np.float32)
         for index in range(CHUNK):
@@ -145,12 +145,6 @@ class Autopilot:
         ahead = s + np.linspace(0.0, 2.0 * abs(speed) + 20.0, 12)
         curvature = float(np.max(np.abs(road.curvature_at(ahead))))
         return math.sqrt(CURVE_ACCELERATION / max(curvature, 1e-6))
-
-    def _nearest_lane(self, lateral: float) -> int:
-        """The lane whose centre is nearest to lateral offset ``lateral``."""
-        style = self._require_scene().style
-        offsets = np.array([style.lane_offset(lane) for lane in range(style.lanes)])
-        return int(np.argmin(np.abs(offsets - lateral)))
 
     def _blocking(
         self, centre: float, s: float, behind: float, reach: float, clearance: float = CLEARANCE

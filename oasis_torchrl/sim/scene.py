@@ -38,6 +38,7 @@ import dataclasses
 import functools
 import hashlib
 import logging
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -182,6 +183,11 @@ class Style:
     def lane_offset(self, lane: int) -> float:
         """Lateral offset of the centre of ``lane`` (0 = rightmost), + is left."""
         return -self.half_lanes_width + (lane + 0.5) * self.lane_width
+
+    def nearest_lane(self, lateral: float) -> int:
+        """The lane whose centre line is nearest lateral offset ``lateral`` (0 = rightmost)."""
+        lane = math.floor((lateral + self.half_lanes_width) / self.lane_width)
+        return min(max(lane, 0), self.lanes - 1)
 
 
 def _keyword(words: list[str], table: dict[str, str]) -> str | None:

@@ -210,12 +210,6 @@ class World:
         s, lateral = self.scene.road.locate(self.state.x, self.state.y, iterations=2)
         return float(s), float(lateral)
 
-    def _lane(self) -> int:
-        """The car's lane: the one whose centre line is nearest its centre (0 = rightmost)."""
-        style = self.scene.style
-        lane = math.floor((self._road_position[1] + style.half_lanes_width) / style.lane_width)
-        return min(max(lane, 0), style.lanes - 1)
-
     def _nearby(self, reach: float) -> slice:
         """Obstacles whose ``s`` is within ``reach`` metres of the car's."""
         s = self._road_position[0]
@@ -318,7 +312,7 @@ class World:
         _, _, road_heading = self.scene.road.pose_at(s)
         near = self._nearby(CORRIDOR_REACH)
         left, right = self._side_distances(near)
-        lane = self._lane()
+        lane = self.scene.style.nearest_lane(lateral)
         in_lane, lane_left, lane_right = self._lane_distances(lane, near)
         lanes = self.scene.style.lanes
         return FrameTruth(
