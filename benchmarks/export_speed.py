@@ -3,9 +3,9 @@
 Records one rollout from the embedded server (``all_frames=True``, autopilot, every row one
 episode of ``--steps`` chunks), then writes it several ways, each timed best of ``--repeats``:
 
-- ``floor``: PyAV alone: one MP4 per episode and camera, LeRobot's codec settings (``g=2``,
-  ``crf=30``, ``yuv420p``, libsvtav1 preset 12), one encoder thread per camera as LeRobot runs
-  them, frames from in-memory arrays;
+- ``floor``: PyAV alone: one MP4 per episode and camera, the recorder's codec settings (LeRobot's
+  ``g=2``, ``yuv420p``, libsvtav1 preset 12, at the project's ``crf`` unless ``codec:crf`` asks
+  for another), one encoder thread per camera as LeRobot runs them, frames from in-memory arrays;
 - ``lerobot``: ``LeRobotDataset.create`` + ``add_frame`` + ``save_episode`` + ``finalize`` on
   rows already in memory (LeRobot's own overhead on top of the floor);
 - ``recorder``: :class:`~oasis_torchrl.data.LeRobotRecorder` on the rollout TensorDict (adds our
@@ -16,8 +16,8 @@ threads (PIL round trip, running image statistics), its per-episode work (parque
 metadata, MP4 concatenation), and ours (mapping, spill write and read-back), plus the PSNR of
 the stored video. Throughput is in dataset rows per second (a row = one frame per camera).
 
-Usage: ``python benchmarks/export_speed.py [--steps 12 --num-envs 2 --codecs h264,libsvtav1]``;
-prints JSON.
+Usage: ``python benchmarks/export_speed.py [--steps 12 --num-envs 2 --codecs h264,libsvtav1]``
+(``--codecs h264:30,h264`` compares LeRobot's quality with the project's); prints JSON.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from pathlib import Path
 import av
 import numpy as np
 import torch
+from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.compute_stats import RunningQuantileStats, auto_downsample_height_width
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from PIL import Image
@@ -77,8 +78,13 @@ def best_of(repeats: int, run: Callable[[], float]) -> float:
     return min(run() for _ in range(repeats))
 
 
-def _encode_camera(frames: np.ndarray, path: Path, vcodec: str) -> None:
-    encoder = camera_encoder(vcodec)  # LeRobot's settings, as its encoder threads use them
+def codec_settings(spec: str) -> RGBEncoderConfig:
+    """``"h264"`` (the project's quality) or ``"h264:30"`` (at crf 30) as encoder settings."""
+    vcodec, _, crf = spec.partition(":")
+    return camera_encoder(vcodec, float(crf)) if crf else camera_encoder(vcodec)
+
+
+def _encode_camera(frames: np.ndarray, path: Path, encoder: RGBEncoderConfig) -> None:
     with av.open(str(path), "w") as container:
         options = encoder.get_codec_options(as_strings=True)
         stream = container.add_stream(encoder.vcodec, FPS, options=options)
@@ -92,13 +98,15 @@ def _encode_camera(frames: np.ndarray, path: Path, vcodec: str) -> None:
         container.mux(stream.encode())
 
 
-def time_floor(episodes: list[dict[str, np.ndarray]], vcodec: str, out: Path) -> float:
+def time_floor(
+    episodes: list[dict[str, np.ndarray]], encoder: RGBEncoderConfig, out: Path
+) -> float:
     """PyAV alone, one thread per camera, episode after episode."""
     start = time.perf_counter()
     for number, images in enumerate(episodes):
         threads = [
             threading.Thread(
-                target=_encode_camera, args=(frames, out / f"{number}_{k}.mp4", vcodec)
+                target=_encode_camera, args=(frames, out / f"{number}_{k}.mp4", encoder)
             )
             for k, frames in enumerate(images.values())
         ]
@@ -110,11 +118,14 @@ def time_floor(episodes: list[dict[str, np.ndarray]], vcodec: str, out: Path) ->
 
 
 def time_lerobot(
-    episodes: list[list[dict[str, np.ndarray]]], features: dict, vcodec: str, root: Path
+    episodes: list[list[dict[str, np.ndarray]]],
+    features: dict,
+    encoder: RGBEncoderConfig,
+    root: Path,
 ) -> dict[str, float]:
     """LeRobot's API on in-memory rows; also times ``save_episode`` within the total."""
     start = time.perf_counter()
-    dataset = open_dataset(root, features, FPS, vcodec=vcodec)
+    dataset = open_dataset(root, features, FPS, vcodec=encoder.vcodec, crf=encoder.crf)
     saving = 0.0
     save_episode = dataset.save_episode
 
@@ -133,9 +144,9 @@ def time_lerobot(
     return {"total_s": end - start, "save_episode_s": saving, "finalize_s": end - finalize_start}
 
 
-def time_recorder(rollout: TensorDictBase, vcodec: str, root: Path) -> float:
+def time_recorder(rollout: TensorDictBase, encoder: RGBEncoderConfig, root: Path) -> float:
     start = time.perf_counter()
-    with LeRobotRecorder(root, vcodec=vcodec) as recorder:
+    with LeRobotRecorder(root, vcodec=encoder.vcodec, crf=encoder.crf) as recorder:
         recorder.write(rollout)
     return time.perf_counter() - start
 
@@ -208,7 +219,9 @@ def stored_psnr(root: Path, rollout: TensorDictBase) -> float:
     return round(float(np.mean(values)), 2)
 
 
-def benchmark_codec(rollout: TensorDictBase, vcodec: str, repeats: int, work: Path) -> dict:
+def benchmark_codec(
+    rollout: TensorDictBase, encoder: RGBEncoderConfig, repeats: int, work: Path
+) -> dict:
     layout = infer_layout(rollout)
     rows = batch_to_rows(rollout, layout)
     count, steps = rows.shape
@@ -233,13 +246,13 @@ def benchmark_codec(rollout: TensorDictBase, vcodec: str, repeats: int, work: Pa
 
     floor_dir = work / "floor"
     floor_dir.mkdir(exist_ok=True)
-    floor = best_of(repeats, lambda: time_floor(images, vcodec, floor_dir))
+    floor = best_of(repeats, lambda: time_floor(images, encoder, floor_dir))
     features = build_features(layout)
     lerobot = min(
-        (time_lerobot(episodes, features, vcodec, fresh("lerobot")) for _ in range(repeats)),
+        (time_lerobot(episodes, features, encoder, fresh("lerobot")) for _ in range(repeats)),
         key=lambda timing: timing["total_s"],
     )
-    recorder = best_of(repeats, lambda: time_recorder(rollout, vcodec, fresh("recorder")))
+    recorder = best_of(repeats, lambda: time_recorder(rollout, encoder, fresh("recorder")))
     rate = lambda seconds: round(total_rows / seconds, 1)  # noqa: E731
     return {
         "rows": total_rows,
@@ -276,7 +289,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=12, help="chunks per episode")
     parser.add_argument("--width", type=int, default=768)
     parser.add_argument("--height", type=int, default=512)
-    parser.add_argument("--codecs", default="h264,libsvtav1")
+    parser.add_argument(
+        "--codecs", default="h264,libsvtav1", help="codec[:crf],...; default crf: the project's"
+    )
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     av.logging.set_libav_level(av.logging.ERROR)
@@ -286,7 +301,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="export-bench-"))
     try:
         results = {
-            codec: benchmark_codec(rollout, codec, args.repeats, work)
+            codec: benchmark_codec(rollout, codec_settings(codec), args.repeats, work)
             for codec in args.codecs.split(",")
         }
         frame = rollout["pixels", "front"][0, 0, -1].numpy()

@@ -49,6 +49,7 @@ def run(cfg: DictConfig) -> int:
                 source_size=tuple(cfg.source_size),
                 image_size=None if cfg.image_size is None else tuple(cfg.image_size),
                 vcodec=cfg.vcodec,
+                crf=cfg.crf,
                 append=cfg.append,
                 on_episode=lambda episode, rows: bar.update(1),
             )

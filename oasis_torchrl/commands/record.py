@@ -60,9 +60,13 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
 
 
 def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:
-    """How the episodes are stored, in one dataset or in shards."""
+    """How the episodes are stored, in one dataset or in shards; a codec or quality the
+    encoder cannot use fails here, before any env or worker starts."""
+    from oasis_torchrl.data.writer import camera_encoder
+
+    camera_encoder(cfg.vcodec, cfg.crf)
     size = None if cfg.image_size is None else tuple(cfg.image_size)
-    return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec}
+    return {"fps": cfg.env.server.fps, "image_size": size, "vcodec": cfg.vcodec, "crf": cfg.crf}
 
 
 def _make_env(cfg: RecordConfig, driver: Driver) -> TransformedEnv:
@@ -86,6 +90,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from oasis_torchrl.data import LeRobotRecorder
     from oasis_torchrl.train.driving import drive
 
+    storage = _recorder_kwargs(cfg)
     driver = driver_spec(cfg)()
     env = _make_env(cfg, driver)
     recorder = LeRobotRecorder(
@@ -94,7 +99,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
         append=cfg.append,
         max_episodes=cfg.episodes,
         keep_unfinished=False,
-        **_recorder_kwargs(cfg),
+        **storage,
     )
     try:
         with recorder, tqdm(total=cfg.episodes, unit="episode", desc="recording") as bar:

@@ -15,6 +15,15 @@ from oasis_torchrl.protocol import FPS
 _SIZE = re.compile(r"^(\d+)x(\d+)$")
 ROWS = ("frame", "chunk")
 DEFAULT_VCODEC = "h264"
+"""libx264 through PyAV: faster than LeRobot's default libsvtav1 at LeRobot's settings, at a
+somewhat lower quality, and decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
+measures both; BENCHMARKS.md has the figures)."""
+DEFAULT_CRF = 18
+"""Quality of the stored video (lower is better and larger; LeRobot's default is 30). A policy
+trains on the stored frames and acts on the frames the world streams, so the two must look
+alike. At the policy's 96x64, 30 smeared the obstacles on the horizon (a few pixels each): 25 dB
+PSNR against the streamed frames, where 18 keeps 29 dB (4:2:0 colour alone caps it near 30) for
+about twice the bytes (BENCHMARKS.md, "Stored video quality")."""
 
 
 def parse_size(text: str) -> list[int]:
@@ -45,6 +54,9 @@ class DatasetOutputConfig:
     vcodec: str = option(
         DEFAULT_VCODEC,
         help="video codec: h264 (fast), libsvtav1 (LeRobot's default, slow), hevc",
+    )
+    crf: float = option(
+        DEFAULT_CRF, help="video quality, lower is better and larger (LeRobot's default: 30)"
     )
     append: bool = option(False, help="add episodes to an existing dataset")
 

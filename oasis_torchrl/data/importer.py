@@ -28,13 +28,14 @@ import torch
 from lerobot.utils.constants import ACTION, DONE, OBS_STATE
 from PIL import Image
 
+from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.features import (
     DatasetLayout,
     build_features,
     image_key,
 )
 from oasis_torchrl.data.images import resize_frames
-from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, write_episode
+from oasis_torchrl.data.writer import open_dataset, write_episode
 from oasis_torchrl.protocol import CAMERAS, CHUNK, FPS
 
 logger = logging.getLogger(__name__)
@@ -263,6 +264,7 @@ def import_recordings(
     source_size: tuple[int, int] = SOURCE_SIZE,
     image_size: tuple[int, int] | None = None,
     vcodec: str = DEFAULT_VCODEC,
+    crf: float = DEFAULT_CRF,
     append: bool = False,
     on_episode: Callable[[Path, int], None] | None = None,
 ) -> ImportReport:
@@ -278,6 +280,7 @@ def import_recordings(
         source_size: ``(height, width)`` every frame must have.
         image_size: stored ``(height, width)`` (even); default ``source_size``.
         vcodec: video codec.
+        crf: video quality (lower is better).
         append: add the episodes to the dataset at ``root``.
         on_episode: called as ``on_episode(folder, rows)`` after each episode (0 rows: skipped).
 
@@ -310,6 +313,7 @@ def import_recordings(
                         fps // CHUNK,
                         repo_id=repo_id,
                         vcodec=vcodec,
+                        crf=crf,
                         append=append,
                     )
                 rows = write_episode(

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from tensordict import TensorDictBase
 
+from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.chunk_rows import (
     RowBatch,
     batch_to_rows,
@@ -30,7 +31,7 @@ from oasis_torchrl.data.features import (
     build_features,
     check_columns,
 )
-from oasis_torchrl.data.writer import DEFAULT_VCODEC, open_dataset, whole_fps, write_episode
+from oasis_torchrl.data.writer import camera_encoder, open_dataset, whole_fps, write_episode
 from oasis_torchrl.protocol import CHUNK, FPS
 
 if TYPE_CHECKING:
@@ -59,6 +60,7 @@ class LeRobotRecorder:
         fps: world-model frame rate of the run.
         image_size: stored ``(height, width)`` (even); default: full resolution.
         vcodec: video codec (``"h264"``, ``"libsvtav1"``, ``"hevc"``).
+        crf: video quality (lower is better; :data:`~oasis_torchrl.data.writer.DEFAULT_CRF`).
         append: add episodes to the dataset at ``root``.
         max_episodes: stop recording after this many episodes (see :attr:`full`).
         keep_unfinished: on a clean :meth:`close`, also save the episodes still running.
@@ -88,6 +90,7 @@ class LeRobotRecorder:
         fps: float = FPS,
         image_size: tuple[int, int] | None = None,
         vcodec: str = DEFAULT_VCODEC,
+        crf: float = DEFAULT_CRF,
         append: bool = False,
         max_episodes: int | None = None,
         keep_unfinished: bool = True,
@@ -101,7 +104,9 @@ class LeRobotRecorder:
         self.repo_id = repo_id
         self.fps = whole_fps(fps)
         self.image_size = image_size
+        camera_encoder(vcodec, crf)  # a bad codec or quality fails here, not at the first batch
         self.vcodec = vcodec
+        self.crf = crf
         self.append = append
         self.max_episodes = max_episodes
         self.keep_unfinished = keep_unfinished
@@ -181,6 +186,7 @@ class LeRobotRecorder:
             dataset_fps,
             repo_id=self.repo_id,
             vcodec=self.vcodec,
+            crf=self.crf,
             append=self.append,
         )
         self._existing = (self.dataset.meta.total_episodes, self.dataset.meta.total_frames)

@@ -24,36 +24,49 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.utils import INFO_PATH
 
 from oasis_torchrl.compat import dropped_video_frames, wait_for_encoder_room
+from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.features import Feature, check_same_features
 from oasis_torchrl.data.loading import default_repo_id, default_video_backend
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_VCODEC = "h264"
-"""libx264 through PyAV: faster than LeRobot's default libsvtav1 at LeRobot's settings, at a
-somewhat lower quality, and decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
-measures both; BENCHMARKS.md has the figures)."""
 ROBOT_TYPE = "oasis"
 """The datasets' ``robot_type``: the oasis robot's (``--robot.type=oasis``), so a person's
 recordings and the project's datasets can be merged (LeRobot merges only equal robot types)."""
 
 
-def camera_encoder(vcodec: str) -> RGBEncoderConfig:
-    """LeRobot's encoder settings for the cameras: ``vcodec`` at LeRobot's defaults otherwise.
+CRF_RANGES: dict[str, tuple[int, int]] = {"h264": (0, 51), "hevc": (0, 51), "libsvtav1": (0, 63)}
+"""The ``crf`` each codec accepts; LeRobot does not check it, and its encoder threads would fail
+only at the first frame."""
+
+
+def camera_encoder(vcodec: str, crf: float = DEFAULT_CRF) -> RGBEncoderConfig:
+    """LeRobot's encoder settings for the cameras: ``vcodec`` at quality ``crf``, LeRobot's
+    defaults otherwise.
 
     Raises:
-        ValueError: LeRobot does not know ``vcodec`` or this PyAV build cannot encode it.
+        ValueError: LeRobot does not know ``vcodec``, this PyAV build cannot encode it, or
+            ``crf`` is outside the codec's range.
 
     Example:
-        >>> camera_encoder("h264").vcodec
-        'h264'
+        >>> camera_encoder("h264").crf
+        18
         >>> camera_encoder("mjpeg")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
         ValueError: vcodec 'mjpeg': Invalid vcodec 'mjpeg'. Must be one of: ...
+        >>> camera_encoder("h264", crf=60)
+        Traceback (most recent call last):
+        ...
+        ValueError: crf 60 is outside h264's range [0, 51] (lower is better quality)
     """
+    low, high = CRF_RANGES.get(vcodec, (0, float("inf")))
+    if not low <= crf <= high:
+        raise ValueError(
+            f"crf {crf} is outside {vcodec}'s range [{low}, {high}] (lower is better quality)"
+        )
     try:
-        return RGBEncoderConfig(vcodec=vcodec)
+        return RGBEncoderConfig(vcodec=vcodec, crf=crf)
     except ValueError as error:
         raise ValueError(f"vcodec {vcodec!r}: {error}") from error
 
@@ -81,21 +94,23 @@ def open_dataset(
     *,
     repo_id: str | None = None,
     vcodec: str = DEFAULT_VCODEC,
+    crf: float = DEFAULT_CRF,
     append: bool = False,
 ) -> LeRobotDataset:
     """Create a dataset at ``root``, or (``append=True``) reopen the one there to add episodes.
 
     Raises:
         FileExistsError: ``root`` holds data and ``append`` is false.
-        ValueError: ``fps`` is not a whole number (LeRobot stores an int); appending with
-            another fps or other features (naming the key).
+        ValueError: ``fps`` is not a whole number (LeRobot stores an int); ``vcodec`` or
+            ``crf`` is not usable (:func:`camera_encoder`); appending with another fps or other
+            features (naming the key).
 
     See :func:`write_episode` for an example.
     """
     fps = whole_fps(fps)
     root = Path(root)
     repo_id = repo_id or default_repo_id(root)
-    encoder = camera_encoder(vcodec)
+    encoder = camera_encoder(vcodec, crf)
     # LeRobot's encoder threads hand FFmpeg its default stderr logger back when they finish;
     # without this, every episode prints the encoder's banner and statistics.
     av.logging.set_libav_level(av.logging.ERROR)

@@ -115,7 +115,7 @@ def record_on_ray(
         seed: run seed (each worker's env gets its own seed derived from it).
         repo_id: LeRobot repo id of the merged dataset (default ``local/<folder name>``).
         recorder_kwargs: further :class:`~oasis_torchrl.data.LeRobotRecorder` arguments of the
-            shards (``fps``, ``image_size``, ``vcodec``).
+            shards (``fps``, ``image_size``, ``vcodec``, ``crf``).
         keep_shards: keep the shards after a complete run's merge.
         progress: called with the episodes recorded so far after every batch.
 

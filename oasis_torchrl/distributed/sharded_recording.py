@@ -52,7 +52,7 @@ class ShardRecorder:
         batch_keys: after recording, strip each batch in place to these keys, so only they
             travel on from the worker (None: leave batches whole; ``()``: keep just the shape).
         **recorder_kwargs: :class:`~oasis_torchrl.data.LeRobotRecorder` arguments (``fps``,
-            ``image_size``, ``vcodec``, ``keep_unfinished``, ...).
+            ``image_size``, ``vcodec``, ``crf``, ``keep_unfinished``, ...).
 
     Example:
         >>> import tempfile

@@ -118,6 +118,7 @@ def test_record_cli_writes_and_appends(tmp_path: Path, small_server) -> None:
     assert main(["record", *common, "--episodes", "3", "--max-steps", "2", *scripted]) == 0
     assert main(["record", *common, "--episodes", "1", "--max-steps", "2", "--append"]) == 0
     assert main(["record", *common, "--episodes", "1"]) == 2  # exists, no --append
+    assert main(["record", *common, "--episodes", "1", "--append", "crf=60"]) == 2  # h264: 0-51
     dataset = open_dataset(root)
     assert dataset.num_episodes == 4 and dataset.num_frames == 4 * 8
     first = dataset[1]["action"]  # frame 1 of the scripted chunk: sin(2 pi / 16) * 0.3

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from oasis_torchrl.config.recording import DEFAULT_CRF
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.envs import OasisEnv
@@ -18,7 +19,7 @@ from oasis_torchrl.sim.config import ServerConfig
 from ._fake_env import CAMERAS, FakeEnvRun, action, frame
 from ._readback import episodes, expected_frame_rows, open_dataset, psnr
 
-MIN_PSNR = 25.0  # h264 crf 30, 4:2:0: these 64x48 frames with a sharp block measure ~29-34 dB
+MIN_PSNR = 25.0  # h264, 4:2:0: these 64x48 frames with a sharp block measure ~29-34 dB at crf 30
 
 
 def _record(root: Path, run: FakeEnvRun, batches: int, horizon: int, **kwargs: object) -> None:
@@ -196,3 +197,26 @@ def test_the_privileged_state_of_each_frame_is_stored(tmp_path: Path) -> None:
     assert stored.shape == (12, len(PRIVILEGED_FIELDS)) and np.ptp(stored[:, 0]) > 0  # it moved
     with pytest.raises(KeyError, match=r"'truth', 'speed'\) \(the ground truth"):
         LeRobotRecorder(tmp_path / "none", privileged=True).write(rollout.exclude("truth"))
+
+
+def test_the_stored_video_has_the_quality_asked_for(tmp_path: Path) -> None:
+    run = FakeEnvRun([[2]])
+    scores = {}
+    for crf in (DEFAULT_CRF, 40):
+        root = tmp_path / f"crf{crf}"
+        _record(root, run, batches=1, horizon=2, crf=crf)
+        dataset = open_dataset(root)
+        assert dataset.meta.features["observation.images.front"]["info"]["video.crf"] == crf
+        scores[crf] = np.mean(
+            [
+                psnr(dataset[row]["observation.images.front"], frame(0, 0, row + 3, 1))
+                for row in range(8)
+            ]
+        )
+    assert scores[DEFAULT_CRF] > scores[40] + 3, scores
+
+
+def test_a_crf_outside_the_codec_range_fails_before_anything_is_written(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"crf 60 is outside h264's range \[0, 51\]"):
+        LeRobotRecorder(tmp_path / "drives", crf=60)
+    assert not (tmp_path / "drives").exists()
