@@ -135,13 +135,19 @@ def drive(
     return simulator.truth.distance, False
 
 
+def evaluation_episodes(prompt: str, seed: int, episodes: int) -> tuple[list[str], list[int]]:
+    """The prompts and seeds of an evaluation's episodes on ``prompt``, one per env row, as the
+    env seeds them from ``seed``."""
+    planner = EpisodePlanner(prompt, num_rows=episodes)
+    planner.set_seed(seed)
+    return planner.next_episodes(range(episodes))
+
+
 def evaluate(
     driver: nn.Module | None, fields: Sequence[str], args: argparse.Namespace
 ) -> dict[str, float]:
     """Mean distance and collision rate on the evaluation's episodes (the env's own seeding)."""
-    planner = EpisodePlanner(args.eval_prompt, num_rows=args.episodes)
-    planner.set_seed(args.eval_seed)
-    prompts, seeds = planner.next_episodes(range(args.episodes))
+    prompts, seeds = evaluation_episodes(args.eval_prompt, args.eval_seed, args.episodes)
     results = [
         drive(driver, fields, prompt, seed, args.max_steps)
         for prompt, seed in zip(prompts, seeds, strict=True)

@@ -140,8 +140,9 @@ def load_from_args(args: argparse.Namespace, schema: type) -> DictConfig:
 
 def _value(leaf: Leaf, raw: Any) -> Any:
     """A flag's text as the setting's value: its own parser, else a YAML value (numbers,
-    lists, null) that the config then checks against the type; plain text for strings. A
-    repeated alias gives a list of such values."""
+    lists, null) that the config then checks against the type; plain text for strings. A list
+    setting also takes its items without the brackets (``--pool-grid 8,12``). A repeated alias
+    gives a list of such values."""
     if isinstance(raw, bool):
         return raw
     if isinstance(raw, list):
@@ -150,7 +151,13 @@ def _value(leaf: Leaf, raw: Any) -> Any:
         return leaf.cli.parse(raw)
     if leaf.type is str or _is_text_list(leaf.type):
         return raw
+    if _is_list(leaf.type) and not raw.strip().startswith(("[", "null")):
+        raw = f"[{raw}]"
     return OmegaConf.from_dotlist([f"value={raw}"]).value
+
+
+def _is_list(kind: Any) -> bool:
+    return getattr(kind, "__origin__", None) in (list, tuple)
 
 
 def _is_text_list(kind: Any) -> bool:

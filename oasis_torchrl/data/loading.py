@@ -28,6 +28,39 @@ def default_repo_id(root: str | Path) -> str:
     return f"local/{Path(root).name}"
 
 
+def is_dataset_root(path: str | Path) -> bool:
+    """Whether ``path`` is a LeRobot dataset folder (it has ``meta/info.json``).
+
+    Example:
+        >>> is_dataset_root("/nonexistent")
+        False
+    """
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
+def dataset_repo_id(root: str | Path, repo_id: str | None = None) -> str:
+    """The repo id to open the dataset at ``root`` with: ``repo_id``, or (none given) the local
+    one, for a folder that must then hold a dataset: LeRobot would otherwise try to download
+    ``local/<name>`` and fail with a network error that names no folder.
+
+    Raises:
+        FileNotFoundError: no ``repo_id`` and ``root`` holds no LeRobot dataset.
+
+    Example:
+        >>> dataset_repo_id("/nowhere/drives", "me/drives")
+        'me/drives'
+        >>> dataset_repo_id("/nowhere/drives")
+        Traceback (most recent call last):
+        ...
+        FileNotFoundError: /nowhere/drives is not a LeRobot dataset (no meta/info.json)
+    """
+    if repo_id:
+        return repo_id
+    if not is_dataset_root(root):
+        raise FileNotFoundError(f"{root} is not a LeRobot dataset (no meta/info.json)")
+    return default_repo_id(root)
+
+
 @functools.cache
 def default_video_backend() -> str:
     """``"torchcodec"`` when its FFmpeg libraries load on this machine, ``"pyav"`` otherwise.
@@ -98,7 +131,7 @@ def open_for_bc(
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
     root = Path(root)
-    repo_id = repo_id or default_repo_id(root)
+    repo_id = dataset_repo_id(root, repo_id)
     meta = LeRobotDatasetMetadata(repo_id, root=root)
     action_dim = meta.features[ACTION]["shape"][0]
     delta = {ACTION: action_delta_timestamps(meta.fps, action_dim, horizon)}

@@ -89,12 +89,12 @@ def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:
     from lerobot.datasets.factory import resolve_delta_timestamps
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
-    from oasis_torchrl.data.loading import default_repo_id, default_video_backend
+    from oasis_torchrl.data.loading import dataset_repo_id, default_video_backend
 
     if not cfg.root:
         raise ValueError("dataset.root is required: the LeRobot dataset folder to clone")
     root = Path(cfg.root)
-    repo_id = cfg.repo_id or default_repo_id(root)
+    repo_id = dataset_repo_id(root, cfg.repo_id)
     meta = LeRobotDatasetMetadata(repo_id, root=root)
     return LeRobotDataset(
         repo_id,

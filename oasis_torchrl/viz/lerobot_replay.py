@@ -18,6 +18,7 @@ import av
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.data.loading import dataset_repo_id, is_dataset_root
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
@@ -33,16 +34,6 @@ STATE, ACTION, REWARD, DONE, SEED = (
     "next.done",
     "episode_seed",
 )
-
-
-def is_dataset_root(path: str | Path) -> bool:
-    """Whether ``path`` is a LeRobot dataset folder (it has ``meta/info.json``).
-
-    Example:
-        >>> is_dataset_root("/nonexistent")
-        False
-    """
-    return (Path(path) / "meta" / "info.json").is_file()
 
 
 def video_frames(
@@ -105,12 +96,10 @@ class DatasetReplay:
     ) -> None:
         from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
 
-        from oasis_torchrl.data.loading import default_repo_id
-
         self.root = Path(root)
         if not is_dataset_root(self.root):
             raise ValueError(f"{self.root} is not a LeRobot dataset (no meta/info.json)")
-        self.repo_id = repo_id or default_repo_id(self.root)
+        self.repo_id = dataset_repo_id(self.root, repo_id)
         self.meta = LeRobotDatasetMetadata(self.repo_id, root=self.root)
         self.recording = recording
         self.jpeg_quality = jpeg_quality

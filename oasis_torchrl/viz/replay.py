@@ -15,7 +15,7 @@ from pathlib import Path
 
 from tensordict import TensorDict, TensorDictBase
 
-from oasis_torchrl.viz.lerobot_replay import is_dataset_root
+from oasis_torchrl.data.loading import is_dataset_root
 from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.recording import DEFAULT_MEMORY_LIMIT
 

@@ -11,6 +11,7 @@ from oasis_torchrl.cli import build_parser, main, parse_arguments
 from oasis_torchrl.config import config_names, load_config, to_object
 from oasis_torchrl.config.arguments import load_from_args
 from oasis_torchrl.config.recording import RecordConfig
+from oasis_torchrl.config.training import BCConfig
 
 
 @pytest.mark.parametrize("name", ["bc", "demo", "drive", "eval", "ppo", "serve"])
@@ -45,9 +46,13 @@ def test_bad_settings_name_the_problem(tmp_path: Path) -> None:
         load_config("ppo", file=bad_file)
 
 
-def test_commands_report_bad_settings() -> None:
+def test_commands_report_bad_settings(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     assert main(["train", "ppo", "optim.lrate=1"]) == 2
     assert main(["train", "bc"]) == 2  # no dataset.root
+    # A folder without a dataset is named, not looked up online as local/<name>.
+    missing = tmp_path / "drives"
+    assert main(["train", "bc", "--dataset.root", str(missing)]) == 2
+    assert f"{missing} is not a LeRobot dataset" in caplog.text
     assert main(["record", "--episodes", "3"]) == 2  # no --root
 
 
@@ -60,6 +65,9 @@ def test_file_then_flags_then_overrides(tmp_path: Path) -> None:
     assert (args.config, args.overrides) == (settings, ["seed=1", "seed=2"])
     cfg = load_from_args(args, args.schema)
     assert (cfg.seed, cfg.optim.lr) == (2, 0.02)
+    for grid in ("8,12", "[8, 12]"):  # a list flag with or without its brackets
+        argv = ["train", "bc", "--policy.pool-grid", grid]
+        assert load_from_args(parse_arguments(parser, argv), BCConfig).policy.pool_grid == [8, 12]
     with pytest.raises(SystemExit):
         parse_arguments(parser, ["train", "ppo", "--nope"])
 
