@@ -228,6 +228,11 @@ class BCPolicyConfig:
         help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
         "normalised)",
     )
+    manoeuvre_weight: float = option(
+        0.0,
+        help="extra weight of steering demonstrations: a sample's action loss times "
+        "1 + manoeuvre_weight * its chunk's mean |steering| (lane changes are rare)",
+    )
     aux_weight: float = option(
         0.0,
         help="weight of the auxiliary loss: predict each frame's privileged state (obstacle "

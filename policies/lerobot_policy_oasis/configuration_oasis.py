@@ -110,6 +110,11 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             follows the dimension that varies most: in autopilot demonstrations throttle (std
             ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
             obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
+        manoeuvre_weight: extra weight of the demonstrations that steer: each sample's action
+            loss is weighted ``1 + manoeuvre_weight * s``, ``s`` the mean absolute steering of
+            its demonstrated chunk. Lane changes are a few percent of an autopilot's chunks, and
+            unweighted a clone steers in a third as many as the autopilot (measured at 0: 1.2%
+            of chunks against 4.1%) and drives into what it should change lanes for.
         aux_weight: weight of an auxiliary loss (0: none): the network's auxiliary head
             predicts each frame's privileged state (``privileged_state``: speed, offsets, heading
             error, obstacle distances ahead in the car's path, its lane and the lanes beside it,
@@ -134,6 +139,7 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
 
     loss: str = "nll"
     action_loss_weights: tuple[float, float] = (1.0, 1.0)
+    manoeuvre_weight: float = 0.0
     aux_weight: float = 0.0
     optimizer_lr: float = 1e-3
     optimizer_weight_decay: float = 1e-4
@@ -153,8 +159,9 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             )
         if self.loss not in LOSSES:
             raise ValueError(f"OasisConfig.loss must be one of {LOSSES}, got {self.loss!r}")
-        if not self.aux_weight >= 0:
-            raise ValueError(f"OasisConfig.aux_weight must be >= 0, got {self.aux_weight}")
+        for name in ("aux_weight", "manoeuvre_weight"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"OasisConfig.{name} must be >= 0, got {getattr(self, name)}")
         weights = tuple(self.action_loss_weights)
         if len(weights) != ACTION_DIM or min(weights) < 0 or max(weights) == 0:
             raise ValueError(

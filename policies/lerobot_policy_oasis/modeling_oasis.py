@@ -156,6 +156,9 @@ class OasisPolicy(PreTrainedPolicy):
             weighted = (error * weights).sum(-1) / weights.sum()
             per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
         info = {f"{self.config.loss}_loss": per_sample.mean().item()}
+        if self.config.manoeuvre_weight:
+            steering = (target[..., 1].abs() * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+            per_sample = per_sample * (1.0 + self.config.manoeuvre_weight * steering)
         if self.config.aux_weight:
             aux = self._aux_loss(batch, features)
             per_sample = per_sample + self.config.aux_weight * aux
