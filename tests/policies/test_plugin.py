@@ -184,6 +184,20 @@ def test_action_loss_weights_pick_the_dimensions() -> None:
     assert throttle_heavy.forward(batch)[0].item() == pytest.approx(0.375, abs=1e-5)
 
 
+@pytest.mark.parametrize("loss", ["l1", "nll"])
+def test_manoeuvre_weight_weighs_the_samples_that_steer(loss: str) -> None:
+    batch = _stacked(_observation(seed=0), _observation(seed=1))
+    batch["action"] = torch.zeros(2, 4, 2)
+    batch["action"][1, :, 1] = torch.tensor([0.2, 0.4, -0.4, -0.2])  # sample 1 steers: mean 0.3
+    batch["action_is_pad"] = torch.tensor([[False] * 4, [False, False, False, True]])
+    plain, _ = _policy(loss=loss).forward(batch, reduction="none")
+    weighted, _ = _policy(loss=loss, manoeuvre_weight=10.0).forward(batch, reduction="none")
+    steering = (0.2 + 0.4 + 0.4) / 3  # the padded action left out
+    torch.testing.assert_close(weighted, plain * torch.tensor([1.0, 1.0 + 10.0 * steering]))
+    with pytest.raises(ValueError, match="manoeuvre_weight must be >= 0"):
+        _config(manoeuvre_weight=-1.0)
+
+
 def test_bad_features_are_named() -> None:
     with pytest.raises(ValueError, match="needs 'action' of shape \\(2,\\)"):
         _config(action_dim=8).net_config()
