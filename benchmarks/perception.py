@@ -15,6 +15,11 @@ fraction of its variance explained (R^2): the prediction's squared error against
 baseline in the same run, always answering the field's mean over the run (0: no better than the
 mean, 1: exact).
 
+On the same frames it also compares what each clone would do with what the autopilot does: how
+often each one's chunk steers (mean ``|steering|`` above :data:`STEERS`: a lane change) and how
+their steering correlates. A clone can read the state well and still rarely commit to a lane
+change.
+
 Usage: ``python benchmarks/perception.py POLICY [POLICY ...] [--episodes 16 --prompts urban]``
 (policy folders of behaviour cloning with ``policy.aux_weight > 0``, or PPO checkpoints with an
 auxiliary head); prints JSON (about a minute per policy on 2 cores).
@@ -38,6 +43,9 @@ from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.simulator import Simulator
 
+STEERS = 0.1
+"""A chunk steers when its mean ``|steering|`` is above this (a lane change's is 0.1-0.5)."""
+
 
 def load_clones(paths: Sequence[str]) -> dict[str, DrivingNet]:
     """The networks at ``paths``, each with an auxiliary head for the privileged fields."""
@@ -55,22 +63,24 @@ def load_clones(paths: Sequence[str]) -> dict[str, DrivingNet]:
 
 def episode_chunks(
     prompt: str, seed: int, size: tuple[int, int], frames: int, args: argparse.Namespace
-) -> Iterator[tuple[list[np.ndarray], torch.Tensor]]:
+) -> Iterator[tuple[list[np.ndarray], torch.Tensor, np.ndarray]]:
     """One noisy autopilot episode at ``(height, width)``: from its ``frames``-th chunk on, each
-    camera's last ``frames`` chunk-end frames ``[frames, H, W, 3]`` and the scaled state then."""
+    camera's last ``frames`` chunk-end frames ``[frames, H, W, 3]``, the scaled state then and
+    the chunk ``[4, 2]`` the autopilot chooses there."""
     rng = np.random.default_rng(seed)
     simulator = Simulator(size[1], size[0])
     simulator.reset(prompt, seed)
     pilot = Autopilot(simulator)
     history = {camera: deque(maxlen=frames) for camera in simulator.camera_names}
     for _ in range(args.max_steps):
-        chunk = pilot.act() + args.noise * rng.standard_normal((4, 2))
-        result = simulator.step(np.clip(chunk, -1, 1).astype(np.float32), last_only=True)
-        for camera, frame in result.rgb.items():
-            history[camera].append(frame[0])
+        chunk = pilot.act()
         if len(history["front"]) == frames:
             images = [np.stack(history[camera]) for camera in simulator.camera_names]
-            yield images, state_of(result.truth[-1], PRIVILEGED_FIELDS)
+            yield images, state_of(simulator.truth, PRIVILEGED_FIELDS), chunk
+        executed = np.clip(chunk + args.noise * rng.standard_normal(chunk.shape), -1, 1)
+        result = simulator.step(executed.astype(np.float32), last_only=True)
+        for camera, frame in result.rgb.items():
+            history[camera].append(frame[0])
         if result.truth[-1].collided:
             return
 
@@ -78,20 +88,44 @@ def episode_chunks(
 @torch.no_grad()
 def predictions(
     net: DrivingNet, prompts: Sequence[str], seeds: Sequence[int], args: argparse.Namespace
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(predicted, true)`` scaled states ``[rows, fields]`` of ``net`` on the episodes."""
+) -> dict[str, torch.Tensor]:
+    """On the episodes, per chunk: the scaled state ``"true"`` and ``net``'s prediction of it
+    ``"predicted"`` ``[rows, fields]``; the autopilot's chunk ``"expert"`` and ``net``'s
+    deterministic one ``"clone"`` ``[rows, 4, 2]`` (the previous action it may read: the
+    autopilot's)."""
     size, frames = tuple(net.config.image_size), net.config.frames
-    predicted, true = [], []
+    columns: dict[str, list[torch.Tensor]] = {
+        "true": [],
+        "predicted": [],
+        "expert": [],
+        "clone": [],
+    }
+    previous = torch.zeros(net.config.state_dim)
     for prompt, seed in zip(prompts, seeds, strict=True):
         rows = list(episode_chunks(prompt, seed, size, frames, args))
         if not rows:
             continue
-        cameras = zip(*(images for images, _ in rows), strict=True)
+        cameras = zip(*(images for images, _, _ in rows), strict=True)
         images = [torch.from_numpy(np.stack(frames)) for frames in cameras]
-        state = torch.zeros(len(rows), net.config.state_dim)
-        predicted.append(net.predict_aux(net.features(images, state)))
-        true.append(torch.stack([r[1] for r in rows]))
-    return torch.cat(predicted), torch.cat(true)
+        expert = torch.from_numpy(np.stack([chunk for _, _, chunk in rows])).float()
+        state = torch.cat([previous[None], expert[:-1, -1]])
+        features = net.features(images, state)
+        columns["predicted"].append(net.predict_aux(features))
+        columns["clone"].append(net.deterministic_chunk(features))
+        columns["true"].append(torch.stack([truth for _, truth, _ in rows]))
+        columns["expert"].append(expert)
+    return {name: torch.cat(values) for name, values in columns.items()}
+
+
+def steering(expert: torch.Tensor, clone: torch.Tensor) -> dict[str, float]:
+    """How often each steers (a chunk's mean ``|steering|`` above :data:`STEERS`) and how the
+    two chunks' mean steering correlate."""
+    expert, clone = expert[..., 1].mean(-1), clone[..., 1].mean(-1)
+    return {
+        "expert_steers": round(float((expert.abs() > STEERS).float().mean()), 4),
+        "clone_steers": round(float((clone.abs() > STEERS).float().mean()), 4),
+        "correlation": round(float(torch.corrcoef(torch.stack([expert, clone]))[0, 1]), 3),
+    }
 
 
 def explained_variance(predicted: torch.Tensor, true: torch.Tensor) -> dict[str, float]:
@@ -123,13 +157,14 @@ def main() -> None:
     seeds = [seed for scene in episodes for seed in scene[1]]
     report: dict[str, object] = {"settings": vars(args), "fields": list(PRIVILEGED_FIELDS)}
     for path, net in tqdm(nets.items(), desc="policies", unit="policy"):
-        predicted, true = predictions(net, prompts, seeds, args)
-        per_field = explained_variance(predicted, true)
+        rows = predictions(net, prompts, seeds, args)
+        per_field = explained_variance(rows["predicted"], rows["true"])
         report[path] = {
-            "rows": len(true),
+            "rows": len(rows["true"]),
             "r2": per_field,
             "mean_r2": round(float(np.mean(list(per_field.values()))), 3),
-            "mean_abs_error": round(float((predicted - true).abs().mean()), 4),
+            "mean_abs_error": round(float((rows["predicted"] - rows["true"]).abs().mean()), 4),
+            "steering": steering(rows["expert"], rows["clone"]),
         }
     print(json.dumps(report, indent=2))
 
