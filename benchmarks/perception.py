@@ -20,9 +20,10 @@ often each one's chunk steers (mean ``|steering|`` above :data:`STEERS`: a lane 
 their steering correlates. A clone can read the state well and still rarely commit to a lane
 change.
 
-Usage: ``python benchmarks/perception.py POLICY [POLICY ...] [--episodes 16 --prompts urban]``
+Usage: ``python benchmarks/perception.py [POLICY ...] [--episodes 16 --prompts urban]``
 (policy folders of behaviour cloning with ``policy.aux_weight > 0``, or PPO checkpoints with an
-auxiliary head); prints JSON (about a minute per policy on 2 cores).
+auxiliary head; default: the learning benchmark's clones, without and with DAgger, under its
+default ``--work``); prints JSON (about a minute per policy on 2 cores).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import argparse
 import json
 from collections import deque
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -43,6 +45,8 @@ from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.simulator import Simulator
 
+LEARNING_CLONES = ("outputs/learning/bc/round_0/policy", "outputs/learning/bc/round_3/policy")
+"""The learning benchmark's clones without and with its 3 DAgger rounds (its default ``--work``)."""
 STEERS = 0.1
 """A chunk steers when its mean ``|steering|`` is above this (a lane change's is 0.1-0.5)."""
 
@@ -51,6 +55,11 @@ def load_clones(paths: Sequence[str]) -> dict[str, DrivingNet]:
     """The networks at ``paths``, each with an auxiliary head for the privileged fields."""
     nets = {}
     for path in paths:
+        if not Path(path).exists():
+            raise FileNotFoundError(
+                f"no policy at {path}: name clones to measure, or run benchmarks/learning.py "
+                "--stages references bc bc_dagger first (its clones are the default)"
+            )
         net = load_net(path).eval()
         if net.config.aux_outputs != len(PRIVILEGED_FIELDS):
             raise ValueError(
@@ -140,7 +149,12 @@ def explained_variance(predicted: torch.Tensor, true: torch.Tensor) -> dict[str,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("policies", nargs="+", help="camera clones with an auxiliary head")
+    parser.add_argument(
+        "policies",
+        nargs="*",
+        default=list(LEARNING_CLONES),
+        help="camera clones with an auxiliary head (default: the learning benchmark's)",
+    )
     parser.add_argument("--episodes", type=int, default=16)
     parser.add_argument("--eval-seed", type=int, default=1000)
     parser.add_argument("--prompts", nargs="+", default=["urban"])
