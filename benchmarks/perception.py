@@ -162,7 +162,6 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.05, help="executed-action noise std")
     args = parser.parse_args()
 
-    torch.manual_seed(0)
     nets = load_clones(args.policies)
     episodes = [
         evaluation_episodes(prompt, args.eval_seed, args.episodes) for prompt in args.prompts

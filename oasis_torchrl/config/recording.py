@@ -22,7 +22,7 @@ DEFAULT_CRF = 18
 """Quality of the stored video (lower is better and larger; LeRobot's default is 30). A policy
 trains on the stored frames and acts on the frames the world streams, so the two must look
 alike. At the policy's 96x64, 30 smeared the obstacles on the horizon (a few pixels each): 25 dB
-PSNR against the streamed frames, where 18 keeps 29 dB (4:2:0 colour alone caps it near 30) for
+PSNR against the streamed frames, where 18 keeps 28 dB (4:2:0 colour alone caps it near 30) for
 about twice the bytes (BENCHMARKS.md, "Stored video quality")."""
 
 

@@ -60,7 +60,8 @@ class LeRobotRecorder:
         fps: world-model frame rate of the run.
         image_size: stored ``(height, width)`` (even); default: full resolution.
         vcodec: video codec (``"h264"``, ``"libsvtav1"``, ``"hevc"``).
-        crf: video quality (lower is better; :data:`~oasis_torchrl.data.writer.DEFAULT_CRF`).
+        crf: video quality (lower is better;
+            :data:`~oasis_torchrl.config.recording.DEFAULT_CRF`).
         append: add episodes to the dataset at ``root``.
         max_episodes: stop recording after this many episodes (see :attr:`full`).
         keep_unfinished: on a clean :meth:`close`, also save the episodes still running.
