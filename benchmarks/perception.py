@@ -36,10 +36,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from state_clone import evaluation_episodes, state_of
+from state_clone import evaluation_episodes, load_camera_clone, state_of
 from tqdm import tqdm
 
-from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.sim.autopilot import Autopilot
@@ -60,13 +59,7 @@ def load_clones(paths: Sequence[str]) -> dict[str, DrivingNet]:
                 f"no policy at {path}: name clones to measure, or run benchmarks/learning.py "
                 "--stages references bc bc_dagger first (its clones are the default)"
             )
-        net = load_net(path).eval()
-        if net.config.aux_outputs != len(PRIVILEGED_FIELDS):
-            raise ValueError(
-                f"{path} has no auxiliary head for the {len(PRIVILEGED_FIELDS)} privileged "
-                f"fields (aux_outputs={net.config.aux_outputs}): train it with aux_weight > 0"
-            )
-        nets[path] = net
+        nets[path] = load_camera_clone(path)
     return nets
 
 

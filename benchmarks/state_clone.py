@@ -194,14 +194,21 @@ def evaluate_on_cameras(drivers: dict[str, PolicyDriver], args: argparse.Namespa
     return results
 
 
-def camera_drivers(path: str, state_clone: nn.Module) -> dict[str, PolicyDriver]:
-    """The camera clone at ``path`` and ``state_clone`` on its predicted state."""
+def load_camera_clone(path: str) -> DrivingNet:
+    """The camera clone at ``path``, in eval mode, after checking it has an auxiliary head for
+    the privileged fields."""
     net = load_net(path).eval()
     if net.config.aux_outputs != len(PRIVILEGED_FIELDS):
         raise ValueError(
             f"{path} has no auxiliary head for the {len(PRIVILEGED_FIELDS)} privileged fields "
             f"(aux_outputs={net.config.aux_outputs}): train it with policy.aux_weight > 0"
         )
+    return net
+
+
+def camera_drivers(path: str, state_clone: nn.Module) -> dict[str, PolicyDriver]:
+    """The camera clone at ``path`` and ``state_clone`` on its predicted state."""
+    net = load_camera_clone(path)
     predicted = PolicyDriver(
         PredictedStateDriver(net, state_clone),
         in_keys=observation_keys(net),

@@ -18,7 +18,7 @@ import av
 import numpy as np
 import rerun as rr
 
-from oasis_torchrl.data.loading import dataset_repo_id, is_dataset_root
+from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
@@ -99,7 +99,7 @@ class DatasetReplay:
         self.root = Path(root)
         if not is_dataset_root(self.root):
             raise ValueError(f"{self.root} is not a LeRobot dataset (no meta/info.json)")
-        self.repo_id = dataset_repo_id(self.root, repo_id)
+        self.repo_id = repo_id or default_repo_id(self.root)
         self.meta = LeRobotDatasetMetadata(self.repo_id, root=self.root)
         self.recording = recording
         self.jpeg_quality = jpeg_quality
