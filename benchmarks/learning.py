@@ -160,6 +160,7 @@ def benchmark_config(args: argparse.Namespace) -> DictConfig:
             f"eval.seeds=[{seeds}]",
             "eval.reference=[]",
             "progress=false",
+            *args.overrides,
         ],
     )
 
@@ -269,6 +270,14 @@ def main() -> None:
         metavar="KEY=VALUE",
         help="PPO settings of both PPO stages, e.g. ray.enabled=true (collection on two Ray "
         "workers, each with its own embedded server: 1.3x the env steps per second here)",
+    )
+    parser.add_argument(
+        "--overrides",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="settings of the main job's config (oasis-torchrl demo --help) to measure instead "
+        "of its defaults, e.g. bc.policy.pool_grid=[8,12]; applied after the budgets above",
     )
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")

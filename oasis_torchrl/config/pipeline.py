@@ -37,6 +37,12 @@ class DemonstrationsConfig:
     episodes: int = option(16, help="episodes to record")
     seed: int = option(1, help="seed of their episodes and noise")
     noise: NoiseConfig = option(default_factory=NoiseConfig, help="executed-action noise")
+    late_reaction: list[float] | None = option(
+        None,
+        help="[near, far] metres: the executed car keeps its lane until the obstacle in it is "
+        "nearer than a distance drawn in this range for each approach, labelled by the "
+        "autopilot throughout (null: the autopilot drives)",
+    )
 
 
 @dataclass

@@ -37,6 +37,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
 from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
+from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import Evaluator
@@ -136,12 +137,16 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
             f"{root} holds {episodes} of {cfg.record.episodes} episodes; delete it"
         )
     quiet_dataset_libraries()
+    reaction = cfg.record.late_reaction
     return record_demonstrations(
         cfg.env,
         root,
         episodes=cfg.record.episodes,
         seed=cfg.record.seed,
         noise=ActionNoise(**cfg.record.noise),
+        learner=None
+        if reaction is None
+        else LateReactionAutopilot(tuple(reaction), seed=cfg.record.seed),
         progress=cfg.progress,
     )
 

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
+from oasis_torchrl.models.privileged import MAX_DISTANCE, PRIVILEGED_FIELDS, PRIVILEGED_KEY
 from oasis_torchrl.train.demonstrations import ActionNoise, NoiseProcess, record_demonstrations
 
 from .conftest import TINY_ENV
@@ -47,3 +51,75 @@ def test_noise_process_is_seeded_and_resets_rows() -> None:
     assert first.value[1].abs().sum() == 0 and first.value[0].abs().sum() > 0
     with pytest.raises(ValueError, match="correlation in"):
         ActionNoise(correlation=1.0)
+
+
+def _truth_row(distance: float, offset: float = 0.0) -> dict[str, torch.Tensor]:
+    values = {
+        "lane_obstacle_distance": distance,
+        "lane_offset": offset,
+        "heading_error": 0.0,
+        "speed": 10.0,
+    }
+    return {key: torch.full((1, 4), value) for key, value in values.items()}
+
+
+def _late_chunk(late: LateReactionAutopilot, distance: float) -> torch.Tensor:
+    expert = torch.tensor([[[0.4, -0.3]] * 4])
+    td = TensorDict({"expert_action": expert, "truth": _truth_row(distance)}, batch_size=[1])
+    return late(td).get("action")[0]
+
+
+def test_late_reaction_keeps_its_lane_until_its_distance_then_drives_as_the_autopilot() -> None:
+    late = LateReactionAutopilot(reaction=(10.0, 20.0), seed=3)
+    assert _late_chunk(late, math.inf)[:, 1].abs().max() == 0  # centred: straight on
+    assert _late_chunk(late, 25.0)[:, 1].abs().max() == 0  # beyond reach: still no reaction
+    reaction = float(late._distances[0])
+    assert 10.0 <= reaction <= 20.0
+    assert _late_chunk(late, reaction + 0.5)[:, 1].abs().max() == 0  # one approach, one distance
+    assert float(late._distances[0]) == reaction
+    torch.testing.assert_close(_late_chunk(late, reaction - 0.5)[:, 1], torch.full((4,), -0.3))
+    assert (_late_chunk(late, reaction - 0.5)[:, 0] == 0.4).all()  # the throttle is always its
+
+
+def test_late_reaction_draws_each_approach_its_own_distance() -> None:
+    late = LateReactionAutopilot(reaction=(5.0, 40.0), seed=0)
+    draws = set()
+    for _ in range(20):
+        _late_chunk(late, math.inf)
+        _late_chunk(late, 30.0)
+        draws.add(float(late._distances[0]))
+    assert len(draws) > 10 and min(draws) >= 5.0 and max(draws) <= 40.0
+
+
+def test_late_reaction_errors_name_the_problem() -> None:
+    with pytest.raises(ValueError, match="near <= far"):
+        LateReactionAutopilot(reaction=(30.0, 10.0))
+    td = TensorDict({"expert_action": torch.zeros(1, 4, 2)}, batch_size=[1])
+    with pytest.raises(KeyError, match="ground truth"):
+        LateReactionAutopilot()(td)
+
+
+def test_late_reaction_records_blocked_lanes_labelled_by_the_autopilot(tmp_path: Path) -> None:
+    """On the embedded server: the executed car stays in its lane with an obstacle close ahead
+    in it, where the stored label (the autopilot's) steers out."""
+    overrides = [*TINY_ENV, "env.num_envs=2", "env.max_steps=40", "env.prompts=[urban]"]
+    cfg = load_config("demo", overrides)
+    learner = LateReactionAutopilot(reaction=(8.0, 8.0))
+    record_demonstrations(
+        cfg.env,
+        tmp_path / "late",
+        episodes=2,
+        seed=5,
+        noise=ActionNoise(0.0, 0.0, 0.0),
+        learner=learner,
+        progress=False,
+    )
+    columns = LeRobotDataset("local/late", root=tmp_path / "late").hf_dataset.with_format("torch")[
+        :
+    ]
+    blocked = columns[PRIVILEGED_KEY][:, PRIVILEGED_FIELDS.index("lane_obstacle_distance")]
+    offset = columns[PRIVILEGED_KEY][:, PRIVILEGED_FIELDS.index("lane_offset")]
+    approaching = (blocked * MAX_DISTANCE > 12.0) & (blocked * MAX_DISTANCE < 30.0)
+    assert approaching.sum() > 8
+    assert (offset[approaching].abs() * 2.0 < 0.3).all()  # scaled by 2 m: within 0.3 m
+    assert columns["action"][approaching, 1].abs().max() > 0.1
