@@ -221,7 +221,8 @@ class BCPolicyConfig:
     components: int = option(3, help="mixture components")
     loss: str = option(
         "nll",
-        help="nll (likelihood of the demonstrated chunk) | l1 | mse (regression of the chunk)",
+        help="nll (likelihood of the demonstrated chunk) | manoeuvre (likelihood jointly with "
+        "its manoeuvre: components left, keep, right) | l1 | mse (regression of the chunk)",
     )
     action_loss_weights: list[float] = option(
         default_factory=lambda: [1.0, 5.0],

@@ -96,20 +96,49 @@ class TanhNormalMixture(D.Distribution):
         """Normalised component log-weights ``[*B, K]``."""
         return torch.log_softmax(self.logits, dim=-1)
 
-    def _mixture_log_prob(
+    def _joint_log_prob(
         self, pre_tanh: torch.Tensor, observed: torch.Tensor | None
-    ) -> torch.Tensor:
-        """Log-density of the actions ``tanh(u)``, ``u`` ``[*S, *B, *E]``: the mixture of
-        normals at ``u`` minus the tanh's log-Jacobian, over the ``observed`` numbers."""
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """For actions ``tanh(u)``, ``u`` ``[*S, *B, *E]``: the log-density of each component
+        jointly with its weight, ``[*S, *B, K]`` (normals at ``u`` plus the log-weights), and
+        the tanh's log-Jacobian ``[*S, *B]`` to subtract, over the ``observed`` numbers."""
         component = self.event_dims + 1  # where the component axis goes in [*S, *B, K, *E]
         per_component = D.Normal(self.loc, self.scale).log_prob(pre_tanh.unsqueeze(-component))
         jacobian = tanh_log_jacobian(pre_tanh)
         if observed is not None:
             per_component = per_component * observed.unsqueeze(-component)
             jacobian = jacobian * observed
-        per_component = per_component.flatten(-self.event_dims).sum(-1)
-        mixture = torch.logsumexp(per_component + self.log_weights, dim=-1)
-        return mixture - jacobian.flatten(-self.event_dims).sum(-1)
+        joint = per_component.flatten(-self.event_dims).sum(-1) + self.log_weights
+        return joint, jacobian.flatten(-self.event_dims).sum(-1)
+
+    def _mixture_log_prob(
+        self, pre_tanh: torch.Tensor, observed: torch.Tensor | None
+    ) -> torch.Tensor:
+        """Log-density of the actions ``tanh(u)``: the mixture of normals at ``u`` minus the
+        tanh's log-Jacobian, over the ``observed`` numbers."""
+        joint, jacobian = self._joint_log_prob(pre_tanh, observed)
+        return torch.logsumexp(joint, dim=-1) - jacobian
+
+    def component_log_prob(
+        self, value: torch.Tensor, component: torch.Tensor, observed: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Log-density of actions ``[*B, *E]`` jointly with the component each came from,
+        ``component`` ``[*B]`` (int): ``log w_k + log p_k(value)``. Its maximum fits each
+        component to its own actions and the weights to the labels, a classifier of the
+        components (:meth:`log_prob` marginalises the component out instead).
+
+        Example:
+            >>> logits = torch.tensor([[0.0, 0.0]])
+            >>> loc = torch.tensor([[[-1.0], [1.0]]])
+            >>> dist = TanhNormalMixture(logits, loc, torch.full_like(loc, 0.1), event_dims=1)
+            >>> value = torch.tanh(torch.tensor([[1.0]]))
+            >>> near, far = (dist.component_log_prob(value, torch.tensor([k])) for k in (1, 0))
+            >>> bool(near > dist.log_prob(value) - 1e-4 > far)
+            True
+        """
+        pre_tanh = torch.atanh(value.clamp(-ACTION_BOUND, ACTION_BOUND))
+        joint, jacobian = self._joint_log_prob(pre_tanh, observed)
+        return joint.gather(-1, component.unsqueeze(-1)).squeeze(-1) - jacobian
 
     def log_prob(self, value: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
         """Exact log-density of actions ``[*S, *B, *E]`` in ``[-1, 1]`` -> ``[*S, *B]``.

@@ -173,13 +173,21 @@ class DrivingNet(nn.Module):
         return self.distribution_class(**self.action_params(features), **self.distribution_kwargs)
 
     def chunk_log_likelihood(
-        self, features: torch.Tensor, target: torch.Tensor, observed: torch.Tensor | None = None
+        self,
+        features: torch.Tensor,
+        target: torch.Tensor,
+        observed: torch.Tensor | None = None,
+        *,
+        by_manoeuvre: bool = False,
     ) -> torch.Tensor:
         """Log-likelihood ``[...]`` of demonstrated chunks ``target`` ``[..., chunk,
         action_dim]`` (behaviour cloning by likelihood), clamped to ``TARGET_BOUND``.
 
         ``observed`` (bool ``[..., chunk]``) leaves out actions past an episode's end. The
         tanh-normal head is scored as a mixture of one component (the same density).
+        ``by_manoeuvre``: the likelihood of each chunk jointly with its manoeuvre
+        (:meth:`manoeuvre`), so each component learns its own manoeuvre and the weights learn
+        to tell them apart, instead of the marginal over components.
         """
         params = self.action_params(features)
         if self.config.head != MIXTURE:
@@ -187,7 +195,33 @@ class DrivingNet(nn.Module):
             params["logits"] = params["loc"].new_zeros(params["loc"].shape[:-2])
         mask = None if observed is None else observed.unsqueeze(-1)
         dist = TanhNormalMixture(**params, event_dims=2)
-        return dist.log_prob(target.clamp(-TARGET_BOUND, TARGET_BOUND), mask)
+        bounded = target.clamp(-TARGET_BOUND, TARGET_BOUND)
+        if not by_manoeuvre or self.config.head != MIXTURE:
+            return dist.log_prob(bounded, mask)
+        return dist.component_log_prob(bounded, self.manoeuvre(target, observed), mask)
+
+    def manoeuvre(self, chunk: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
+        """The component ``[...]`` (int) whose manoeuvre a chunk ``[..., chunk, action_dim]``
+        is: the one whose initial steering (``init_action`` spread by ``init_spread``, left to
+        right) is nearest the chunk's mean steering over its ``observed`` actions.
+
+        Example:
+            >>> net = DrivingNet(DrivingNetConfig(components=3, init_spread=(0.0, 0.3)))
+            >>> steering = torch.tensor([-0.4, -0.05, 0.2])
+            >>> chunks = torch.stack([torch.zeros(3), steering], -1)[:, None].expand(3, 4, 2)
+            >>> net.manoeuvre(chunks).tolist()  # left, keep, right
+            [0, 1, 2]
+        """
+        cfg = self.config
+        steering = chunk[..., 1]
+        if observed is None:
+            mean = steering.mean(-1)
+        else:
+            weights = observed.to(steering.dtype)
+            mean = (steering * weights).sum(-1) / weights.sum(-1).clamp_min(1.0)
+        offsets = torch.linspace(-1.0, 1.0, self.components, dtype=mean.dtype)
+        anchors = cfg.init_action[1] + offsets * cfg.init_spread[1]
+        return (mean.unsqueeze(-1) - anchors).abs().argmin(-1)
 
     def deterministic_chunk(self, features: torch.Tensor) -> torch.Tensor:
         """The chunk ``[..., chunk, action_dim]`` the policy commits to: ``tanh(loc)`` of the

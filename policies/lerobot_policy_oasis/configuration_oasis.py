@@ -39,7 +39,7 @@ from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 POLICY_TYPE = "oasis"
 FRAME_SPACING = CHUNK
 """Rows (world frames at 20 fps) between two frames the policy sees: one world-model chunk."""
-LOSSES = ("nll", "l1", "mse")
+LOSSES = ("nll", "manoeuvre", "l1", "mse")
 NETWORK_FIELDS = (
     "image_size",
     "shared_encoder",
@@ -103,8 +103,12 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
         loss: behaviour-cloning loss on the chunk: ``"nll"`` (the negative log-likelihood of
             the demonstrated chunk under the network's chunk distribution, per action number:
             with the mixture head each manoeuvre gets its own component and the clone commits
-            to one; it also fits the distribution's scale), ``"l1"`` or ``"mse"`` (regression of
-            the deterministic chunk, ``action_loss_weights`` weighted).
+            to one; it also fits the distribution's scale), ``"manoeuvre"`` (the same, jointly
+            with the chunk's manoeuvre: the mixture component whose initial steering is nearest
+            the chunk's, so the components are left, keep and right and the weights a
+            classifier of them, :meth:`~oasis_torchrl.models.DrivingNet.manoeuvre`), ``"l1"``
+            or ``"mse"`` (regression of the deterministic chunk, ``action_loss_weights``
+            weighted).
         action_loss_weights: weight of the throttle and steering errors of ``"l1"`` and
             ``"mse"``. Actions are not normalised (see above), so with equal weights the loss
             follows the dimension that varies most: in autopilot demonstrations throttle (std

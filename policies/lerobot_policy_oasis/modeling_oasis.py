@@ -32,6 +32,8 @@ from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
+LIKELIHOOD_LOSSES = ("nll", "manoeuvre")
+"""The losses that fit the chunk distribution (its scale too) rather than regress a chunk."""
 
 
 class OasisPolicy(PreTrainedPolicy):
@@ -75,7 +77,7 @@ class OasisPolicy(PreTrainedPolicy):
         likelihood loss the distribution's scale, with ``aux_weight`` the auxiliary head."""
         yield from self.model.encoder.parameters()
         yield from self.model.actor.parameters()
-        if self.config.loss == "nll":
+        if self.config.loss in LIKELIHOOD_LOSSES:
             yield self.model.log_scale
         if self.model.aux is not None:
             yield from self.model.aux.parameters()
@@ -145,8 +147,10 @@ class OasisPolicy(PreTrainedPolicy):
         pad = batch.get(ACTION_IS_PAD)
         valid = torch.ones_like(target[..., 0]) if pad is None else (~pad).to(target.dtype)
         features = self._features(batch)
-        if self.config.loss == "nll":
-            log_likelihood = self.model.chunk_log_likelihood(features, target, valid.bool())
+        if self.config.loss in LIKELIHOOD_LOSSES:
+            log_likelihood = self.model.chunk_log_likelihood(
+                features, target, valid.bool(), by_manoeuvre=self.config.loss == "manoeuvre"
+            )
             numbers = valid.sum(-1).clamp_min(1.0) * target.shape[-1]
             per_sample = -log_likelihood / numbers
         else:

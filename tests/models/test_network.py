@@ -267,19 +267,55 @@ def test_the_chunk_likelihood_is_the_distributions_density(head: str) -> None:
     )
 
 
-def _clone(head: str, targets: torch.Tensor) -> torch.Tensor:
-    """Fit the head to ``targets`` [N, 4, 2] seen from one observation; its chunk for it."""
+def _fit(
+    head: str, features: torch.Tensor, targets: torch.Tensor, by_manoeuvre: bool = False
+) -> DrivingNet:
+    """A small network's actor fitted to ``targets`` [N, 4, 2] seen as ``features``."""
     torch.manual_seed(0)
     config = DrivingNetConfig(image_size=SIZE, head=head, camera_features=8, hidden_dim=32)
     net = DrivingNet(config)
-    features = torch.rand(1, net.config.features_dim).expand(len(targets), -1)
+    features = features.expand(-1, net.config.features_dim)
     optimizer = torch.optim.Adam([*net.actor.parameters(), net.log_scale], lr=1e-2)
     for _ in range(300):
-        loss = -net.chunk_log_likelihood(features, targets).mean()
+        log_likelihood = net.chunk_log_likelihood(features, targets, by_manoeuvre=by_manoeuvre)
         optimizer.zero_grad()
-        loss.backward()
+        (-log_likelihood.mean()).backward()
         optimizer.step()
-    return net.deterministic_chunk(features[:1])[0].detach()
+    return net
+
+
+def _clone(head: str, targets: torch.Tensor) -> torch.Tensor:
+    """Fit the head to ``targets`` [N, 4, 2] seen from one observation; its chunk for it."""
+    features = torch.rand(1, 1).expand(len(targets), 1)
+    net = _fit(head, features, targets)
+    return net.deterministic_chunk(features[:1].expand(1, net.config.features_dim))[0].detach()
+
+
+def test_a_manoeuvre_is_the_component_nearest_its_steering() -> None:
+    net = DrivingNet(DrivingNetConfig(image_size=SIZE, components=5, init_spread=(0.0, 0.4)))
+    chunks = torch.zeros(5, 4, 2)
+    chunks[:, :, 1] = torch.tensor([-0.5, -0.15, 0.05, 0.25, 0.9])[:, None]
+    assert net.manoeuvre(chunks).tolist() == [0, 1, 2, 3, 4]
+    observed = torch.tensor([[True, True, False, False]] * 5)
+    chunks[:, 2:, 1] = -1.0  # past the episode's end: left out
+    assert net.manoeuvre(chunks, observed).tolist() == [0, 1, 2, 3, 4]
+
+
+def test_the_manoeuvre_likelihood_gives_each_component_one_manoeuvre() -> None:
+    # Throttle varies more than steering, in every manoeuvre; fitted jointly with the
+    # manoeuvre, the components are left, keep and right and the weights tell them apart from
+    # the observation.
+    features = torch.linspace(0.0, 1.0, 90)[:, None]
+    targets = torch.zeros(90, 4, 2)
+    targets[:, :, 0] = torch.where(torch.arange(90) % 2 == 0, 0.9, -0.5)[:, None]
+    targets[:30, :, 1], targets[60:, :, 1] = -0.3, 0.3
+    net = _fit("mixture", features, targets, by_manoeuvre=True)
+    wide = features.expand(-1, net.config.features_dim)
+    committed = net.deterministic_chunk(wide)[:, :, 1].mean(-1).detach()
+    assert (committed[:20] < -0.2).all() and (committed[70:] > 0.2).all()
+    assert committed[35:55].abs().max() < 0.1
+    steering = torch.tanh(net.action_params(wide)["loc"][0, :, :, 1].mean(-1))
+    assert steering[0] < -0.2 < 0.2 < steering[2] and steering[1].abs() < 0.1
 
 
 def test_behaviour_cloning_by_likelihood_commits_to_one_side() -> None:

@@ -111,7 +111,7 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
     )
 
 
-@pytest.mark.parametrize("loss", ["l1", "nll"])
+@pytest.mark.parametrize("loss", ["l1", "nll", "manoeuvre"])
 def test_forward_masks_padded_actions(loss: str) -> None:
     policy = _policy(loss=loss)
     batch = _stacked(_observation(seed=0), _observation(seed=1))
@@ -132,7 +132,7 @@ def test_forward_masks_padded_actions(loss: str) -> None:
     assert policy.model.encoder.convs[0].weight.grad is not None
     # The likelihood fits the distribution's scale too; the regression leaves it alone.
     trained = {id(parameter) for parameter in policy.get_optim_params()}
-    assert (id(policy.model.log_scale) in trained) == (loss == "nll")
+    assert (id(policy.model.log_scale) in trained) == (loss != "l1")
 
 
 def test_the_auxiliary_loss_predicts_the_privileged_state() -> None:
@@ -205,7 +205,7 @@ def test_bad_features_are_named() -> None:
         OasisConfig(device="cpu", n_action_steps=5)
     with pytest.raises(ValueError, match="action_loss_weights must be two non-negative"):
         OasisConfig(device="cpu", action_loss_weights=(0.0, 0.0))
-    with pytest.raises(ValueError, match=r"loss must be one of \('nll', 'l1', 'mse'\)"):
+    with pytest.raises(ValueError, match=r"loss must be one of \('nll', 'manoeuvre', 'l1', 'mse'\)"):
         OasisConfig(device="cpu", loss="huber")
     with pytest.raises(ValueError, match="head must be one of"):
         _config(head="gmm").net_config()
