@@ -205,7 +205,8 @@ def test_bad_features_are_named() -> None:
         OasisConfig(device="cpu", n_action_steps=5)
     with pytest.raises(ValueError, match="action_loss_weights must be two non-negative"):
         OasisConfig(device="cpu", action_loss_weights=(0.0, 0.0))
-    with pytest.raises(ValueError, match=r"loss must be one of \('nll', 'manoeuvre', 'l1', 'mse'\)"):
+    expected = r"loss must be one of \('nll', 'manoeuvre', 'l1', 'mse'\)"
+    with pytest.raises(ValueError, match=expected):
         OasisConfig(device="cpu", loss="huber")
     with pytest.raises(ValueError, match="head must be one of"):
         _config(head="gmm").net_config()
