@@ -122,23 +122,25 @@ class TanhNormalMixture(D.Distribution):
     def component_log_prob(
         self, value: torch.Tensor, component: torch.Tensor, observed: torch.Tensor | None = None
     ) -> torch.Tensor:
-        """Log-density of actions ``[*B, *E]`` jointly with the component each came from,
-        ``component`` ``[*B]`` (int): ``log w_k + log p_k(value)``. Its maximum fits each
-        component to its own actions and the weights to the labels, a classifier of the
-        components (:meth:`log_prob` marginalises the component out instead).
+        """Log-density ``[*B]`` of actions ``[*B, *E]`` under one component each,
+        ``component`` ``[*B]`` (int), its weight left out: with :attr:`log_weights` at the same
+        component, the joint log-density of an action and the component it came from (fitting
+        both fits each component to its own actions and the weights as a classifier of them;
+        :meth:`log_prob` marginalises the component out instead).
 
         Example:
             >>> logits = torch.tensor([[0.0, 0.0]])
             >>> loc = torch.tensor([[[-1.0], [1.0]]])
             >>> dist = TanhNormalMixture(logits, loc, torch.full_like(loc, 0.1), event_dims=1)
             >>> value = torch.tanh(torch.tensor([[1.0]]))
-            >>> near, far = (dist.component_log_prob(value, torch.tensor([k])) for k in (1, 0))
-            >>> bool(near > dist.log_prob(value) - 1e-4 > far)
+            >>> own, other = (dist.component_log_prob(value, torch.tensor([k])) for k in (1, 0))
+            >>> bool(own + dist.log_weights[0, 1] > dist.log_prob(value) - 1e-4 > other)
             True
         """
         pre_tanh = torch.atanh(value.clamp(-ACTION_BOUND, ACTION_BOUND))
         joint, jacobian = self._joint_log_prob(pre_tanh, observed)
-        return joint.gather(-1, component.unsqueeze(-1)).squeeze(-1) - jacobian
+        densities = joint - self.log_weights
+        return densities.gather(-1, component.unsqueeze(-1)).squeeze(-1) - jacobian
 
     def log_prob(self, value: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
         """Exact log-density of actions ``[*S, *B, *E]`` in ``[-1, 1]`` -> ``[*S, *B]``.

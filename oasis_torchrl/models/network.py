@@ -173,32 +173,53 @@ class DrivingNet(nn.Module):
         return self.distribution_class(**self.action_params(features), **self.distribution_kwargs)
 
     def chunk_log_likelihood(
-        self,
-        features: torch.Tensor,
-        target: torch.Tensor,
-        observed: torch.Tensor | None = None,
-        *,
-        by_manoeuvre: bool = False,
+        self, features: torch.Tensor, target: torch.Tensor, observed: torch.Tensor | None = None
     ) -> torch.Tensor:
         """Log-likelihood ``[...]`` of demonstrated chunks ``target`` ``[..., chunk,
         action_dim]`` (behaviour cloning by likelihood), clamped to ``TARGET_BOUND``.
 
         ``observed`` (bool ``[..., chunk]``) leaves out actions past an episode's end. The
         tanh-normal head is scored as a mixture of one component (the same density).
-        ``by_manoeuvre``: the likelihood of each chunk jointly with its manoeuvre
-        (:meth:`manoeuvre`), so each component learns its own manoeuvre and the weights learn
-        to tell them apart, instead of the marginal over components.
         """
+        mask = None if observed is None else observed.unsqueeze(-1)
+        bounded = target.clamp(-TARGET_BOUND, TARGET_BOUND)
+        return self._chunk_mixture(features).log_prob(bounded, mask)
+
+    def manoeuvre_log_likelihood(
+        self, features: torch.Tensor, target: torch.Tensor, observed: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Behaviour cloning by manoeuvre: for demonstrated chunks ``target`` ``[..., chunk,
+        action_dim]``, the log-density ``[...]`` of each under the component of its manoeuvre
+        (:meth:`manoeuvre`), and the log-probability ``[...]`` the network gives that
+        manoeuvre. Maximising both makes the components left, keep and right and the weights a
+        classifier of them; the marginal likelihood (:meth:`chunk_log_likelihood`) lets the
+        components split on whatever varies most (throttle) instead.
+
+        Example:
+            >>> net = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+            >>> features = torch.rand(2, net.config.features_dim)
+            >>> chunk, manoeuvre = net.manoeuvre_log_likelihood(features, torch.zeros(2, 4, 2))
+            >>> chunk.shape, bool((manoeuvre < 0).all())
+            (torch.Size([2]), True)
+        """
+        dist = self._chunk_mixture(features)
+        mask = None if observed is None else observed.unsqueeze(-1)
+        if self.config.head != MIXTURE:
+            return dist.log_prob(target.clamp(-TARGET_BOUND, TARGET_BOUND), mask), torch.zeros(
+                target.shape[:-2]
+            )
+        component = self.manoeuvre(target, observed)
+        bounded = target.clamp(-TARGET_BOUND, TARGET_BOUND)
+        weight = dist.log_weights.gather(-1, component.unsqueeze(-1)).squeeze(-1)
+        return dist.component_log_prob(bounded, component, mask), weight
+
+    def _chunk_mixture(self, features: torch.Tensor) -> TanhNormalMixture:
+        """The chunk distribution as a mixture (of one component for the tanh-normal head)."""
         params = self.action_params(features)
         if self.config.head != MIXTURE:
             params = {key: value.unsqueeze(-3) for key, value in params.items()}
             params["logits"] = params["loc"].new_zeros(params["loc"].shape[:-2])
-        mask = None if observed is None else observed.unsqueeze(-1)
-        dist = TanhNormalMixture(**params, event_dims=2)
-        bounded = target.clamp(-TARGET_BOUND, TARGET_BOUND)
-        if not by_manoeuvre or self.config.head != MIXTURE:
-            return dist.log_prob(bounded, mask)
-        return dist.component_log_prob(bounded, self.manoeuvre(target, observed), mask)
+        return TanhNormalMixture(**params, event_dims=2)
 
     def manoeuvre(self, chunk: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
         """The component ``[...]`` (int) whose manoeuvre a chunk ``[..., chunk, action_dim]``

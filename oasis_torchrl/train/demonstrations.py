@@ -10,7 +10,9 @@ chunk, reset with the row's episode.
 
 With a ``learner``, the learner's own (noisy) actions are executed instead, still labelled by
 the autopilot: a DAgger round (Ross et al., 2011), which collects the states the clone itself
-reaches, e.g. an obstacle seen late at full speed, with what the expert would do there.
+reaches, e.g. an obstacle seen late at full speed, with what the expert would do there. The
+same ``learner`` argument records late-reacting drives before any clone exists
+(:class:`~oasis_torchrl.drivers.late_reaction.LateReactionAutopilot`, ``record.late_reaction``).
 
 Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one row per frame,
 with each frame's privileged state (the target of behaviour cloning's auxiliary loss).

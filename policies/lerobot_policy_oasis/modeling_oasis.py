@@ -148,11 +148,15 @@ class OasisPolicy(PreTrainedPolicy):
         valid = torch.ones_like(target[..., 0]) if pad is None else (~pad).to(target.dtype)
         features = self._features(batch)
         if self.config.loss in LIKELIHOOD_LOSSES:
-            log_likelihood = self.model.chunk_log_likelihood(
-                features, target, valid.bool(), by_manoeuvre=self.config.loss == "manoeuvre"
-            )
             numbers = valid.sum(-1).clamp_min(1.0) * target.shape[-1]
-            per_sample = -log_likelihood / numbers
+            if self.config.loss == "nll":
+                log_likelihood = self.model.chunk_log_likelihood(features, target, valid.bool())
+                per_sample = -log_likelihood / numbers
+            else:  # the chunk per number, its manoeuvre once per sample (a classification)
+                chunk, manoeuvre = self.model.manoeuvre_log_likelihood(
+                    features, target, valid.bool()
+                )
+                per_sample = -chunk / numbers - manoeuvre
         else:
             error = self.model.deterministic_chunk(features) - target
             error = error.abs() if self.config.loss == "l1" else error.square()

@@ -277,7 +277,10 @@ def _fit(
     features = features.expand(-1, net.config.features_dim)
     optimizer = torch.optim.Adam([*net.actor.parameters(), net.log_scale], lr=1e-2)
     for _ in range(300):
-        log_likelihood = net.chunk_log_likelihood(features, targets, by_manoeuvre=by_manoeuvre)
+        if by_manoeuvre:
+            log_likelihood = sum(net.manoeuvre_log_likelihood(features, targets))
+        else:
+            log_likelihood = net.chunk_log_likelihood(features, targets)
         optimizer.zero_grad()
         (-log_likelihood.mean()).backward()
         optimizer.step()
