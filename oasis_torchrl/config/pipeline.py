@@ -3,6 +3,7 @@ behaviour cloning (-> DAgger rounds) -> PPO fine-tuning -> evaluation of all of 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
@@ -30,6 +31,25 @@ class NoiseConfig:
     correlation: float = option(0.8, help="chunk-to-chunk correlation in [0, 1)")
 
 
+def reaction_range(reaction: Sequence[float], name: str = "reaction") -> tuple[float, float]:
+    """``(near, far)`` metres of a late reaction, checked: two numbers, ``0 <= near <= far``.
+
+    Example:
+        >>> reaction_range([8, 40])
+        (8.0, 40.0)
+        >>> reaction_range([40, 8], "record.late_reaction")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: record.late_reaction must be [near, far] metres with 0 <= near <= far, ...
+    """
+    values = [float(value) for value in reaction]
+    if len(values) != 2 or not 0 <= values[0] <= values[1]:
+        raise ValueError(
+            f"{name} must be [near, far] metres with 0 <= near <= far, got {list(reaction)}"
+        )
+    return values[0], values[1]
+
+
 @dataclass
 class DemonstrationsConfig:
     """The autopilot demonstrations (frame rows, a LeRobot dataset)."""
@@ -43,6 +63,10 @@ class DemonstrationsConfig:
         "nearer than a distance drawn in this range for each approach, labelled by the "
         "autopilot throughout (null: the autopilot drives)",
     )
+
+    def __post_init__(self) -> None:
+        if self.late_reaction is not None:
+            reaction_range(self.late_reaction, "record.late_reaction")
 
 
 @dataclass

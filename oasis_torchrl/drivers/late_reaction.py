@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import torch
 from tensordict import TensorDictBase
 
+from oasis_torchrl.config.pipeline import reaction_range
 from oasis_torchrl.drivers.autopilot import Autopilot
 
 TRUTH = "truth"
@@ -64,10 +65,7 @@ class LateReactionAutopilot(Autopilot):
 
     def __init__(self, reaction: Sequence[float] = (8.0, 40.0), seed: int = 0) -> None:
         super().__init__()
-        near, far = (float(value) for value in reaction)
-        if not 0 <= near <= far or len(reaction) != 2:
-            raise ValueError(f"reaction must be [near, far] metres, 0 <= near <= far: {reaction}")
-        self.reaction = (near, far)
+        self.reaction = reaction_range(reaction)
         self._generator = torch.Generator().manual_seed(seed)
         self._distances = torch.zeros(0)
 

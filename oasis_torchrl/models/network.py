@@ -204,12 +204,10 @@ class DrivingNet(nn.Module):
         """
         dist = self._chunk_mixture(features)
         mask = None if observed is None else observed.unsqueeze(-1)
-        if self.config.head != MIXTURE:
-            return dist.log_prob(target.clamp(-TARGET_BOUND, TARGET_BOUND), mask), torch.zeros(
-                target.shape[:-2]
-            )
-        component = self.manoeuvre(target, observed)
         bounded = target.clamp(-TARGET_BOUND, TARGET_BOUND)
+        if self.config.head != MIXTURE:  # one manoeuvre, certain
+            return dist.log_prob(bounded, mask), bounded.new_zeros(bounded.shape[:-2])
+        component = self.manoeuvre(target, observed)
         weight = dist.log_weights.gather(-1, component.unsqueeze(-1)).squeeze(-1)
         return dist.component_log_prob(bounded, component, mask), weight
 
@@ -234,6 +232,11 @@ class DrivingNet(nn.Module):
             [0, 1, 2]
         """
         cfg = self.config
+        if self.components > 1 and cfg.init_spread[1] <= 0:
+            raise ValueError(
+                "manoeuvres need the mixture's components spread over steering "
+                f"(DrivingNetConfig.init_spread[1] > 0), got {list(cfg.init_spread)}"
+            )
         steering = chunk[..., 1]
         if observed is None:
             mean = steering.mean(-1)

@@ -94,6 +94,8 @@ def test_late_reaction_draws_each_approach_its_own_distance() -> None:
 def test_late_reaction_errors_name_the_problem() -> None:
     with pytest.raises(ValueError, match="near <= far"):
         LateReactionAutopilot(reaction=(30.0, 10.0))
+    with pytest.raises(ValueError, match=r"record.late_reaction must be \[near, far\]"):
+        load_config("demo", ["record.late_reaction=[8,20,40]"])
     td = TensorDict({"expert_action": torch.zeros(1, 4, 2)}, batch_size=[1])
     with pytest.raises(KeyError, match="ground truth"):
         LateReactionAutopilot()(td)
