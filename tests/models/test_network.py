@@ -302,6 +302,9 @@ def test_a_manoeuvre_is_the_component_nearest_its_steering() -> None:
     observed = torch.tensor([[True, True, False, False]] * 5)
     chunks[:, 2:, 1] = -1.0  # past the episode's end: left out
     assert net.manoeuvre(chunks, observed).tolist() == [0, 1, 2, 3, 4]
+    unspread = DrivingNet(DrivingNetConfig(image_size=SIZE, init_spread=(0.0, 0.0)))
+    with pytest.raises(ValueError, match=r"spread over steering \(DrivingNetConfig.init_spread"):
+        unspread.manoeuvre(chunks)
 
 
 def test_the_manoeuvre_likelihood_gives_each_component_one_manoeuvre() -> None:
