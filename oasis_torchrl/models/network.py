@@ -86,16 +86,32 @@ class DrivingNet(nn.Module):
         self.set_scale(cfg.init_scale)
         # A small last actor layer starts PPO near one chunk (init_action) for every input,
         # instead of saturated tanh ends; the mixture's components around it (init_spread).
-        offsets = torch.linspace(-1.0, 1.0, self.components) if self.components > 1 else None
         with torch.no_grad():
             self.actor[-1].weight.mul_(0.01)
             bias = self.actor[-1].bias
-            actions = torch.tensor([cfg.init_action])
-            if offsets is not None:
-                bias[: self.logit_outputs] = -SPREAD_PRIOR * offsets.square()
-                actions = actions + offsets.unsqueeze(1) * torch.tensor(cfg.init_spread)
-            location = self._raw_location(actions).unsqueeze(1).expand(-1, cfg.chunk, -1)
-            bias[self.logit_outputs :] = location.flatten()
+            if self.components > 1:
+                bias[: self.logit_outputs] = -SPREAD_PRIOR * self._spread_offsets().square()
+            location = self._raw_location(self.initial_actions())
+            bias[self.logit_outputs :] = location.unsqueeze(1).expand(-1, cfg.chunk, -1).flatten()
+
+    def _spread_offsets(self) -> torch.Tensor:
+        """Each component's place in ``init_spread``, ``[K]``: -1 (left) to 1 (right), evenly;
+        a single component at 0."""
+        if self.components == 1:
+            return torch.zeros(1)
+        return torch.linspace(-1.0, 1.0, self.components)
+
+    def initial_actions(self) -> torch.Tensor:
+        """A fresh network's mean action per component, ``[K, action_dim]``: ``init_action``
+        spread by ``init_spread`` (left to right for the mixture's keep, left and right).
+
+        Example:
+            >>> DrivingNet(DrivingNetConfig(init_spread=(0.0, 0.3))).initial_actions()[:, 1]
+            tensor([-0.3000,  0.0000,  0.3000])
+        """
+        cfg = self.config
+        spread = self._spread_offsets().unsqueeze(1) * torch.tensor(cfg.init_spread)
+        return torch.tensor([cfg.init_action]) + spread
 
     @property
     def _chunk_shape(self) -> tuple[int, ...]:
@@ -221,8 +237,8 @@ class DrivingNet(nn.Module):
 
     def manoeuvre(self, chunk: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
         """The component ``[...]`` (int) whose manoeuvre a chunk ``[..., chunk, action_dim]``
-        is: the one whose initial steering (``init_action`` spread by ``init_spread``, left to
-        right) is nearest the chunk's mean steering over its ``observed`` actions.
+        is: the one whose initial steering (:meth:`initial_actions`) is nearest the
+        chunk's mean steering over its ``observed`` actions.
 
         Example:
             >>> net = DrivingNet(DrivingNetConfig(components=3, init_spread=(0.0, 0.3)))
@@ -243,8 +259,7 @@ class DrivingNet(nn.Module):
         else:
             weights = observed.to(steering.dtype)
             mean = (steering * weights).sum(-1) / weights.sum(-1).clamp_min(1.0)
-        offsets = torch.linspace(-1.0, 1.0, self.components, dtype=mean.dtype)
-        anchors = cfg.init_action[1] + offsets * cfg.init_spread[1]
+        anchors = self.initial_actions()[:, 1].to(mean.dtype)
         return (mean.unsqueeze(-1) - anchors).abs().argmin(-1)
 
     def deterministic_chunk(self, features: torch.Tensor) -> torch.Tensor:
