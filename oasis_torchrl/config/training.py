@@ -252,10 +252,19 @@ class BCTrainConfig:
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
     shift_pad: int = option(4, help="random-shift augmentation in pixels (0: off)")
+    mirror: float = option(
+        0.0,
+        help="share of the samples reflected left to right (cameras flipped and swapped, "
+        "steering and the privileged state's sides mirrored; 0: off)",
+    )
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
         1000, help="also save the policy folder every N steps (0: only at the end)"
     )
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.mirror <= 1.0:
+            raise ValueError(f"train.mirror is a share of the samples in [0, 1], got {self.mirror}")
 
 
 @dataclass

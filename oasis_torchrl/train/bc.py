@@ -4,9 +4,10 @@ The same pieces as ``lerobot-train --policy.type=oasis``: LeRobot's ``make_polic
 from the dataset), the plugin's processors (resize and normalisation), ``policy.forward`` as
 the loss and the policy's AdamW preset. What differs: the dataset is decoded once into memory
 (:class:`~oasis_torchrl.train.bc_data.InMemoryBCDataset`; ``dataset.cache=false`` streams
-from the videos like ``lerobot-train``), optional random-shift image augmentation, TorchRL
-loggers, tqdm, and an evaluation in the env at the end. The output folder is a LeRobot policy
-folder (``save_pretrained`` weights, config and processors): it loads with
+from the videos like ``lerobot-train``), optional random-shift and mirror augmentation
+(:mod:`~oasis_torchrl.train.mirror`), TorchRL loggers, tqdm, and an evaluation in the env at
+the end. The output folder is a LeRobot policy folder (``save_pretrained`` weights, config and
+processors): it loads with
 ``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``, and as a PPO warm start
 (``init_from``). Config: :class:`~oasis_torchrl.config.BCConfig`.
 """
@@ -32,6 +33,7 @@ from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.mirror import Mirror
 
 logger = logging.getLogger(__name__)
 
@@ -158,6 +160,7 @@ class BCTrainer:
             experiment_name=cfg.logger.exp_name,
         )
         self.image_keys = [key for key in self.policy_config.image_features]
+        self.mirror = self._mirror(dataset.meta.features) if cfg.train.mirror else None
 
     def run(self) -> BCResult:
         """Train ``train.steps`` steps, save the policy folder, evaluate if configured."""
@@ -178,7 +181,8 @@ class BCTrainer:
             range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress
         ) as bar:
             for step in bar:
-                batch = self._preprocessed(next(batches))
+                raw = next(batches)
+                batch = self._preprocessed(self.mirror(raw) if self.mirror else raw)
                 for key in self.image_keys:
                     batch[key] = random_shift(batch[key], cfg.shift_pad)
                 loss, info = self.policy.forward(batch)
@@ -197,6 +201,11 @@ class BCTrainer:
                 if cfg.save_every and step % cfg.save_every == 0:
                     self.save(self.output_dir / "policy")
         return average
+
+    def _mirror(self, features: dict[str, Any]) -> Mirror:
+        privileged = features.get(PRIVILEGED_KEY)
+        names = privileged["names"] if privileged else None
+        return Mirror(self.image_keys, names, share=self.cfg.train.mirror)
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:
         """The batch through the policy's preprocessor, the privileged state kept beside it
