@@ -18,11 +18,12 @@ key                                dtype       shape          meaning
 ``next.done``                      bool        ``(1,)``       the episode ends after this row
 ``episode_seed``                   int64       ``(1,)``       world seed (rollouts): with the task
                                                               it rebuilds the scene
-``privileged_state``               float32     ``(6,)``       on request, the simulator's state of
-                                                              this frame (speed, lane offset,
-                                                              heading error, obstacle distances
-                                                              ahead, left and right; scaled): an
-                                                              auxiliary target, no policy input
+``privileged_state``               float32     ``(10,)``      on request, the simulator's state of
+                                                              this frame (``PRIVILEGED_FIELDS``:
+                                                              speed, offsets, lanes, obstacle
+                                                              distances in the path and in the
+                                                              lanes; scaled): an auxiliary
+                                                              target, no policy input
 ``task``                           string                     the episode's prompt
 =================================  ==========  =============  =====================================
 
