@@ -77,7 +77,8 @@ lock: venv-python $(STAMP)
 
 # The quick benchmarks (each a few minutes at most); the learning benchmark trains policies for
 # hours and has its own target.
-LEARNING_BENCH := benchmarks/learning.py benchmarks/state_clone.py benchmarks/perception.py
+LEARNING_BENCH := benchmarks/learning.py benchmarks/state_clone.py benchmarks/perception.py \
+	benchmarks/perception_data.py
 bench: venv-python $(STAMP)
 	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/*.py)); do \
 		$(PY) $$script; done
