@@ -17,7 +17,7 @@ Every run sees the same number of samples (``--steps`` x 64); the baseline is th
 training set without mirroring, in the same run.
 
 Usage: ``python benchmarks/perception_data.py [--episodes 320 --sizes 9600 0 --steps 6000]``
-(size 0: every training row); prints JSON (about 15 min on 2 cores).
+(size 0: every training row); prints JSON (about 20 min on 2 cores).
 """
 
 from __future__ import annotations
