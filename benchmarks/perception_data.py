@@ -65,10 +65,8 @@ class Drives:
         return list(pair.unbind(1))
 
     def head(self, rows: int) -> Drives:
-        """The first ``rows`` rows."""
-        return Drives(
-            self.frames[:rows], self.previous[:rows].clamp(max=rows - 1), self.state[:rows]
-        )
+        """The first ``rows`` rows (each row's previous one comes before it)."""
+        return Drives(self.frames[:rows], self.previous[:rows], self.state[:rows])
 
 
 def render(
