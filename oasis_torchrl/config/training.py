@@ -110,6 +110,11 @@ class OptimConfig:
         3.0e-3,
         help="learning rate of the action scale (null: lr); its gradient is weak and noisy",
     )
+    pool_scale: bool = option(
+        True,
+        help="learn one action scale per action number (its gradient pooled over the chunk and "
+        "the components) instead of one per chunk entry",
+    )
     max_grad_norm: float = option(0.5, help="gradient clipping")
     epochs: int = option(4, help="passes over each batch")
     target_kl: float | None = option(

@@ -178,6 +178,8 @@ class PPOTrainer:
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.env.append_transform(ChunkFrameStack(cameras, depth=self.net.config.frames))
+        if cfg.optim.pool_scale:
+            self.net.pool_scale_gradients()
         self.modules = make_actor_critic(self.net)
         self.loss = DrivingPPOLoss(
             self.modules,

@@ -61,6 +61,8 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     trained = ("encoder.convs.0.weight", "actor.0.weight", "critic.2.weight", "aux.2.weight")
     for key in (*trained, "log_scale"):
         assert not torch.equal(before[key], after[key]), key
+    scale = after["log_scale"]  # optim.pool_scale: one learned value per action number
+    torch.testing.assert_close(scale, scale[:1, :1].expand_as(scale))
     assert result.net.config.critic_inputs == len(PRIVILEGED_FIELDS)  # the asymmetric critic
     assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(1.0)}))  # null: off
     trainer.cfg.optim.target_kl = 0.05
@@ -113,8 +115,10 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
         "eval.selection_seeds=[5]",
         "eval.max_steps=4",
         "checkpoint.keep_evaluated=true",
+        "optim.pool_scale=false",
     )
     result = PPOTrainer(cfg).run()
+    assert result.net.log_scale[..., 1].unique().numel() > 1  # one scale per chunk entry
 
     *periodic, final = result.history
     assert [entry["seeds"] for entry in periodic] == [[5]] * 3
