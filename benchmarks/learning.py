@@ -244,7 +244,7 @@ def main() -> None:
     # 256 late-reaction demonstrations: a clone of 64 drove like a constant action
     # (BENCHMARKS.md, "BC without DAgger").
     parser.add_argument("--demo-episodes", type=int, default=256)
-    parser.add_argument("--bc-steps", type=int, default=8000)
+    parser.add_argument("--bc-steps", type=int, default=16000)
     parser.add_argument("--dagger-rounds", type=int, default=3)
     parser.add_argument("--dagger-episodes", type=int, default=32)
     parser.add_argument("--dagger-steps", type=int, default=1000)
