@@ -107,7 +107,7 @@ class OptimConfig:
         1.0e-3, help="learning rate of the critic head (null: lr); a fresh critic needs the pace"
     )
     scale_lr: float | None = option(
-        3.0e-3,
+        1.0e-2,
         help="learning rate of the action scale (null: lr); its gradient is weak and noisy",
     )
     pool_scale: bool = option(
