@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from perception import explained_variance
 from torch import nn
 from tqdm import tqdm
 
@@ -138,12 +139,7 @@ def r_squared(model: nn.Module, drives: Drives) -> dict[str, float]:
     """Each field's share of variance explained on ``drives`` (0: no better than its mean)."""
     rows = torch.arange(len(drives.state))
     predicted = torch.cat([model(drives.images(part)) for part in rows.split(512)])
-    error = (predicted - drives.state).square().mean(0)
-    explained = 1 - error / drives.state.var(0, unbiased=False)
-    return {
-        field: round(float(value), 3)
-        for field, value in zip(PRIVILEGED_FIELDS, explained, strict=True)
-    }
+    return explained_variance(predicted, drives.state)
 
 
 def main() -> None:
