@@ -247,6 +247,10 @@ class BCPolicyConfig:
     optimizer_lr: float = option(1.0e-3, help="learning rate")
     optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
     optimizer_grad_clip_norm: float = option(10.0, help="gradient clipping")
+    scheduler_name: str | None = option(
+        None, help="learning-rate schedule: null (constant) or cosine (annealed to 0 at the end)"
+    )
+    scheduler_warmup_steps: int = option(0, help="linear warm-up steps of the cosine schedule")
 
 
 @dataclass

@@ -143,17 +143,21 @@ class BCTrainer:
         self.preprocessor, self.postprocessor = make_pre_post_processors(
             self.policy_config, dataset_stats=dataset.meta.stats
         )
-        data = InMemoryBCDataset(dataset, progress=cfg.progress) if cfg.dataset.cache else dataset
+        cached = InMemoryBCDataset(dataset, progress=cfg.progress) if cfg.dataset.cache else None
+        data = dataset if cached is None else cached
         self.loader = DataLoader(
             data,
             batch_size=cfg.train.batch_size,
             shuffle=True,
             drop_last=len(data) > cfg.train.batch_size,
             num_workers=cfg.train.num_workers,
+            collate_fn=None if cached is None else cached.collate,
         )
         self.optimizer = self.policy_config.get_optimizer_preset().build(
             list(self.policy.get_optim_params())
         )
+        schedule = self.policy_config.get_scheduler_preset()
+        self.scheduler = schedule.build(self.optimizer, cfg.train.steps) if schedule else None
         self.logger = get_logger(
             cfg.logger.backend,
             logger_name=str(self.output_dir / "logs"),
@@ -190,11 +194,15 @@ class BCTrainer:
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)
                 self.optimizer.step()
+                if self.scheduler is not None:
+                    self.scheduler.step()
                 value = loss.item()
                 average = value if step == 1 else 0.98 * average + 0.02 * value
                 if step % cfg.log_every == 0 or step == cfg.steps:
                     self.logger.log_scalar("bc/loss", value, step=step)
                     self.logger.log_scalar("bc/grad_norm", float(grad_norm), step=step)
+                    lr = self.optimizer.param_groups[0]["lr"]
+                    self.logger.log_scalar("bc/lr", lr, step=step)
                     if "aux_loss" in info:
                         self.logger.log_scalar("bc/aux_loss", info["aux_loss"], step=step)
                     bar.set_postfix(loss=f"{average:.4f}")

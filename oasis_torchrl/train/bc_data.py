@@ -59,19 +59,21 @@ class InMemoryBCDataset(Dataset):
         columns = dataset.hf_dataset.with_format("torch", columns=names)[:]
         self.columns = {key: torch.as_tensor(columns[key]) for key in names}
         self.row_keys = [OBS_STATE, ACTION, *targets]
-        # Rows of the loaded episodes are contiguous in the hf dataset; map absolute dataset
-        # indices (what episode bounds use) to positions in it.
-        self._position = {
-            int(index): position for position, index in enumerate(self.columns["index"])
-        }
+        # Absolute dataset indices (what episode bounds use) -> positions in the loaded rows.
+        indices = self.columns["index"]
+        self._first_index = int(indices.min())
+        self._position = torch.full((int(indices.max()) - self._first_index + 1,), -1)
+        self._position[indices - self._first_index] = torch.arange(len(indices))
         episodes = sorted(set(self.columns["episode_index"].tolist()))
-        self.bounds = {
+        bounds = {
             ep: (
                 int(dataset.meta.episodes[ep]["dataset_from_index"]),
                 int(dataset.meta.episodes[ep]["dataset_to_index"]),
             )
             for ep in episodes
         }
+        # Each row's episode bounds [start, end), absolute indices.
+        self._bounds = torch.tensor([bounds[int(ep)] for ep in self.columns["episode_index"]])
         self.frames = {
             key: self._decode(dataset, key, episodes, progress) for key in self.camera_keys
         }
@@ -104,21 +106,38 @@ class InMemoryBCDataset(Dataset):
         return len(self.columns["index"])
 
     def __getitem__(self, position: int) -> dict[str, Any]:
-        index = int(self.columns["index"][position])
-        start, end = self.bounds[int(self.columns["episode_index"][position])]
+        """One sample, as ``LeRobotDataset[position]`` gives it (without the task columns)."""
+        return {key: value[0] for key, value in self.__getitems__([position]).items()}
+
+    def __getitems__(self, positions: list[int]) -> dict[str, Any]:
+        """The collated batch of these samples, gathered in one indexing per key (the
+        ``DataLoader`` calls it with a batch's indices; pass :meth:`collate` as its
+        ``collate_fn``)."""
+        rows = torch.as_tensor(positions, dtype=torch.long)
+        index = self.columns["index"][rows, None]
+        start, end = self._bounds[rows, :1], self._bounds[rows, 1:]
         sources = {**self.frames, **{key: self.columns[key] for key in self.row_keys}}
-        sample: dict[str, Any] = {}
+        batch: dict[str, Any] = {}
         for key, source in sources.items():
             deltas = self.deltas.get(key)
             if deltas is None:
-                sample[key] = source[position]
+                batch[key] = source[rows]
                 continue
             wanted = index + deltas
-            rows = [self._position[int(row)] for row in wanted.clamp(start, end - 1)]
-            sample[key] = source[rows]
-            sample[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
+            clamped = torch.minimum(torch.maximum(wanted, start), end - 1)
+            batch[key] = source[self._position[clamped - self._first_index]]
+            batch[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
         for key in self.camera_keys:
-            sample[key] = sample[key].float().div_(255)
+            batch[key] = batch[key].float().div_(255)
         for key in ("episode_index", "index", "frame_index", "timestamp"):
-            sample[key] = self.columns[key][position]
-        return sample
+            batch[key] = self.columns[key][rows]
+        return batch
+
+    @staticmethod
+    def collate(batch: dict[str, Any]) -> dict[str, Any]:
+        """The ``DataLoader``'s ``collate_fn``: :meth:`__getitems__` already collates.
+
+        Example:
+            >>> batches = DataLoader(cached, 64, collate_fn=cached.collate)  # doctest: +SKIP
+        """
+        return batch

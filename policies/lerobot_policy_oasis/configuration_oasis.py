@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamWConfig
+from lerobot.optim.schedulers import CosineAnnealingWithWarmupSchedulerConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from oasis_torchrl.models import CAMERAS, DrivingNetConfig
@@ -40,6 +41,8 @@ POLICY_TYPE = "oasis"
 FRAME_SPACING = CHUNK
 """Rows (world frames at 20 fps) between two frames the policy sees: one world-model chunk."""
 LOSSES = ("nll", "manoeuvre", "l1", "mse")
+SCHEDULERS = (None, "cosine")
+"""Learning-rate schedules: ``None`` (constant) or ``"cosine"`` (warm-up, then annealing to 0)."""
 NETWORK_FIELDS = (
     "image_size",
     "shared_encoder",
@@ -127,6 +130,11 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             the rare lane changes of the action labels alone do not; at deployment the head is
             unused.
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
+        scheduler_name: the learning-rate schedule: ``None`` keeps ``optimizer_lr`` throughout;
+            ``"cosine"`` warms up linearly over ``scheduler_warmup_steps`` to ``optimizer_lr``,
+            then anneals to zero at the last training step (LeRobot's
+            ``cosine_annealing_with_warmup``; ``lerobot-train`` builds it with its ``steps``).
+        scheduler_warmup_steps: the cosine schedule's warm-up.
 
     Example:
         >>> config = OasisConfig(device="cpu")
@@ -148,6 +156,8 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
     optimizer_lr: float = 1e-3
     optimizer_weight_decay: float = 1e-4
     optimizer_grad_clip_norm: float = 10.0
+    scheduler_name: str | None = None
+    scheduler_warmup_steps: int = 0
 
     # Nothing is uploaded unless asked for, so `lerobot-train` needs no `policy.repo_id`.
     push_to_hub: bool = False
@@ -166,6 +176,16 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
         for name in ("aux_weight", "manoeuvre_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"OasisConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.scheduler_name not in SCHEDULERS:
+            raise ValueError(
+                f"OasisConfig.scheduler_name must be one of {SCHEDULERS}, "
+                f"got {self.scheduler_name!r}"
+            )
+        if self.scheduler_warmup_steps < 0:
+            raise ValueError(
+                "OasisConfig.scheduler_warmup_steps must be >= 0, "
+                f"got {self.scheduler_warmup_steps}"
+            )
         weights = tuple(self.action_loss_weights)
         if len(weights) != ACTION_DIM or min(weights) < 0 or max(weights) == 0:
             raise ValueError(
@@ -248,9 +268,18 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             grad_clip_norm=self.optimizer_grad_clip_norm,
         )
 
-    def get_scheduler_preset(self) -> None:
-        """No learning-rate schedule."""
-        return None
+    def get_scheduler_preset(self) -> CosineAnnealingWithWarmupSchedulerConfig | None:
+        """The ``scheduler_name`` schedule, or ``None`` for a constant learning rate.
+
+        Example:
+            >>> OasisConfig(device="cpu", scheduler_name="cosine").get_scheduler_preset()
+            CosineAnnealingWithWarmupSchedulerConfig(num_warmup_steps=0)
+        """
+        if self.scheduler_name is None:
+            return None
+        return CosineAnnealingWithWarmupSchedulerConfig(
+            num_warmup_steps=self.scheduler_warmup_steps
+        )
 
     @property
     def observation_delta_indices(self) -> list[int] | None:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
+from torch.utils.data import DataLoader, default_collate
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers.folders import load_net
@@ -76,7 +78,9 @@ def test_a_warm_start_goes_on_with_the_auxiliary_head(tiny_dataset: Path, tmp_pa
         torch.testing.assert_close(value, trained[key], msg=key)
 
 
-def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: Path) -> None:
+def test_in_memory_samples_and_batches_match_lerobot_samples(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
     dataset = open_dataset(_bc_config(tiny_dataset, tmp_path).dataset, OasisConfig(device="cpu"))
     cached = InMemoryBCDataset(dataset, progress=False)
     assert len(cached) == len(dataset) == 32
@@ -92,6 +96,13 @@ def test_in_memory_samples_match_lerobot_samples(tiny_dataset: Path, tmp_path: P
         for key in actual:
             tolerance = {"atol": 1 / 255, "rtol": 0} if key in cached.camera_keys else {}
             torch.testing.assert_close(actual[key], expected[key], msg=key, **tolerance)
+    batch = next(
+        iter(DataLoader(cached, batch_size=4, sampler=[0, 13, 15, 31], collate_fn=cached.collate))
+    )
+    expected = default_collate([{key: dataset[i][key] for key in batch} for i in (0, 13, 15, 31)])
+    for key, value in batch.items():
+        tolerance = {"atol": 1 / 255, "rtol": 0} if key in cached.camera_keys else {}
+        torch.testing.assert_close(value, expected[key], msg=key, **tolerance)
     assert cached[15]["action_is_pad"].tolist() == [False, True, True, True]
     assert cached[16]["observation.state_is_pad"].tolist() == [True, False]  # episode start
     assert cached[16]["observation.images.front"].shape == (2, 3, 32, 48)
@@ -106,3 +117,19 @@ def test_random_shift_moves_content_within_the_pad() -> None:
     rows, cols = positions // 9, positions % 9
     assert rows.min() >= 2 and rows.max() <= 6 and cols.min() >= 2 and cols.max() <= 6
     assert len(set(positions.tolist())) > 5
+
+
+def test_the_cosine_schedule_warms_up_and_anneals_to_zero(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
+    overrides = ("policy.scheduler_name=cosine", "policy.scheduler_warmup_steps=2", "train.steps=6")
+    BCTrainer(_bc_config(tiny_dataset, tmp_path, *overrides)).run()
+    logged = (tmp_path / "logs" / "bc" / "scalars" / "bc" / "lr.csv").read_text().split()
+    rates = [float(line.split(",")[1]) for line in logged]
+    assert rates[0] == 0.5e-3 and rates[1] == 1e-3  # warm-up to optimizer_lr
+    assert rates[2] > rates[3] > rates[4] > rates[5] == 0.0
+
+
+def test_an_unknown_schedule_is_refused() -> None:
+    with pytest.raises(ValueError, match="scheduler_name must be one of"):
+        OasisConfig(device="cpu", scheduler_name="linear")
