@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from tensordict import NonTensorData, TensorDictBase
 
+from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
@@ -213,7 +213,10 @@ class LeRobotDriver(Driver):
                 continue
             pixels = td.get(("pixels", camera))
             newest = pixels[:, -1] if pixels.dim() == 5 else pixels
-            frames[camera] = _resized(newest.cpu(), self.image_size).numpy()
+            newest = newest.cpu()
+            if self.image_size is not None:
+                newest = resize_frames(newest, self.image_size)
+            frames[camera] = newest.numpy()
         return frames
 
 
@@ -223,13 +226,3 @@ def _image_size(config: Any) -> tuple[int, int] | None:
     if len(sizes) > 1:
         raise ValueError(f"the policy's cameras have different sizes {sorted(sizes)}")
     return tuple(int(n) for n in sizes.pop()) if sizes else None
-
-
-def _resized(frames: torch.Tensor, size: tuple[int, int] | None) -> torch.Tensor:
-    """uint8 ``[N, H, W, 3]`` frames at ``size`` (antialiased bilinear; as is when equal)."""
-    if size is None or tuple(frames.shape[1:3]) == tuple(size):
-        return frames
-    scaled = F.interpolate(
-        frames.permute(0, 3, 1, 2).float(), size=size, mode="bilinear", antialias=True
-    )
-    return scaled.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).contiguous()

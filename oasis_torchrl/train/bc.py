@@ -143,7 +143,10 @@ class BCTrainer:
         self.preprocessor, self.postprocessor = make_pre_post_processors(
             self.policy_config, dataset_stats=dataset.meta.stats
         )
-        cached = InMemoryBCDataset(dataset, progress=cfg.progress) if cfg.dataset.cache else None
+        cached = None
+        if cfg.dataset.cache:  # frames kept at the policy's size: no resize per batch
+            size = tuple(self.policy_config.image_size)
+            cached = InMemoryBCDataset(dataset, image_size=size, progress=cfg.progress)
         data = dataset if cached is None else cached
         self.loader = DataLoader(
             data,

@@ -23,6 +23,7 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.utils.data import Dataset
 from tqdm import tqdm
 
+from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.data.loading import default_video_backend
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 
@@ -37,6 +38,9 @@ class InMemoryBCDataset(Dataset):
 
     Args:
         dataset: the LeRobot dataset (its ``delta_timestamps`` say which action rows to stack).
+        image_size: ``(height, width)`` to keep the frames at, resized once while decoding
+            (antialiased bilinear, as the policy's preprocessor would resize every batch;
+            ``None``: the dataset's size).
         progress: show a progress bar while decoding.
 
     Example:
@@ -45,7 +49,9 @@ class InMemoryBCDataset(Dataset):
         torch.Size([4, 2])
     """
 
-    def __init__(self, dataset: Any, *, progress: bool = True) -> None:
+    def __init__(
+        self, dataset: Any, *, image_size: tuple[int, int] | None = None, progress: bool = True
+    ) -> None:
         if not dataset.delta_timestamps or ACTION not in dataset.delta_timestamps:
             raise ValueError(
                 "open the dataset with delta_timestamps for 'action' (an action chunk)"
@@ -74,12 +80,14 @@ class InMemoryBCDataset(Dataset):
         }
         # Each row's episode bounds [start, end), absolute indices.
         self._bounds = torch.tensor([bounds[int(ep)] for ep in self.columns["episode_index"]])
+        self.image_size = image_size
         self.frames = {
             key: self._decode(dataset, key, episodes, progress) for key in self.camera_keys
         }
 
     def _decode(self, dataset: Any, key: str, episodes: list[int], progress: bool) -> torch.Tensor:
-        """uint8 ``[rows, 3, H, W]`` of one camera, in hf-dataset row order."""
+        """uint8 ``[rows, 3, H, W]`` of one camera, in hf-dataset row order (at
+        ``image_size`` if set)."""
         chunks = []
         for ep in tqdm(episodes, desc=f"decoding {key}", unit="episode", disable=not progress):
             rows = (self.columns["episode_index"] == ep).nonzero().flatten()
@@ -99,6 +107,9 @@ class InMemoryBCDataset(Dataset):
             else:
                 images = torch.stack([dataset[int(row)][key] for row in rows])
                 frames = (images * 255).round_().to(torch.uint8)
+            if self.image_size is not None:  # HWC views for resize_frames, then back
+                frames = resize_frames(frames.permute(0, 2, 3, 1), self.image_size)
+                frames = frames.permute(0, 3, 1, 2)
             chunks.append(frames)
         return torch.cat(chunks)
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
+from lerobot_policy_oasis.processor_oasis import ResizeFramesProcessorStep
 from torch.utils.data import DataLoader, default_collate
 
 from oasis_torchrl.config import load_config
@@ -133,3 +134,14 @@ def test_the_cosine_schedule_warms_up_and_anneals_to_zero(
 def test_an_unknown_schedule_is_refused() -> None:
     with pytest.raises(ValueError, match="scheduler_name must be one of"):
         OasisConfig(device="cpu", scheduler_name="linear")
+
+
+def test_the_cache_keeps_frames_at_the_policys_size(tiny_dataset: Path, tmp_path: Path) -> None:
+    dataset = open_dataset(_bc_config(tiny_dataset, tmp_path).dataset, OasisConfig(device="cpu"))
+    cached = InMemoryBCDataset(dataset, image_size=(16, 24), progress=False)
+    resize = ResizeFramesProcessorStep(size=(16, 24))
+    for index in (0, 17):
+        expected = resize.observation(dataset[index])
+        for key in cached.camera_keys:
+            assert cached[index][key].shape == (2, 3, 16, 24)
+            torch.testing.assert_close(cached[index][key], expected[key], atol=2 / 255, rtol=0)
