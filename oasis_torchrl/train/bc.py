@@ -172,12 +172,13 @@ class BCTrainer:
     def run(self) -> BCResult:
         """Train ``train.steps`` steps, save the policy folder, evaluate if configured."""
         save_config(self.cfg, self.output_dir / "config.yaml")
-        loss = self._train()
+        loss = self.train()
         policy_dir = self.save(self.output_dir / "policy")
         final = self._evaluate() if self.cfg.eval.episodes else None
         return BCResult(self.policy, policy_dir, final, loss)
 
-    def _train(self) -> float:
+    def train(self) -> float:
+        """Take ``train.steps`` gradient steps; the loss, smoothed over the last ~50 steps."""
         cfg = self.cfg.train
         clip = self.policy_config.optimizer_grad_clip_norm
         parameters = list(self.policy.get_optim_params())

@@ -3,12 +3,14 @@
 ``LeRobotDataset.__getitem__`` decodes every camera's video from the nearest keyframe for every
 sample, which costs far more than a training step of the oasis network.
 :class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass through LeRobot's
-own decoder, keeps the frames as uint8, and serves the same sample dict
+own decoder, keeps the frames as uint8 (at the policy's size, if given: resized once, not per
+batch), and serves the same sample dict
 (``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``,
 ``privileged_state`` where recorded, the ``<key>_is_pad`` masks and the indices) by LeRobot's
 delta-index rules: a key with delta indices stacks the rows at those offsets within the same
 episode, clamped at its ends and marked as padding there (e.g. the frame one chunk earlier and
-the next 4 actions).
+the next 4 actions). A ``DataLoader`` gets whole batches from it (``__getitems__``, one
+indexing per key), not one sample at a time.
 """
 
 from __future__ import annotations
