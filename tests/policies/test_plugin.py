@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -244,6 +245,8 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
         f"--dataset.root={root}",
         "--policy.image_size=[32,48]",
         "--policy.components=2",  # a network field, taken from DrivingNetConfig
+        "--policy.scheduler_name=cosine",  # the policy's preset: LeRobot builds and steps it
+        "--policy.scheduler_warmup_steps=1",
         "--steps=2",
         "--batch_size=4",
         "--num_workers=0",
@@ -257,3 +260,5 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
     loaded = OasisPolicy.from_pretrained(folder)
     assert loaded.config.image_size == SIZE and loaded.model.config.components == 2
     assert (folder / "policy_preprocessor.json").exists()
+    schedule = json.loads((folder.parent / "training_state" / "scheduler_state.json").read_text())
+    assert schedule["last_epoch"] == 2 and schedule["_last_lr"] == [0.0]  # annealed to 0
