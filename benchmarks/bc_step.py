@@ -11,7 +11,8 @@ The dataset: autopilot drives recorded by the embedded server at 96x64 with the 
 (the demonstrations ``oasis-torchrl demo`` records). A step is the trainer's own: fetch, the
 policy's preprocessor, random shifts, the main job's loss (mixture head, manoeuvre loss,
 auxiliary head), backward, AdamW. Timed at the default policy size (64x96, no resize) and at
-32x48 (the cache's resize counts), best of ``--repeats`` runs of ``--steps`` steps, same run.
+32x48 (ours resized once, into the cache; the baseline every batch), best of ``--repeats`` runs
+of ``--steps`` steps, same run.
 
 Usage: ``python benchmarks/bc_step.py [--episodes 8 --steps 40 --repeats 3]``; prints JSON with
 milliseconds per step and ``speedup`` (the baseline's time over ours; > 1: ours is faster).
