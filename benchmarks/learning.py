@@ -39,7 +39,6 @@ import argparse
 import csv
 import json
 import logging
-import math
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -48,6 +47,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.train.evaluate import paired_difference
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,
@@ -203,27 +203,13 @@ def ppo_stage(
 
 def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, Any]:
     """The periodic evaluation (on the selection seeds) that rates best among the policies
-    trained for at most ``budget`` env steps (the first of equals, as the trainer keeps)."""
+    trained for at most ``budget`` env steps (the first of equals, as the trainer keeps with
+    ``eval.selection_margin`` 0, the default PPO from scratch runs with)."""
     *periodic, _ = history
     within = [entry for entry in periodic if entry["policy_frames"] <= budget]
     if not within:
         raise ValueError(f"no PPO evaluation within {budget} env steps")
     return max(within, key=lambda entry: entry["mean_distance"])
-
-
-def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, float]:
-    """Mean and standard error of the per-episode distance differences ``treated -
-    baseline`` over the episodes both ran (matched by prompt and episode seed)."""
-    before = {(e["prompt"], e["episode_seed"]): e["distance"] for e in baseline["per_episode"]}
-    differences = [
-        episode["distance"] - before[(episode["prompt"], episode["episode_seed"])]
-        for episode in treated["per_episode"]
-        if (episode["prompt"], episode["episode_seed"]) in before
-    ]
-    count = len(differences)
-    mean = sum(differences) / count
-    variance = sum((d - mean) ** 2 for d in differences) / (count - 1)
-    return {"mean": mean, "stderr": math.sqrt(variance / count), "episodes": float(count)}
 
 
 def main() -> None:

@@ -135,11 +135,18 @@ class PPOEvaluationConfig(EvaluationConfig):
         "evaluated on `seeds` at the end; a warm start is rated first, so fine-tuning keeps "
         "it unless a later policy beats it",
     )
+    selection_margin: float = option(
+        0.0,
+        help="standard errors of the paired per-episode difference by which a policy must beat "
+        "the kept one on the selection seeds to replace it (0: any higher mean distance)",
+    )
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.selection_seeds is not None and not self.selection_seeds:
             raise ValueError("eval.selection_seeds must be null or a non-empty list of integers")
+        if not self.selection_margin >= 0:
+            raise ValueError(f"eval.selection_margin must be >= 0, got {self.selection_margin}")
 
 
 @dataclass

@@ -108,6 +108,55 @@ class EvalReport:
         return path
 
 
+def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, float]:
+    """Mean and standard error of the per-episode distance differences ``treated - baseline``
+    (two :meth:`EvalReport.to_dict` results) over the episodes both ran, matched by prompt and
+    episode seed.
+
+    Example:
+        >>> def report(*metres):
+        ...     runs = [EpisodeResult("urban", i, d, False, 0.0, 9) for i, d in enumerate(metres)]
+        ...     return EvalReport(runs).to_dict()
+        >>> paired_difference(report(12.0, 25.0, 31.0), report(10.0, 20.0, 30.0))
+        {'mean': 2.666..., 'stderr': 1.201..., 'episodes': 3.0}
+    """
+    before = {(e["prompt"], e["episode_seed"]): e["distance"] for e in baseline["per_episode"]}
+    differences = [
+        episode["distance"] - before[(episode["prompt"], episode["episode_seed"])]
+        for episode in treated["per_episode"]
+        if (episode["prompt"], episode["episode_seed"]) in before
+    ]
+    count = len(differences)
+    if count < 2:
+        raise ValueError(f"a paired difference needs at least 2 shared episodes, got {count}")
+    mean = sum(differences) / count
+    variance = sum((d - mean) ** 2 for d in differences) / (count - 1)
+    return {"mean": mean, "stderr": math.sqrt(variance / count), "episodes": float(count)}
+
+
+def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float) -> bool:
+    """Whether an evaluation (:meth:`EvalReport.to_dict`) should replace the kept one: with
+    ``margin`` 0, any higher mean distance; otherwise a paired gain of more than ``margin``
+    standard errors over the episodes both ran (a gain within an evaluation's noise keeps the
+    kept policy).
+
+    Example:
+        >>> kept = EvalReport([EpisodeResult("urban", i, 100.0 * i, False, 0.0, 9)
+        ...                    for i in range(4)]).to_dict()
+        >>> lucky = {**kept, "mean_distance": 160.0, "per_episode": [
+        ...     {**e, "distance": e["distance"] + g}
+        ...     for e, g in zip(kept["per_episode"], (-30.0, 40.0, -20.0, 50.0))]}
+        >>> beats(lucky, kept, margin=0.0), beats(lucky, kept, margin=2.0)
+        (True, False)
+    """
+    if kept is None:
+        return True
+    if not margin:
+        return candidate["mean_distance"] > kept["mean_distance"]
+    difference = paired_difference(candidate, kept)
+    return difference["mean"] > margin * difference["stderr"]
+
+
 def _mean(values: Sequence[float]) -> float:
     return sum(values) / len(values) if values else math.nan
 

@@ -42,7 +42,7 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.protocol import ACTION_NAMES
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
 logger = logging.getLogger(__name__)
@@ -169,7 +169,8 @@ class PPOTrainer:
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
-        self.best_selection: float | None = resumed.get("best_selection")
+        # The evaluation (on the selection seeds) of the policy kept so far, episodes included.
+        self.kept_selection: dict[str, Any] | None = resumed.get("kept_selection")
         # The last frame of each chunk is all the policy reads: the server sends only that.
         self.env = make_env(
             cfg.env, all_frames=False, frame_stack=None, privileged=uses_ground_truth(cfg)
@@ -450,9 +451,15 @@ class PPOTrainer:
 
     # -- evaluation, logging, files ----------------------------------------------------------
 
+    @property
+    def best_selection(self) -> float | None:
+        """Mean distance of the kept policy on the selection seeds (None: none chosen yet)."""
+        return None if self.kept_selection is None else self.kept_selection["mean_distance"]
+
     def _periodic_evaluation(self) -> EvalReport:
-        """Evaluate on ``eval.selection_seeds`` if set, keeping the best policy so far as
-        ``checkpoints/best.pt``; otherwise on ``eval.seeds``. With
+        """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
+        ``checkpoints/best.pt`` if it beats the kept one (by ``eval.selection_margin`` standard
+        errors, :func:`~oasis_torchrl.train.evaluate.beats`); otherwise on ``eval.seeds``. With
         ``checkpoint.keep_evaluated``, the evaluated policy is also saved as
         ``checkpoints/frames_<env steps>.pt`` (to choose among them later, e.g. the best within
         a smaller budget)."""
@@ -466,10 +473,9 @@ class PPOTrainer:
                 frames=self.frames,
                 evaluation=report.summary(),
             )
-        if selection_seeds and (
-            self.best_selection is None or report.mean_distance > self.best_selection
-        ):
-            self.best_selection = report.mean_distance
+        margin = self.cfg.eval.get("selection_margin", 0.0)
+        if selection_seeds and beats(report.to_dict(), self.kept_selection, margin):
+            self.kept_selection = report.to_dict()
             save_checkpoint(
                 self.checkpoint_dir / BEST,
                 self.net,
@@ -553,6 +559,7 @@ class PPOTrainer:
             frames=self.frames,
             history=self.history,
             best_selection=self.best_selection,
+            kept_selection=self.kept_selection,
             config=OmegaConf.to_container(self.cfg),
         )
 

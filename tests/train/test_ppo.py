@@ -182,6 +182,35 @@ def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) ->
         )
 
 
+def test_a_margin_keeps_the_warm_start_against_gains_within_noise(tmp_path: Path) -> None:
+    """With ``eval.selection_margin``, a later policy must beat the kept one by that many
+    standard errors of the paired difference; no gain over two episodes is a million."""
+    source = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+    folder = export_lerobot(source, tmp_path / "bc_policy")
+    cfg = _ppo_config(
+        tmp_path / "run",
+        32,
+        f"init_from={folder}",
+        "eval.selection_seeds=[5]",
+        "eval.selection_margin=1e6",
+        "eval.episodes=2",
+        "eval.max_steps=4",
+        "eval.every=1",
+    )
+    result = PPOTrainer(cfg).run()
+    *periodic, final = result.history
+    assert [entry["policy_frames"] for entry in periodic] == [0, 16, 32]
+    assert load_checkpoint(result.checkpoint)["frames"] == final["policy_frames"] == 0
+    torch.testing.assert_close(
+        result.net.state_dict()["actor.2.bias"], source.state_dict()["actor.2.bias"]
+    )
+    latest = load_checkpoint(tmp_path / "run" / "checkpoints" / "latest.pt")
+    assert latest["kept_selection"]["mean_distance"] == periodic[0]["mean_distance"]
+
+    with pytest.raises(ValueError, match=r"eval\.selection_margin must be >= 0, got -1"):
+        _ppo_config(tmp_path, 32, "eval.selection_margin=-1")
+
+
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=(1.5, 0.3)))
     folder = export_lerobot(source, tmp_path / "bc_policy")
