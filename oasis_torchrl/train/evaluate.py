@@ -153,6 +153,12 @@ def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float)
         return True
     if not margin:
         return candidate["mean_distance"] > kept["mean_distance"]
+    if len(kept["per_episode"]) < 2:
+        raise ValueError(
+            f"a selection margin ({margin} standard errors) needs at least 2 evaluation "
+            f"episodes on the selection seeds, got {len(kept['per_episode'])}: raise "
+            "eval.episodes or set eval.selection_margin=0"
+        )
     difference = paired_difference(candidate, kept)
     return difference["mean"] > margin * difference["stderr"]
 
