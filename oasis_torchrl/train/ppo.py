@@ -474,8 +474,9 @@ class PPOTrainer:
                 evaluation=report.summary(),
             )
         margin = self.cfg.eval.get("selection_margin", 0.0)
-        if selection_seeds and beats(report.to_dict(), self.kept_selection, margin):
-            self.kept_selection = report.to_dict()
+        evaluated = report.to_dict()
+        if selection_seeds and beats(evaluated, self.kept_selection, margin):
+            self.kept_selection = evaluated
             save_checkpoint(
                 self.checkpoint_dir / BEST,
                 self.net,

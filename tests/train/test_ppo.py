@@ -17,7 +17,7 @@ from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.models.checkpoint import load_checkpoint
-from oasis_torchrl.train.ppo import PPOTrainer, build_net
+from oasis_torchrl.train.ppo import PPOResult, PPOTrainer, build_net
 
 from .conftest import TINY_ENV
 
@@ -155,9 +155,9 @@ def test_selection_seeds_choose_the_kept_policy(tmp_path: Path) -> None:
             _ppo_config(tmp_path, 48, f"eval.selection_seeds={bad}")
 
 
-def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) -> None:
-    """Fine-tuning keeps the policy it started from unless a later one beats it on the
-    selection seeds: the warm start is rated before any update."""
+def _fine_tune(tmp_path: Path, *overrides: str) -> tuple[DrivingNet, PPOResult]:
+    """A fresh network exported as a LeRobot policy, then fine-tuned 32 env steps from it
+    with selection seeds; the network and the run's result."""
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
     folder = export_lerobot(source, tmp_path / "bc_policy")
     cfg = _ppo_config(
@@ -166,9 +166,15 @@ def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) ->
         f"init_from={folder}",
         "eval.selection_seeds=[5]",
         "eval.max_steps=4",
-        "eval.every=2",
+        *overrides,
     )
-    result = PPOTrainer(cfg).run()
+    return source, PPOTrainer(cfg).run()
+
+
+def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) -> None:
+    """Fine-tuning keeps the policy it started from unless a later one beats it on the
+    selection seeds: the warm start is rated before any update."""
+    source, result = _fine_tune(tmp_path, "eval.every=2")
 
     *periodic, final = result.history
     assert [entry["policy_frames"] for entry in periodic] == [0, 32]
@@ -185,19 +191,9 @@ def test_a_warm_start_is_the_first_candidate_of_the_selection(tmp_path: Path) ->
 def test_a_margin_keeps_the_warm_start_against_gains_within_noise(tmp_path: Path) -> None:
     """With ``eval.selection_margin``, a later policy must beat the kept one by that many
     standard errors of the paired difference; no gain over two episodes is a million."""
-    source = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
-    folder = export_lerobot(source, tmp_path / "bc_policy")
-    cfg = _ppo_config(
-        tmp_path / "run",
-        32,
-        f"init_from={folder}",
-        "eval.selection_seeds=[5]",
-        "eval.selection_margin=1e6",
-        "eval.episodes=2",
-        "eval.max_steps=4",
-        "eval.every=1",
+    source, result = _fine_tune(
+        tmp_path, "eval.selection_margin=1e6", "eval.episodes=2", "eval.every=1"
     )
-    result = PPOTrainer(cfg).run()
     *periodic, final = result.history
     assert [entry["policy_frames"] for entry in periodic] == [0, 16, 32]
     assert load_checkpoint(result.checkpoint)["frames"] == final["policy_frames"] == 0
