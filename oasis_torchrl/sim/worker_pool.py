@@ -85,6 +85,7 @@ class _Worker:
         self._ids = itertools.count()
         self._alive = True
         self._death = ""
+        self._death_known = threading.Event()
         self.process, self._connection = _launch(
             (config, simulator_factory, logging.getLogger().getEffectiveLevel())
         )
@@ -110,19 +111,21 @@ class _Worker:
         """Run ``operation`` on a session's world in the worker; its answer, or its error."""
         future: Future[Any] = Future()
         with self._lock:
-            if not self._alive:
-                raise self.lost_error()
-            request_id = next(self._ids)
-            self._pending[request_id] = future
-            try:
-                self._connection.send((request_id, operation, session_id, arguments))
-            except OSError:
-                del self._pending[request_id]
-                raise self.lost_error() from None
+            alive = self._alive
+            if alive:
+                request_id = next(self._ids)
+                self._pending[request_id] = future
+                with contextlib.suppress(OSError):
+                    # A send to a dead worker leaves the call pending: the reader sees the pipe
+                    # close, learns how the worker ended, and fails the call with that cause.
+                    self._connection.send((request_id, operation, session_id, arguments))
+        if not alive:
+            raise self.lost_error()
         return future.result()
 
     def lost_error(self) -> RequestError:
-        """What a call of a session on this (dead) worker gets."""
+        """What a call of a session on this (dead) worker gets, once the cause is known."""
+        self._death_known.wait(EXIT_TIMEOUT_S)
         return RequestError(common_pb2.ERROR_CODE_INVALID_SESSION, self.death_message())
 
     def death_message(self) -> str:
@@ -133,7 +136,9 @@ class _Worker:
         """Ask the worker to exit, reap it (killing it if it lingers), close the pipe."""
         with self._lock:
             was_alive, self._alive = self._alive, False
-            self._death = "was stopped with the server"
+            if was_alive:
+                self._death = "was stopped with the server"
+                self._death_known.set()
             if was_alive:
                 with contextlib.suppress(OSError):  # already gone
                     self._connection.send(None)
@@ -173,6 +178,7 @@ class _Worker:
                 self._death = describe_exit(self.process.wait(EXIT_TIMEOUT_S))
             except subprocess.TimeoutExpired:
                 self._death = describe_exit(None)
+            self._death_known.set()
         error = self.lost_error()
         for future in pending.values():
             future.set_exception(error)
