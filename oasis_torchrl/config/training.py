@@ -43,6 +43,11 @@ class NetworkConfig:
     encoder_channels: list[int] = option(
         default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
     )
+    encoder_strides: list[int] = option(
+        default_factory=lambda: [4, 2, 1],
+        help="strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] "
+        "keeps twice the resolution for about twice the computation",
+    )
     pool_grid: list[int] = option(
         default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
     )
@@ -217,6 +222,11 @@ class BCPolicyConfig:
     shared_encoder: bool = option(True, help="one encoder for every camera")
     encoder_channels: list[int] = option(
         default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
+    )
+    encoder_strides: list[int] = option(
+        default_factory=lambda: [4, 2, 1],
+        help="strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] "
+        "keeps twice the resolution for about twice the computation",
     )
     pool_grid: list[int] = option(
         default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"

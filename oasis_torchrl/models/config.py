@@ -14,6 +14,8 @@ POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 POLICY_FRAMES = 2
 """Default frames per camera the network sees, one chunk apart."""
 MAX_INIT_ACTION = 0.99
+ENCODER_STRIDES = (1, 2, 4)
+"""Strides an encoder convolution may have (4: a 4x4 patch convolution, else 3x3)."""
 """Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
 TANH_NORMAL = "tanh_normal"
 MIXTURE = "mixture"
@@ -37,8 +39,12 @@ class DrivingNetConfig:
             loops (:mod:`oasis_torchrl.envs.per_frame`), and what TorchRL envs give
             (:class:`oasis_torchrl.envs.transforms.ChunkFrameStack`).
         shared_encoder: one convolutional encoder for every camera (``True``) or one per camera.
-        encoder_channels: channels of the three convolutions (a 4x4 stride-4 patch stem, then
-            3x3 stride 2, then 3x3 stride 1).
+        encoder_channels: channels of the three convolutions.
+        encoder_strides: strides of the three convolutions, each 1, 2 or 4: a stride of 4 is a
+            4x4 patch convolution, 1 and 2 are 3x3 convolutions. The default ``(4, 2, 1)``
+            reads 64x96 frames on a 16x24 then 8x12 grid; ``(2, 2, 2)`` keeps twice the
+            resolution in the first two layers (an obstacle 60 m ahead is about a pixel tall
+            at 64x96) for about twice the computation.
         pool_grid: ``(rows, cols)`` the last feature map is average-pooled to; keeping a grid
             (not a global pool) keeps where things are, which steering needs.
         camera_features: features per camera after the projection.
@@ -87,6 +93,7 @@ class DrivingNetConfig:
     frames: int = POLICY_FRAMES
     shared_encoder: bool = True
     encoder_channels: tuple[int, int, int] = (24, 48, 64)
+    encoder_strides: tuple[int, int, int] = (4, 2, 1)
     pool_grid: tuple[int, int] = (4, 6)
     camera_features: int = 128
     state_dim: int = 2
@@ -138,6 +145,13 @@ class DrivingNetConfig:
             raise ValueError(
                 "DrivingNetConfig.encoder_channels needs 3 values, "
                 f"got {list(self.encoder_channels)}"
+            )
+        if len(self.encoder_strides) != 3 or any(
+            stride not in ENCODER_STRIDES for stride in self.encoder_strides
+        ):
+            raise ValueError(
+                f"DrivingNetConfig.encoder_strides needs 3 values among {ENCODER_STRIDES}, "
+                f"got {list(self.encoder_strides)}"
             )
         positive = {
             "image_size": self.image_size,

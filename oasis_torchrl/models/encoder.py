@@ -22,17 +22,26 @@ from oasis_torchrl.models.config import DrivingNetConfig
 
 _IMAGE_MEAN = 0.5
 _IMAGE_STD = 0.25
-# (kernel, stride, padding) of the three convolutions: a 4x4 patch stem, then two 3x3 layers.
-_LAYOUT = ((4, 4, 0), (3, 2, 1), (3, 1, 1))
+
+
+def convolution_layout(stride: int) -> tuple[int, int, int]:
+    """``(kernel, stride, padding)`` of an encoder convolution of that stride: a 4x4 patch
+    convolution for 4, a 3x3 one (padded to keep the grid at stride 1) for 1 and 2.
+
+    Example:
+        >>> [convolution_layout(stride) for stride in (4, 2, 1)]
+        [(4, 4, 0), (3, 2, 1), (3, 1, 1)]
+    """
+    return (4, 4, 0) if stride == 4 else (3, stride, 1)
 
 
 class MultiCameraEncoder(nn.Module):
     """Encode ``C`` cameras' frames into ``[..., C * F]``: uint8 ``[..., T, H, W, 3]`` or float
     ``[..., T, 3, H, W]`` in ``[0, 1]`` (the same layout and type for every camera).
 
-    Per camera, the ``T = config.frames`` frames stacked along the channels: conv 4x4/4 -> ReLU
-    -> conv 3x3/2 -> ReLU -> conv 3x3/1 -> ReLU -> average pool to ``pool_grid`` -> linear to
-    ``F = camera_features`` -> ReLU.
+    Per camera, the ``T = config.frames`` frames stacked along the channels: three convolutions
+    of ``encoder_strides`` (by default conv 4x4/4 -> ReLU -> conv 3x3/2 -> ReLU -> conv 3x3/1 ->
+    ReLU) -> average pool to ``pool_grid`` -> linear to ``F = camera_features`` -> ReLU.
 
     Example:
         >>> config = DrivingNetConfig(image_size=(32, 48), frames=2, camera_features=16)
@@ -53,9 +62,10 @@ class MultiCameraEncoder(nn.Module):
         self.groups = 1 if config.shared_encoder else self.num_cameras
         layers: list[nn.Module] = []
         in_channels = 3 * config.frames
-        for out_channels, (kernel, stride, padding) in zip(
-            config.encoder_channels, _LAYOUT, strict=True
+        for out_channels, stride in zip(
+            config.encoder_channels, config.encoder_strides, strict=True
         ):
+            kernel, stride, padding = convolution_layout(stride)
             layers += [
                 nn.Conv2d(
                     in_channels * self.groups,

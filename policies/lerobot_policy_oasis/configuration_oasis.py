@@ -47,6 +47,7 @@ NETWORK_FIELDS = (
     "image_size",
     "shared_encoder",
     "encoder_channels",
+    "encoder_strides",
     "pool_grid",
     "camera_features",
     "hidden_dim",
@@ -92,8 +93,9 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
     """Configuration of :class:`~lerobot_policy_oasis.modeling_oasis.OasisPolicy`.
 
     The network's fields (:data:`NETWORK_FIELDS`: ``image_size``, ``shared_encoder``,
-    ``encoder_channels``, ``pool_grid``, ``camera_features``, ``hidden_dim``, ``use_state``,
-    ``head``, ``components``, ``init_action``, ``init_spread``, ``init_scale``, ``min_scale``)
+    ``encoder_channels``, ``encoder_strides``, ``pool_grid``, ``camera_features``,
+    ``hidden_dim``, ``use_state``, ``head``, ``components``, ``init_action``, ``init_spread``,
+    ``init_scale``, ``min_scale``)
     are :class:`oasis_torchrl.models.DrivingNetConfig`'s, with its types, defaults and meaning
     (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
     ``image_size`` is also the size the preprocessor resizes frames to.

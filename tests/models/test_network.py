@@ -83,6 +83,20 @@ def test_env_frames_and_float_frames_give_the_reference_encoding(shared: bool) -
     torch.testing.assert_close(encoder(env_frames), encoder(as_float), atol=1e-5, rtol=1e-4)
 
 
+def test_finer_strides_keep_a_finer_grid_before_the_pool() -> None:
+    config = DrivingNetConfig(image_size=(64, 96), encoder_strides=(2, 2, 2))
+    encoder = MultiCameraEncoder(config)
+    convolutions = [layer for layer in encoder.convs if isinstance(layer, torch.nn.Conv2d)]
+    assert [conv.stride for conv in convolutions] == [(2, 2)] * 3
+    grid = encoder.convs[:-1](torch.rand(1, 6, 64, 96))
+    assert grid.shape[-2:] == (8, 12)  # 64x96 halved three times; the default ends at 8x12 too
+    default = MultiCameraEncoder(DrivingNetConfig(image_size=(64, 96)))
+    assert default.convs[:2](torch.rand(1, 6, 64, 96)).shape[-2:] == (16, 24)
+    assert encoder.convs[:2](torch.rand(1, 6, 64, 96)).shape[-2:] == (32, 48)
+    frames = [torch.rand(2, 2, 3, 64, 96) for _ in config.cameras]
+    assert encoder(frames).shape == (2, 3 * config.camera_features)
+
+
 def test_encoder_rejects_wrong_inputs() -> None:
     encoder = MultiCameraEncoder(DrivingNetConfig(image_size=SIZE))
     with pytest.raises(ValueError, match="expected 3 camera images, got 2"):
@@ -377,6 +391,8 @@ def test_config_round_trip_and_validation() -> None:
         DrivingNetConfig(init_scale=(0.5,))
     with pytest.raises(ValueError, match="components must be positive"):
         DrivingNetConfig(components=0)
+    with pytest.raises(ValueError, match=r"encoder_strides needs 3 values among \(1, 2, 4\)"):
+        DrivingNetConfig(encoder_strides=(3, 2, 1))
 
 
 def test_networks_saved_before_the_mixture_head_load() -> None:
