@@ -5,7 +5,8 @@
 2. ``bc``: behaviour cloning on it (the ``bc`` stage settings,
    :class:`~oasis_torchrl.config.BCSettings`),
    then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
-   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
+   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all
+   (or, with ``dagger.from_scratch``, a fresh clone is trained on it all);
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
    :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
@@ -152,26 +153,41 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
 
 
 def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
-    """The BC config of clone round ``round_`` (0: from scratch; k: DAgger round k).
+    """The BC config of clone round ``round_`` (0: from scratch; k: DAgger round k, which
+    fine-tunes the previous clone unless ``dagger.from_scratch``).
 
     Example:
         >>> bc = bc_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/x"), 1)
-        >>> bc.output_dir, bc.init_from, bc.dataset.root
-        ('/tmp/d/bc/round_1', '/tmp/d/bc/round_0/policy', '/tmp/d/x')
+        >>> bc.output_dir, bc.init_from, bc.dataset.root, bc.train.steps
+        ('/tmp/d/bc/round_1', '/tmp/d/bc/round_0/policy', '/tmp/d/x', 500)
+        >>> fresh = load_config("demo", ["output_dir=/tmp/d", "dagger.from_scratch=true"])
+        >>> bc = bc_config(fresh, Path("/tmp/d/x"), 1)
+        >>> bc.output_dir, bc.init_from, bc.train.steps
+        ('/tmp/d/bc/round_1', None, 1000)
     """
-    out = Path(cfg.output_dir) / "bc"
     values: dict[str, Any] = {
         "seed": cfg.seed + round_,
         "progress": cfg.progress,
-        "output_dir": str(out / f"round_{round_}"),
+        "output_dir": str(Path(cfg.output_dir) / "bc" / f"round_{round_}"),
         "dataset": {"root": str(dataset)},
         "eval": {"episodes": 0},
         "policy": {"image_size": list(cfg.env.image_size)},
     }
-    if round_:
-        values["init_from"] = str(out / f"round_{round_ - 1}" / "policy")
+    if round_ and not cfg.dagger.from_scratch:
+        values["init_from"] = str(previous_clone(cfg, round_))
         values["train"] = {"steps": cfg.dagger.steps}
     return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)
+
+
+def previous_clone(cfg: DictConfig, round_: int) -> Path:
+    """The policy folder of the clone before round ``round_``: the one that drives its DAgger
+    episodes.
+
+    Example:
+        >>> previous_clone(load_config("demo", ["output_dir=/tmp/d"]), 2)
+        PosixPath('/tmp/d/bc/round_1/policy')
+    """
+    return Path(cfg.output_dir) / "bc" / f"round_{round_ - 1}" / "policy"
 
 
 def ppo_config(
@@ -226,7 +242,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
                 episodes=cfg.dagger.episodes,
                 seed=cfg.record.seed + 1000 * round_,
                 noise=ActionNoise(**cfg.dagger.noise),
-                learner=load_driver(bc_cfg.init_from),
+                learner=load_driver(str(previous_clone(cfg, round_))),
                 progress=cfg.progress,
             )
         train_bc(bc_cfg)
