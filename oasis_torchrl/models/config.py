@@ -14,9 +14,9 @@ POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 POLICY_FRAMES = 2
 """Default frames per camera the network sees, one chunk apart."""
 MAX_INIT_ACTION = 0.99
+"""Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
 ENCODER_STRIDES = (1, 2, 4)
 """Strides an encoder convolution may have (4: a 4x4 patch convolution, else 3x3)."""
-"""Largest ``|init_action|``: its location before the tanh stays inside the network's bound."""
 TANH_NORMAL = "tanh_normal"
 MIXTURE = "mixture"
 HEADS = (TANH_NORMAL, MIXTURE)
@@ -44,7 +44,7 @@ class DrivingNetConfig:
             4x4 patch convolution, 1 and 2 are 3x3 convolutions. The default ``(4, 2, 1)``
             reads 64x96 frames on a 16x24 then 8x12 grid; ``(2, 2, 2)`` keeps twice the
             resolution in the first two layers (an obstacle 60 m ahead is about a pixel tall
-            at 64x96) for about twice the computation.
+            at 64x96) for about 1.4x the time of a behaviour-cloning step.
         pool_grid: ``(rows, cols)`` the last feature map is average-pooled to; keeping a grid
             (not a global pool) keeps where things are, which steering needs.
         camera_features: features per camera after the projection.

@@ -139,7 +139,6 @@ class _Worker:
             if was_alive:
                 self._death = "was stopped with the server"
                 self._death_known.set()
-            if was_alive:
                 with contextlib.suppress(OSError):  # already gone
                     self._connection.send(None)
         try:
