@@ -53,7 +53,8 @@ def _csv_values(path: Path) -> list[float]:
 
 
 def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
-    trainer = PPOTrainer(_ppo_config(tmp_path, 16, "optim.lr=2e-4", "optim.critic_lr=1e-3"))
+    overrides = ("optim.lr=2e-4", "optim.critic_lr=1e-3", "network.init_scale=[0.5,0.1]")
+    trainer = PPOTrainer(_ppo_config(tmp_path, 16, *overrides))
     before = {key: value.clone() for key, value in trainer.net.state_dict().items()}
     result = trainer.run()
 
