@@ -168,7 +168,7 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     values: dict[str, Any] = {
         "seed": cfg.seed + round_,
         "progress": cfg.progress,
-        "output_dir": str(Path(cfg.output_dir) / "bc" / f"round_{round_}"),
+        "output_dir": str(round_folder(cfg, round_)),
         "dataset": {"root": str(dataset)},
         "eval": {"episodes": 0},
         "policy": {"image_size": list(cfg.env.image_size)},
@@ -179,6 +179,16 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)
 
 
+def round_folder(cfg: DictConfig, round_: int) -> Path:
+    """Where clone round ``round_`` writes (its config, logs and ``policy/``).
+
+    Example:
+        >>> round_folder(load_config("demo", ["output_dir=/tmp/d"]), 2)
+        PosixPath('/tmp/d/bc/round_2')
+    """
+    return Path(cfg.output_dir) / "bc" / f"round_{round_}"
+
+
 def previous_clone(cfg: DictConfig, round_: int) -> Path:
     """The policy folder of the clone before round ``round_``: the one that drives its DAgger
     episodes.
@@ -187,7 +197,7 @@ def previous_clone(cfg: DictConfig, round_: int) -> Path:
         >>> previous_clone(load_config("demo", ["output_dir=/tmp/d"]), 2)
         PosixPath('/tmp/d/bc/round_1/policy')
     """
-    return Path(cfg.output_dir) / "bc" / f"round_{round_ - 1}" / "policy"
+    return round_folder(cfg, round_ - 1) / "policy"
 
 
 def ppo_config(
