@@ -473,9 +473,15 @@ class PPOTrainer:
                 frames=self.frames,
                 evaluation=report.summary(),
             )
-        margin = self.cfg.eval.get("selection_margin", 0.0)
+        if selection_seeds:
+            self._keep_if_better(report)
+        return report
+
+    def _keep_if_better(self, report: EvalReport) -> None:
+        """Keep the evaluated policy as ``checkpoints/best.pt`` if its selection evaluation
+        beats the kept one's by ``eval.selection_margin`` standard errors."""
         evaluated = report.to_dict()
-        if selection_seeds and beats(evaluated, self.kept_selection, margin):
+        if beats(evaluated, self.kept_selection, self.cfg.eval.selection_margin):
             self.kept_selection = evaluated
             save_checkpoint(
                 self.checkpoint_dir / BEST,
@@ -484,7 +490,6 @@ class PPOTrainer:
                 frames=self.frames,
                 selection=report.summary(),
             )
-        return report
 
     def _kept_net(self) -> tuple[DrivingNet, Path | None, int]:
         """The policy a run leaves, its checkpoint and the env steps it trained for: the best
