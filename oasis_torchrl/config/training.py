@@ -17,10 +17,6 @@ from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.options import option
 
 LOGGER_BACKENDS = ("csv", "tensorboard")
-ENCODER_STRIDES_HELP = (
-    "strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] keeps twice "
-    "the resolution in the first two layers for about 1.4x the time of a step"
-)
 
 
 @dataclass
@@ -35,37 +31,45 @@ class LoggerConfig:
             raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
-# -- PPO ---------------------------------------------------------------------------------------
-
-
 @dataclass
-class NetworkConfig:
-    """The driving network of a fresh PPO run (oasis_torchrl.models.DrivingNetConfig fields;
-    ignored on a warm start)."""
+class NetworkArchitectureConfig:
+    """The driving network's shape (oasis_torchrl.models.DrivingNetConfig fields), shared by
+    PPO's fresh network and BC's policy."""
 
     shared_encoder: bool = option(True, help="one encoder for every camera")
     encoder_channels: list[int] = option(
         default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
     )
     encoder_strides: list[int] = option(
-        default_factory=lambda: [4, 2, 1], help=ENCODER_STRIDES_HELP
+        default_factory=lambda: [4, 2, 1],
+        help="strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] keeps "
+        "twice the resolution in the first two layers for about 1.4x the time of a step",
     )
     pool_grid: list[int] = option(
         default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
     )
     camera_features: int = option(128, help="features per camera")
-    hidden_dim: int = option(256, help="width of the actor and value MLPs")
-    use_state: bool = option(True, help="the previous action as an input")
-    init_action: list[float] = option(
-        default_factory=lambda: [0.5, 0.0],
-        help="a fresh actor's mean [throttle, steering]: drive, don't stand",
-    )
+    hidden_dim: int = option(256, help="width of the actor MLP (and of PPO's value MLP)")
     head: str = option(
         "mixture",
         help="action head: mixture (a mixture of tanh-normals over the chunk, commits to one "
         "manoeuvre) | tanh_normal (one tanh-normal, unimodal)",
     )
     components: int = option(3, help="mixture components")
+
+
+# -- PPO ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class NetworkConfig(NetworkArchitectureConfig):
+    """The driving network of a fresh PPO run (ignored on a warm start)."""
+
+    use_state: bool = option(True, help="the previous action as an input")
+    init_action: list[float] = option(
+        default_factory=lambda: [0.5, 0.0],
+        help="a fresh actor's mean [throttle, steering]: drive, don't stand",
+    )
     init_spread: list[float] = option(
         default_factory=lambda: [0.0, 0.3],
         help="a fresh mixture's components spread this far around init_action (keep, left, "
@@ -221,30 +225,13 @@ class PPOConfig(PPOSettings):
 
 
 @dataclass
-class BCPolicyConfig:
+class BCPolicyConfig(NetworkArchitectureConfig):
     """The cloned policy (lerobot_policy_oasis.OasisConfig fields)."""
 
     image_size: list[int] = option(default_factory=lambda: [64, 96], help="[height, width]")
-    shared_encoder: bool = option(True, help="one encoder for every camera")
-    encoder_channels: list[int] = option(
-        default_factory=lambda: [24, 48, 64], help="channels of the three convolutions"
-    )
-    encoder_strides: list[int] = option(
-        default_factory=lambda: [4, 2, 1], help=ENCODER_STRIDES_HELP
-    )
-    pool_grid: list[int] = option(
-        default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
-    )
-    camera_features: int = option(128, help="features per camera")
-    hidden_dim: int = option(256, help="width of the actor MLP")
     use_state: bool = option(
         False, help="the previous action as an input (off: a clone would copy it)"
     )
-    head: str = option(
-        "mixture",
-        help="action head: mixture (commits to one manoeuvre) | tanh_normal (unimodal)",
-    )
-    components: int = option(3, help="mixture components")
     loss: str = option(
         "nll",
         help="nll (likelihood of the demonstrated chunk) | manoeuvre (likelihood jointly with "
