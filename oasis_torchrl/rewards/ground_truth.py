@@ -4,7 +4,7 @@ Per row and step (a chunk of T frames)::
 
     reward = progress_scale * progress_gained
              - collision_penalty * collision
-             - lane_penalty * lateral_offset
+             - lane_penalty * lane_offset
 
 - ``progress_gained``: metres along the road centreline gained during the chunk: the chunk's last
   ``progress`` minus the previous step's last ``progress``. The server counts progress from the
@@ -12,7 +12,10 @@ Per row and step (a chunk of T frames)::
   along the road is what is rewarded; there is no separate speed term.
 - ``collision``: 1 on the first step whose chunk has a collided frame (hitting an obstacle or
   leaving the road), else 0; the penalty is paid once per episode.
-- ``lateral_offset``: mean ``|lateral_offset|`` (metres from the centreline) over the chunk.
+- ``lane_offset``: mean ``|lane_offset|`` over the chunk: metres from the centre of the lane the
+  car is in. Not the road's centreline (``lateral_offset``): on a two-lane road that is the line
+  between the lanes, and a cost measured from it paid PPO to ride that line (BENCHMARKS.md,
+  "crashes.py").
 
 ``terminated`` is True whenever a frame of the chunk collided. ``reset(mask)`` forgets the
 progress baseline and the collided flag of the masked rows.
@@ -32,7 +35,7 @@ class GroundTruthReward:
     >>> reward = GroundTruthReward(lane_penalty=0.0)
     >>> def step(progress, collided):
     ...     frames = {"progress": torch.tensor([progress]), "collided": torch.tensor([collided])}
-    ...     frames["lateral_offset"] = torch.zeros(1, 4)
+    ...     frames["lane_offset"] = torch.zeros(1, 4)
     ...     return reward(TensorDict({("truth", k): v for k, v in frames.items()}, [1]))
     >>> step([0.5, 1.0, 1.5, 2.0], [0.0] * 4)["reward"].item()
     0.20000000298023224
@@ -41,7 +44,7 @@ class GroundTruthReward:
     (-9.94, True)
     """
 
-    terms = ("progress_gained", "collision", "lateral_offset")
+    terms = ("progress_gained", "collision", "lane_offset")
 
     def __init__(
         self,
@@ -60,7 +63,7 @@ class GroundTruthReward:
         batch = batch_rows(td)
         progress = _read_truth(td, "progress", batch)
         hit = _read_truth(td, "collided", batch).gt(0.5).any(-1)
-        lateral_offset = _read_truth(td, "lateral_offset", batch).abs().mean(-1)
+        lane_offset = _read_truth(td, "lane_offset", batch).abs().mean(-1)
 
         last_progress = progress[:, -1]
         progress_gained = last_progress - self._last_progress.read(batch, progress.device)
@@ -72,9 +75,9 @@ class GroundTruthReward:
         reward = (
             self.progress_scale * progress_gained
             - self.collision_penalty * collision
-            - self.lane_penalty * lateral_offset
+            - self.lane_penalty * lane_offset
         )
-        values = (progress_gained, collision, lateral_offset)
+        values = (progress_gained, collision, lane_offset)
         return reward_output(reward, dict(zip(self.terms, values, strict=True)), terminated=hit)
 
     def reset(self, mask: torch.Tensor | None = None) -> None:

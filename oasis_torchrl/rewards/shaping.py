@@ -28,7 +28,7 @@ class ClearanceShaping:
         >>> from oasis_torchrl.rewards import GroundTruthReward
         >>> shaped = ClearanceShaping(GroundTruthReward(lane_penalty=0.0), weight=0.4, horizon=20)
         >>> truth = {"progress": torch.zeros(1, 4), "collided": torch.zeros(1, 4),
-        ...          "lateral_offset": torch.zeros(1, 4),
+        ...          "lane_offset": torch.zeros(1, 4),
         ...          "obstacle_distance": torch.full((1, 4), 10.0)}
         >>> out = shaped(TensorDict({("truth", k): v for k, v in truth.items()}, [1]))
         >>> round(out["reward"].item(), 3), out["reward_terms", "clearance"].item()

@@ -12,6 +12,7 @@ from oasis_torchrl.rewards import GroundTruthReward
 def truth_td(
     progress: list[list[float]],
     collided: list[list[float]] | None = None,
+    lane_offset: list[list[float]] | None = None,
     lateral_offset: list[list[float]] | None = None,
 ) -> TensorDict:
     """A step TensorDict with ``("truth", field)`` [N, 4] for the fields the reward reads."""
@@ -19,6 +20,7 @@ def truth_td(
     fields = {
         "progress": progress_t,
         "collided": torch.tensor(collided) if collided else torch.zeros_like(progress_t),
+        "lane_offset": torch.tensor(lane_offset) if lane_offset else torch.zeros_like(progress_t),
         "lateral_offset": (
             torch.tensor(lateral_offset) if lateral_offset else torch.zeros_like(progress_t)
         ),
@@ -50,11 +52,22 @@ def test_collision_penalty_is_paid_once_and_terminates_every_time() -> None:
     assert again["terminated"].item()
 
 
-def test_lane_term_is_mean_absolute_offset() -> None:
+def test_lane_term_is_mean_absolute_offset_from_the_lane_centre() -> None:
     reward = GroundTruthReward(progress_scale=0.0, lane_penalty=0.5)
-    out = reward(truth_td([[0.0] * 4], lateral_offset=[[1.0, -1.0, 2.0, -2.0]]))
-    assert out["reward_terms", "lateral_offset"].item() == pytest.approx(1.5)
+    out = reward(truth_td([[0.0] * 4], lane_offset=[[1.0, -1.0, 2.0, -2.0]]))
+    assert out["reward_terms", "lane_offset"].item() == pytest.approx(1.5)
     assert out["reward"].item() == pytest.approx(-0.75)
+
+
+def test_riding_the_line_between_two_lanes_costs_and_a_lane_centre_does_not() -> None:
+    reward = GroundTruthReward(progress_scale=0.0, lane_penalty=0.01)
+    # A two-lane road: its centreline is the line between the lanes (half a lane, 1.6 m, from
+    # each lane's centre).
+    on_the_line = truth_td([[0.0] * 4], lane_offset=[[1.6] * 4], lateral_offset=[[0.0] * 4])
+    in_a_lane = truth_td([[0.0] * 4], lane_offset=[[0.0] * 4], lateral_offset=[[1.6] * 4])
+    assert reward(on_the_line)["reward"].item() == pytest.approx(-0.016)
+    reward.reset()
+    assert reward(in_a_lane)["reward"].item() == 0.0
 
 
 def test_reset_restarts_only_the_masked_rows() -> None:
