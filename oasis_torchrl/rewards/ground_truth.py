@@ -41,7 +41,7 @@ class GroundTruthReward:
     0.20000000298023224
     >>> out = step([2.5, 2.6, 2.6, 2.6], [0.0, 1.0, 1.0, 1.0])
     >>> round(out["reward"].item(), 3), out["terminated"].item()
-    (-9.94, True)
+    (-1.94, True)
     """
 
     terms = ("progress_gained", "collision", "lane_offset")
@@ -49,7 +49,7 @@ class GroundTruthReward:
     def __init__(
         self,
         progress_scale: float = 0.1,
-        collision_penalty: float = 10.0,
+        collision_penalty: float = 2.0,
         lane_penalty: float = 0.01,
     ) -> None:
         self.progress_scale = progress_scale
