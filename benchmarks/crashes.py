@@ -52,14 +52,7 @@ def drive(spec: str, args: argparse.Namespace) -> tuple[TensorDictBase, EvalRepo
         ],
     )
     driver = load_driver(spec)
-    with Evaluator(
-        cfg.env,
-        cfg,
-        image_size=driver.image_size,
-        frame_stack=driver.frame_stack,
-        expert=driver.needs_expert,
-        progress=False,
-    ) as evaluator:
+    with Evaluator.for_driver(cfg.env, cfg, driver, progress=False) as evaluator:
         evaluator.env.set_seed(args.seed)
         rollout = rollout_episodes(evaluator.env, driver, args.max_steps)
     return rollout, EvalReport(episode_results(rollout))

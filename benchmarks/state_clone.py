@@ -183,9 +183,7 @@ def evaluate_on_cameras(drivers: dict[str, PolicyDriver], args: argparse.Namespa
     cfg = OmegaConf.merge(load_config("demo", ["progress=false"]), {"eval": scenes})
     results = {}
     for name, driver in drivers.items():
-        with Evaluator(
-            cfg.env, cfg.eval, image_size=driver.image_size, frame_stack=driver.frame_stack
-        ) as evaluator:
+        with Evaluator.for_driver(cfg.env, cfg.eval, driver) as evaluator:
             report = evaluator.evaluate(driver)
         results[name] = {
             "mean_distance": report.mean_distance,

@@ -40,13 +40,7 @@ def run(cfg: DictConfig) -> int:
 
     try:
         driver = load_driver(cfg.policy)
-        with Evaluator(
-            cfg.env,
-            cfg,
-            image_size=driver.image_size,
-            frame_stack=driver.frame_stack,
-            expert=driver.needs_expert,
-        ) as evaluator:
+        with Evaluator.for_driver(cfg.env, cfg, driver) as evaluator:
             report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)

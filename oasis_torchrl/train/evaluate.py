@@ -30,6 +30,7 @@ from torchrl.envs import EnvBase
 from tqdm import tqdm
 
 from oasis_torchrl.client import SceneLookup
+from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
@@ -360,6 +361,31 @@ class Evaluator:
         )
         self.recorders = EpisodeRecorders(
             eval_cfg.get("rerun"), eval_cfg.get("lerobot"), scenes=self.env.scene_source()
+        )
+
+    @classmethod
+    def for_driver(
+        cls, env_cfg: DictConfig, eval_cfg: DictConfig, driver: Driver, *, progress: bool = True
+    ) -> Evaluator:
+        """An evaluator whose env serves what ``driver`` reads: its image size, its frame
+        stack and, if it drives with it, the embedded server's expert.
+
+        Example:
+            >>> from oasis_torchrl.drivers import load_driver
+            >>> from oasis_torchrl.config import load_config
+            >>> cfg = load_config("eval", ["episodes=1", "max_steps=2"])
+            >>> autopilot = load_driver("autopilot")
+            >>> with Evaluator.for_driver(cfg.env, cfg, autopilot, progress=False) as evaluator:
+            ...     evaluator.evaluate(autopilot).collision_rate
+            0.0
+        """
+        return cls(
+            env_cfg,
+            eval_cfg,
+            image_size=driver.image_size,
+            frame_stack=driver.frame_stack,
+            expert=driver.needs_expert,
+            progress=progress,
         )
 
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:

@@ -275,14 +275,7 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     for name in names:
         driver = load_driver(policies[name])
         eval_cfg = cfg.eval if name == names[-1] else plain
-        with Evaluator(
-            cfg.env,
-            eval_cfg,
-            image_size=driver.image_size,
-            frame_stack=driver.frame_stack,
-            expert=driver.needs_expert,
-            progress=cfg.progress,
-        ) as evaluator:
+        with Evaluator.for_driver(cfg.env, eval_cfg, driver, progress=cfg.progress) as evaluator:
             report = evaluator.evaluate(driver)
         results[name] = report.to_dict()
         logger.info("%s: %s", name, report.summary())
