@@ -31,6 +31,9 @@ class LoggerConfig:
             raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
+# -- the driving network -----------------------------------------------------------------------
+
+
 @dataclass
 class NetworkArchitectureConfig:
     """The driving network's shape (oasis_torchrl.models.DrivingNetConfig fields), shared by
