@@ -13,9 +13,8 @@ Per row and step (a chunk of T frames)::
 - ``collision``: 1 on the first step whose chunk has a collided frame (hitting an obstacle or
   leaving the road), else 0; the penalty is paid once per episode.
 - ``lane_offset``: mean ``|lane_offset|`` over the chunk: metres from the centre of the lane the
-  car is in. Not the road's centreline (``lateral_offset``): on a two-lane road that is the line
-  between the lanes, and a cost measured from it paid PPO to ride that line (BENCHMARKS.md,
-  "crashes.py").
+  car is in. Not from the road's centreline (``lateral_offset``): on a road of two or four lanes
+  that is the line between two lanes, the one place a lane-keeping cost should not favour.
 
 ``terminated`` is True whenever a frame of the chunk collided. ``reset(mask)`` forgets the
 progress baseline and the collided flag of the masked rows.
