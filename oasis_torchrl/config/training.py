@@ -97,6 +97,22 @@ class CollectorConfig:
 
 
 @dataclass
+class ExplorationConfig:
+    """How the collecting policy draws its noise (oasis_torchrl.train.exploration)."""
+
+    hold_chunks: float = option(
+        1.0,
+        help="mean chunks a row keeps its exploration noise (the mixture component and the "
+        "normal deviations; redrawn with probability 1/hold_chunks per chunk): 1 draws it "
+        "afresh every chunk; 5 holds a manoeuvre about a second",
+    )
+
+    def __post_init__(self) -> None:
+        if not self.hold_chunks >= 1:
+            raise ValueError(f"exploration.hold_chunks must be >= 1, got {self.hold_chunks}")
+
+
+@dataclass
 class LossConfig:
     """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
 
@@ -190,6 +206,9 @@ class PPOSettings:
         help="[throttle, steering] action scale after a warm start (null: the source's)",
     )
     collector: CollectorConfig = option(default_factory=CollectorConfig, help="experience")
+    exploration: ExplorationConfig = option(
+        default_factory=ExplorationConfig, help="the collecting policy's noise"
+    )
     loss: LossConfig = option(default_factory=LossConfig, help="the PPO loss")
     optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
     eval: PPOEvaluationConfig = option(

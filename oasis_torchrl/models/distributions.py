@@ -87,6 +87,27 @@ class TanhNormalMixture(D.Distribution):
         self.entropy_samples = entropy_samples
         super().__init__(logits.shape[:-1], loc.shape[batch_dims + 1 :], validate_args=False)
 
+    @classmethod
+    def of_params(
+        cls,
+        loc: torch.Tensor,
+        scale: torch.Tensor,
+        logits: torch.Tensor | None = None,
+        event_dims: int = 1,
+    ) -> TanhNormalMixture:
+        """The mixture of a head's parameters; without ``logits``, ``loc`` ``[*B, *E]`` is one
+        tanh-normal, as a mixture of one component (the same density).
+
+        Example:
+            >>> loc = torch.zeros(5, 4, 2)
+            >>> TanhNormalMixture.of_params(loc, torch.ones_like(loc), event_dims=2).logits.shape
+            torch.Size([5, 1])
+        """
+        if logits is None:
+            loc, scale = loc.unsqueeze(-event_dims - 1), scale.unsqueeze(-event_dims - 1)
+            logits = loc.new_zeros((*loc.shape[: -event_dims - 1], 1))
+        return cls(logits, loc, scale, event_dims=event_dims)
+
     @property
     def support(self) -> constraints.Constraint:
         return constraints.independent(constraints.interval(-1.0, 1.0), self.event_dims)
@@ -161,6 +182,30 @@ class TanhNormalMixture(D.Distribution):
         pre_tanh = self._component(self.loc, component) + self._component(
             self.scale, component
         ) * torch.randn(shape + self.batch_shape + self.event_shape, device=self.loc.device)
+        return torch.tanh(pre_tanh).clamp(-ACTION_BOUND, ACTION_BOUND)
+
+    def from_noise(self, uniform: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
+        """The action that noise ``uniform`` ``[*B]`` in [0, 1) and ``normal`` ``[*B, *E]``
+        (standard normal) give: the component at ``uniform`` of the weights' cumulative sum,
+        then ``tanh(loc + scale * normal)`` of it. With fresh noise that is :meth:`sample`;
+        noise held over several steps keeps the component and the deviation while the weights
+        and locations stay (e.g. a manoeuvre), each step's action still distributed as the
+        mixture.
+
+        Example:
+            >>> logits = torch.zeros(2, 2)  # two rows of the same two components
+            >>> loc = torch.tensor([[-1.0], [1.0]]).expand(2, 2, 1)
+            >>> dist = TanhNormalMixture(logits, loc, torch.full_like(loc, 0.1), event_dims=1)
+            >>> dist.from_noise(torch.tensor([0.2, 0.7]), torch.zeros(2, 1))  # left, right
+            tensor([[-0.7616],
+                    [ 0.7616]])
+        """
+        cumulative = self.log_weights.exp().cumsum(-1)
+        last = self.logits.shape[-1] - 1
+        component = (cumulative < uniform.unsqueeze(-1)).sum(-1).clamp_max(last)
+        pre_tanh = self._component(self.loc, component) + self._component(
+            self.scale, component
+        ) * normal.to(self.loc.dtype)
         return torch.tanh(pre_tanh).clamp(-ACTION_BOUND, ACTION_BOUND)
 
     def _component(self, values: torch.Tensor, component: torch.Tensor) -> torch.Tensor:

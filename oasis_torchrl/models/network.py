@@ -229,11 +229,7 @@ class DrivingNet(nn.Module):
 
     def _chunk_mixture(self, features: torch.Tensor) -> TanhNormalMixture:
         """The chunk distribution as a mixture (of one component for the tanh-normal head)."""
-        params = self.action_params(features)
-        if self.config.head != MIXTURE:
-            params = {key: value.unsqueeze(-3) for key, value in params.items()}
-            params["logits"] = params["loc"].new_zeros(params["loc"].shape[:-2])
-        return TanhNormalMixture(**params, event_dims=2)
+        return TanhNormalMixture.of_params(**self.action_params(features), event_dims=2)
 
     def manoeuvre(self, chunk: torch.Tensor, observed: torch.Tensor | None = None) -> torch.Tensor:
         """The component ``[...]`` (int) whose manoeuvre a chunk ``[..., chunk, action_dim]``

@@ -43,6 +43,7 @@ from oasis_torchrl.models.checkpoint import (
 )
 from oasis_torchrl.protocol import ACTION_NAMES
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
+from oasis_torchrl.train.exploration import HeldNoisePolicy
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
 
 logger = logging.getLogger(__name__)
@@ -182,6 +183,10 @@ class PPOTrainer:
         if cfg.optim.pool_scale:
             self.net.pool_scale_gradients()
         self.modules = make_actor_critic(self.net)
+        hold = cfg.exploration.hold_chunks
+        self.collecting_policy = (
+            HeldNoisePolicy(self.modules.policy, hold) if hold > 1 else self.modules.policy
+        )
         self.loss = DrivingPPOLoss(
             self.modules,
             aux_coeff=cfg.loss.aux_coeff,
@@ -318,7 +323,7 @@ class PPOTrainer:
                 bar.update(batch.numel())
                 bar.set_postfix(_postfix(metrics))
                 if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
-                    collector.update_policy_weights_(self.modules.policy)
+                    collector.update_policy_weights_(self.collecting_policy)
                 waiting = time.perf_counter()
         finally:
             bar.close()
@@ -344,14 +349,14 @@ class PPOTrainer:
                     frame_stack=self.net.config.frames,
                     privileged=uses_ground_truth(cfg),
                 ),
-                self.modules.policy,
+                self.collecting_policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
                 auto_register_policy_transforms=False,
             )
         return Collector(
             self.env,
-            self.modules.policy,
+            self.collecting_policy,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
             auto_register_policy_transforms=False,
