@@ -159,13 +159,18 @@ class ActorCritic:
         return self.operator.module[0]
 
 
-def make_actor_critic(net: DrivingNet, image_key: str = FRAME_STACK) -> ActorCritic:
+def make_actor_critic(
+    net: DrivingNet, image_key: str = FRAME_STACK, features: TensorDictModule | None = None
+) -> ActorCritic:
     """Wrap ``net`` as the TorchRL actor and critic of the PPO recipe.
 
     Args:
         net: the network (shared by the three modules).
         image_key: ``"frame_stack"`` (uint8 env frames) or ``"images"`` (float, see module
             doc).
+        features: the shared part, writing ``"features"`` ``[*B, net.config.features_dim]``
+            (default: ``net.features`` of the cameras and the state); another one gives the
+            same heads other inputs, e.g. a teacher that reads the privileged state.
 
     Example:
         >>> from tensordict import TensorDict
@@ -182,7 +187,7 @@ def make_actor_critic(net: DrivingNet, image_key: str = FRAME_STACK) -> ActorCri
         torch.Size([3, 1])
     """
     cfg = net.config
-    common = TensorDictModule(
+    common = features or TensorDictModule(
         _Features(net), in_keys=observation_keys(net, image_key), out_keys=[FEATURES]
     )
     param_keys = list(net.action_params(torch.zeros(cfg.features_dim)))

@@ -1,0 +1,285 @@
+"""PPO from scratch on the privileged state: does PPO lack perception or exploration?
+
+PPO from scratch on the cameras learns no reaction to obstacles within 204,800 env steps
+(BENCHMARKS.md, "crashes.py"): it finds a local optimum that pays without seeing (one
+throttle, the line between two lanes). Two things could hold it there: the cameras (the encoder
+must learn to see an obstacle in a lane before the actor can react to it) or exploration (a lane
+change must be found by per-chunk noise). This script removes the first: the same PPO (the
+``PPOConfig`` defaults: mixture head, its initial action and scales, loss, optimiser, reward,
+five training scenes, 8 rows, batches of 512 env steps) with the cameras' encoder replaced by one
+layer on :data:`~oasis_torchrl.models.privileged.PRIVILEGED_FIELDS` (the lane-centred state from
+which a clone of the autopilot drives 96% of it, ``state_clone.py``), on the simulator's physics
+alone (no frames rendered, so about ten times faster). If PPO reaches the targets here, what the
+camera runs lack is perception, and a privileged teacher distilled into the cameras is the way;
+if it does not, exploration is.
+
+Every ``--eval-every`` env steps the policy drives the selection episodes (urban, seed 2000,
+32 episodes of up to 150 chunks, deterministic); the best is kept and reported on the learning
+benchmark's evaluation episodes (urban, seed 1000), against the best constant action there.
+
+Usage: ``python benchmarks/state_ppo.py [--frames 204800 --seeds 0 1]``; prints JSON (about
+8 min per seed on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+from collections.abc import Sequence
+
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.envs import EnvBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives.value import GAE
+from tqdm import tqdm
+
+from oasis_torchrl.config import load_config
+from oasis_torchrl.config.pipeline import TRAINING_PROMPTS
+from oasis_torchrl.envs.episodes import EpisodePlanner, episode_prompts
+from oasis_torchrl.envs.factory import make_reward
+from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
+from oasis_torchrl.models.actor_critic import FEATURES
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, privileged_state
+from oasis_torchrl.sim.simulator import Simulator
+from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
+
+OBSERVATION = "observation"
+REWARD_FIELDS = ("progress", "collided", "lane_offset", "obstacle_distance")
+BEST_CONSTANT = 192.4
+"""Full throttle, straight, on the evaluation episodes (BENCHMARKS.md, "Learning")."""
+
+
+class StateDrivingEnv(EnvBase):
+    """``rows`` simulators stepped on physics alone; the observation is the privileged state of
+    each row's last frame and its previous action, the reward the training env's
+    (``make_reward(cfg.reward)``), an episode ends at a collision or after ``max_steps``."""
+
+    def __init__(
+        self, prompts: Sequence[str], rows: int, max_steps: int, reward_cfg, seed: int
+    ) -> None:
+        super().__init__(batch_size=torch.Size([rows]))
+        self.simulators = [Simulator(96, 64) for _ in range(rows)]
+        self.planner = EpisodePlanner(episode_prompts(prompts), num_rows=rows)
+        self.planner.set_seed(seed)
+        self.reward = make_reward(reward_cfg)
+        self.max_steps = max_steps
+        self.steps = torch.zeros(rows, dtype=torch.long)
+        self.previous = torch.zeros(rows, 2)
+        width = len(PRIVILEGED_FIELDS) + 2
+        self.observation_spec = Composite(
+            {OBSERVATION: Unbounded((rows, width))}, shape=self.batch_size
+        )
+        self.action_spec = Bounded(-1.0, 1.0, (rows, 4, 2))
+        self.reward_spec = Unbounded((rows, 1))
+
+    def _observation(self) -> torch.Tensor:
+        truths = [simulator.truth for simulator in self.simulators]
+        fields = {
+            name: torch.tensor([float(getattr(truth, name)) for truth in truths])
+            for name in PRIVILEGED_FIELDS
+        }
+        return torch.cat([privileged_state(fields), self.previous], dim=-1)
+
+    def _reset(self, tensordict: TensorDictBase | None) -> TensorDictBase:
+        mask = torch.ones(self.batch_size, dtype=torch.bool)
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(-1)
+        rows = mask.nonzero().flatten().tolist()
+        prompts, seeds = self.planner.next_episodes(rows)
+        for row, prompt, seed in zip(rows, prompts, seeds, strict=True):
+            self.simulators[row].reset(prompt, seed)
+        self.steps[mask] = 0
+        self.previous[mask] = 0.0
+        self.reward.reset(mask)
+        return TensorDict({OBSERVATION: self._observation()}, self.batch_size)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        actions = tensordict.get("action").clamp(-1.0, 1.0)
+        frames = [
+            simulator.step(chunk.numpy(), render=False).truth
+            for simulator, chunk in zip(self.simulators, actions, strict=True)
+        ]
+        truth = {
+            field: torch.tensor([[float(getattr(f, field)) for f in row] for row in frames])
+            for field in REWARD_FIELDS
+        }
+        out = self.reward(TensorDict({"truth": truth}, self.batch_size))
+        self.steps += 1
+        self.previous = actions[:, -1].clone()
+        terminated = out.get("terminated").reshape(-1, 1)
+        truncated = (self.steps >= self.max_steps).reshape(-1, 1) & ~terminated
+        return TensorDict(
+            {
+                OBSERVATION: self._observation(),
+                "reward": out.get("reward").reshape(-1, 1),
+                "terminated": terminated,
+                "truncated": truncated,
+                "done": terminated | truncated,
+            },
+            self.batch_size,
+        )
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.planner.set_seed(seed or 0)
+
+    def distances(self) -> list[float]:
+        """Each row's distance driven in its current episode."""
+        return [simulator.truth.distance for simulator in self.simulators]
+
+
+class _StateFeatures(nn.Module):
+    """``[*B, fields + 2] -> [*B, features_dim]``: one layer over the privileged state in place
+    of the cameras' encoder, then the previous action, as ``DrivingNet.features`` lays them."""
+
+    def __init__(self, net: DrivingNet) -> None:
+        super().__init__()
+        width = net.config.features_dim - net.config.state_dim
+        self.layer = nn.Sequential(nn.Linear(len(PRIVILEGED_FIELDS), width), nn.ReLU())
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        state, previous = observation[..., :-2], observation[..., -2:]
+        return torch.cat([self.layer(state), previous], dim=-1)
+
+
+def state_policy(cfg) -> tuple[DrivingNet, TensorDictModule]:
+    """The PPO config's fresh network (its heads, initial action and scales) and the
+    shared part that feeds them the privileged state."""
+    network = OmegaConf.to_container(cfg.network)
+    net = DrivingNet(DrivingNetConfig.from_dict({**network, "image_size": (64, 96)}))
+    features = TensorDictModule(_StateFeatures(net), in_keys=[OBSERVATION], out_keys=[FEATURES])
+    return net, features
+
+
+def evaluate(policy: TensorDictModule, cfg, seed: int, episodes: int, max_steps: int = 150) -> dict:
+    """Deterministic episodes on "urban" (one per row, seeded as the env seeds them): mean
+    distance before a collision and the collision rate."""
+    env = StateDrivingEnv(["urban"], episodes, max_steps, cfg.env.reward, seed)
+    td = env.reset()
+    ended = torch.zeros(episodes, dtype=torch.bool)
+    distance = torch.zeros(episodes)
+    collided = torch.zeros(episodes, dtype=torch.bool)
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        for _ in range(max_steps):
+            td = env.step(policy(td))
+            now = torch.tensor(env.distances())
+            done = td.get(("next", "done")).reshape(-1) & ~ended
+            hit = td.get(("next", "terminated")).reshape(-1) & ~ended
+            distance = torch.where(ended, distance, now)
+            collided |= hit
+            ended |= done
+            if ended.all():
+                break
+            td = td.get("next").exclude("reward", "done", "terminated", "truncated")
+    return {
+        "mean_distance": distance.mean().item(),
+        "collision_rate": collided.float().mean().item(),
+    }
+
+
+def train(seed: int, args: argparse.Namespace) -> dict:
+    """One PPO run; its selection curve and the kept policy's evaluation."""
+    cfg = load_config("ppo", list(args.overrides))
+    torch.manual_seed(seed)
+    net, features = state_policy(cfg)
+    if cfg.optim.pool_scale:
+        net.pool_scale_gradients()
+    modules = make_actor_critic(net, features=features)
+    loss = DrivingPPOLoss(
+        modules,
+        clip_epsilon=cfg.loss.clip_epsilon,
+        entropy_coeff=cfg.loss.entropy_coeff,
+        critic_coeff=cfg.loss.critic_coeff,
+        loss_critic_type=cfg.loss.loss_critic_type,
+        normalize_advantage=True,
+    )
+    advantage = GAE(
+        gamma=cfg.loss.gamma,
+        lmbda=cfg.loss.lmbda,
+        value_network=modules.value,
+        deactivate_vmap=True,
+    )
+    groups = [
+        {"params": [*features.parameters(), *net.actor.parameters()], "lr": cfg.optim.lr},
+        {"params": list(net.critic.parameters()), "lr": cfg.optim.critic_lr},
+        {"params": [net.log_scale], "lr": cfg.optim.scale_lr},
+    ]
+    base_lrs = [group["lr"] for group in groups]
+    optimizer = torch.optim.Adam(groups)
+    env = StateDrivingEnv(
+        TRAINING_PROMPTS, cfg.env.num_envs, cfg.env.max_steps, cfg.env.reward, seed
+    )
+    collector = Collector(
+        env,
+        modules.policy,
+        frames_per_batch=cfg.collector.frames_per_batch,
+        total_frames=args.frames,
+    )
+    curve, kept, frames = [], {}, 0
+    parameters = [*features.parameters(), *net.parameters()]
+    for batch in tqdm(collector, total=args.frames // cfg.collector.frames_per_batch):
+        frames += batch.numel()
+        factor = max(1.0 - frames / args.frames, 0.05)
+        for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
+            group["lr"] = base * factor
+        with torch.no_grad():
+            batch = advantage(batch)
+        flat = batch.exclude("next").reshape(-1)
+        for _ in range(cfg.optim.epochs):
+            for index in torch.randperm(flat.numel()).split(cfg.optim.mini_batch_size):
+                losses = loss(flat[index])
+                optimizer.zero_grad()
+                sum(losses[key] for key in loss.terms).backward()
+                nn.utils.clip_grad_norm_(parameters, cfg.optim.max_grad_norm)
+                optimizer.step()
+        if frames % args.eval_every == 0:
+            rated = evaluate(modules.policy, cfg, args.selection_seed, args.episodes)
+            curve.append({"frames": frames, "scale": scale_of(net), **rated})
+            kept[frames] = copy.deepcopy(modules.policy.state_dict())
+    collector.shutdown()
+    reports = {}
+    for budget in sorted({*args.budgets, args.frames}):
+        best = max(
+            (point for point in curve if point["frames"] <= budget),
+            key=lambda point: point["mean_distance"],
+        )
+        modules.policy.load_state_dict(kept[best["frames"]])
+        final = evaluate(modules.policy, cfg, args.eval_seed, args.episodes)
+        reports[str(budget)] = {
+            "kept_frames": best["frames"],
+            "selection": best["mean_distance"],
+            **final,
+            "over_best_constant": final["mean_distance"] / BEST_CONSTANT,
+        }
+    return {"seed": seed, "curve": curve, "within": reports}
+
+
+def scale_of(net: DrivingNet) -> list[float]:
+    """The action scale per action number, [throttle, steering]."""
+    dims = tuple(range(net.log_scale.dim() - 1))
+    return net.log_scale.exp().mean(dims).tolist()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--frames", type=int, default=204800)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--eval-every", type=int, default=10240)
+    parser.add_argument("--budgets", type=int, nargs="+", default=[102400])
+    parser.add_argument("--episodes", type=int, default=32)
+    parser.add_argument("--selection-seed", type=int, default=2000)
+    parser.add_argument("--eval-seed", type=int, default=1000)
+    parser.add_argument("overrides", nargs="*", help="PPOConfig overrides, e.g. loss.gamma=0.99")
+    args = parser.parse_args()
+    runs = [train(seed, args) for seed in args.seeds]
+    print(json.dumps({"settings": vars(args), "runs": runs}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
