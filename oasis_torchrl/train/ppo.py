@@ -1,7 +1,8 @@
 """PPO on :class:`~oasis_torchrl.envs.OasisEnv`, the TorchRL recipe.
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
-TanhNormal over the 4-action chunk); :class:`~torchrl.objectives.value.GAE` computes advantages
+distribution over the 4-action chunk, its noise drawn afresh every chunk or held over several:
+:mod:`oasis_torchrl.train.exploration`); :class:`~torchrl.objectives.value.GAE` computes advantages
 with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared encoder, run once
 per minibatch: :mod:`oasis_torchrl.train.ppo_loss`) for a few epochs of minibatches per batch.
 Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar, checkpoints with resume,
