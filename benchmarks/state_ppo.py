@@ -17,6 +17,11 @@ Every ``--eval-every`` env steps the policy drives the selection episodes (urban
 32 episodes of up to 150 chunks, deterministic); the best is kept and reported on the learning
 benchmark's evaluation episodes (urban, seed 1000), against the best constant action there.
 
+The loop is a short one over TorchRL's Collector and GAE and the project's ``DrivingPPOLoss``
+with the trainer's settings (three learning-rate groups annealed to 5%, gradient clipping,
+epochs of minibatches); ``PPOTrainer`` itself builds the camera env. Unlike the trainer it has
+no KL stop (off by default there) and does not skip non-finite steps.
+
 Usage: ``python benchmarks/state_ppo.py [--frames 204800 --seeds 0 1]``; prints JSON (about
 5 min per seed on 2 cores).
 """
