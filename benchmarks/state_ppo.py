@@ -35,13 +35,13 @@ from collections.abc import Sequence
 
 import torch
 from omegaconf import DictConfig, OmegaConf
-from tensordict import TensorDict, TensorDictBase
+from state_clone import state_of
+from tensordict import NonTensorStack, TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.collectors import Collector
-from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 from torchrl.envs import EnvBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives.value import GAE
 from tqdm import tqdm
 
@@ -51,12 +51,15 @@ from oasis_torchrl.envs.episodes import EpisodePlanner, episode_prompts
 from oasis_torchrl.envs.factory import make_reward
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.actor_critic import FEATURES
-from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, privileged_state
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.sim.simulator import Simulator
+from oasis_torchrl.sim.world import FrameTruth
+from oasis_torchrl.train.evaluate import EvalReport, episode_results, rollout_episodes
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
 OBSERVATION = "observation"
-REWARD_FIELDS = ("progress", "collided", "lane_offset", "obstacle_distance")
+TRUTH_FIELDS = ("progress", "distance", "collided", "lane_offset", "obstacle_distance")
+"""The ground truth of every frame a step returns: what the reward and the evaluation read."""
 BEST_CONSTANT = 192.4
 """Full throttle, straight, on the evaluation episodes (BENCHMARKS.md, "Learning")."""
 
@@ -77,20 +80,42 @@ class StateDrivingEnv(EnvBase):
         self.max_steps = max_steps
         self.steps = torch.zeros(rows, dtype=torch.long)
         self.previous = torch.zeros(rows, 2)
+        self.prompts = [""] * rows
+        self.seeds = torch.zeros(rows, 1, dtype=torch.int64)
         width = len(PRIVILEGED_FIELDS) + 2
         self.observation_spec = Composite(
-            {OBSERVATION: Unbounded((rows, width))}, shape=self.batch_size
+            {
+                OBSERVATION: Unbounded((rows, width)),
+                "prompt": NonTensor(shape=(rows,), example_data="urban"),
+                "episode_seed": Unbounded((rows, 1), dtype=torch.int64),
+                "truth": Composite(
+                    {field: Unbounded((rows, 4)) for field in TRUTH_FIELDS}, shape=self.batch_size
+                ),
+            },
+            shape=self.batch_size,
         )
+        flags = {
+            flag: Categorical(2, (rows, 1), dtype=torch.bool)
+            for flag in ("done", "terminated", "truncated")
+        }
+        self.done_spec = Composite(flags, shape=self.batch_size)
         self.action_spec = Bounded(-1.0, 1.0, (rows, 4, 2))
         self.reward_spec = Unbounded((rows, 1))
 
-    def _observation(self) -> torch.Tensor:
-        truths = [simulator.truth for simulator in self.simulators]
-        fields = {
-            name: torch.tensor([float(getattr(truth, name)) for truth in truths])
-            for name in PRIVILEGED_FIELDS
-        }
-        return torch.cat([privileged_state(fields), self.previous], dim=-1)
+    def _observation(self) -> TensorDict:
+        """Each row's observation, and its episode's prompt and seed (as the camera env
+        gives them, so the project's evaluation reads these rollouts)."""
+        state = torch.stack(
+            [state_of(simulator.truth, PRIVILEGED_FIELDS) for simulator in self.simulators]
+        )
+        return TensorDict(
+            {
+                OBSERVATION: torch.cat([state, self.previous], dim=-1),
+                "prompt": NonTensorStack(*self.prompts),
+                "episode_seed": self.seeds.clone(),
+            },
+            self.batch_size,
+        )
 
     def _reset(self, tensordict: TensorDictBase | None) -> TensorDictBase:
         mask = torch.ones(self.batch_size, dtype=torch.bool)
@@ -100,10 +125,13 @@ class StateDrivingEnv(EnvBase):
         prompts, seeds = self.planner.next_episodes(rows)
         for row, prompt, seed in zip(rows, prompts, seeds, strict=True):
             self.simulators[row].reset(prompt, seed)
+            self.prompts[row], self.seeds[row] = prompt, seed
         self.steps[mask] = 0
         self.previous[mask] = 0.0
         self.reward.reset(mask)
-        return TensorDict({OBSERVATION: self._observation()}, self.batch_size)
+        return self._observation().update(
+            {"truth": self._truth([[s.truth] for s in self.simulators])}
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         actions = tensordict.get("action").clamp(-1.0, 1.0)
@@ -111,32 +139,32 @@ class StateDrivingEnv(EnvBase):
             simulator.step(chunk.numpy(), render=False).truth
             for simulator, chunk in zip(self.simulators, actions, strict=True)
         ]
-        truth = {
-            field: torch.tensor([[float(getattr(f, field)) for f in row] for row in frames])
-            for field in REWARD_FIELDS
-        }
+        truth = self._truth(frames)
         out = self.reward(TensorDict({"truth": truth}, self.batch_size))
         self.steps += 1
         self.previous = actions[:, -1].clone()
         terminated = out.get("terminated").reshape(-1, 1)
         truncated = (self.steps >= self.max_steps).reshape(-1, 1) & ~terminated
-        return TensorDict(
+        return self._observation().update(
             {
-                OBSERVATION: self._observation(),
+                "truth": truth,
                 "reward": out.get("reward").reshape(-1, 1),
                 "terminated": terminated,
                 "truncated": truncated,
                 "done": terminated | truncated,
-            },
-            self.batch_size,
+            }
         )
+
+    def _truth(self, frames: Sequence[Sequence[FrameTruth]]) -> TensorDict:
+        """``TRUTH_FIELDS`` of each row's frames ``[rows, 4]`` (a reset's one frame repeated)."""
+        values = {
+            field: torch.tensor([[float(getattr(f, field)) for f in row] for row in frames])
+            for field in TRUTH_FIELDS
+        }
+        return TensorDict({k: v.expand(-1, 4) for k, v in values.items()}, self.batch_size)
 
     def _set_seed(self, seed: int | None) -> None:
         self.planner.set_seed(seed or 0)
-
-    def distances(self) -> list[float]:
-        """Each row's distance driven in its current episode."""
-        return [simulator.truth.distance for simulator in self.simulators]
 
 
 class _StateFeatures(nn.Module):
@@ -164,30 +192,12 @@ def state_policy(cfg: DictConfig) -> tuple[DrivingNet, TensorDictModule]:
 
 def evaluate(
     policy: TensorDictModule, cfg: DictConfig, seed: int, episodes: int, max_steps: int = 150
-) -> dict:
-    """Deterministic episodes on "urban" (one per row, seeded as the env seeds them): mean
-    distance before a collision and the collision rate."""
+) -> dict[str, float]:
+    """Deterministic episodes on "urban" (one per row, seeded as the env seeds them), read as
+    the project's evaluation reads them: mean distance before a collision, collision rate,
+    return."""
     env = StateDrivingEnv(["urban"], episodes, max_steps, cfg.env.reward, seed)
-    td = env.reset()
-    ended = torch.zeros(episodes, dtype=torch.bool)
-    distance = torch.zeros(episodes)
-    collided = torch.zeros(episodes, dtype=torch.bool)
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-        for _ in range(max_steps):
-            td = env.step(policy(td))
-            now = torch.tensor(env.distances())
-            done = td.get(("next", "done")).reshape(-1) & ~ended
-            hit = td.get(("next", "terminated")).reshape(-1) & ~ended
-            distance = torch.where(ended, distance, now)
-            collided |= hit
-            ended |= done
-            if ended.all():
-                break
-            td = td.get("next").exclude("reward", "done", "terminated", "truncated")
-    return {
-        "mean_distance": distance.mean().item(),
-        "collision_rate": collided.float().mean().item(),
-    }
+    return EvalReport(episode_results(rollout_episodes(env, policy, max_steps))).summary()
 
 
 def train(seed: int, args: argparse.Namespace) -> dict:
