@@ -133,6 +133,26 @@ class LossConfig:
 
 
 @dataclass
+class AuxReplayConfig:
+    """Past observations replayed for the auxiliary loss (oasis_torchrl.train.aux_replay)."""
+
+    capacity: int = option(
+        0,
+        help="rows of past observations (frames as uint8, ~110 KB a row at 64x96) and their "
+        "privileged state kept for the auxiliary loss (0: off; needs loss.aux_coeff > 0)",
+    )
+    steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
+    mini_batch_size: int = option(128, help="rows per replayed minibatch")
+
+    def __post_init__(self) -> None:
+        if self.capacity < 0 or self.steps < 0:
+            raise ValueError(
+                f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
+                f"and {self.steps}"
+            )
+
+
+@dataclass
 class OptimConfig:
     """Adam over the actor, encoder and critic."""
 
@@ -210,6 +230,9 @@ class PPOSettings:
         default_factory=ExplorationConfig, help="the collecting policy's noise"
     )
     loss: LossConfig = option(default_factory=LossConfig, help="the PPO loss")
+    aux_replay: AuxReplayConfig = option(
+        default_factory=AuxReplayConfig, help="past observations replayed for the auxiliary loss"
+    )
     optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
     eval: PPOEvaluationConfig = option(
         default_factory=PPOEvaluationConfig, help="evaluations during and after training"
@@ -219,6 +242,12 @@ class PPOSettings:
     ray: RayCollectionConfig = option(
         default_factory=RayCollectionConfig, help="collection on Ray (off by default)"
     )
+
+    def __post_init__(self) -> None:
+        if self.aux_replay.capacity and not self.loss.aux_coeff:
+            raise ValueError(
+                "aux_replay.capacity replays the auxiliary loss: set loss.aux_coeff > 0 too"
+            )
 
 
 @dataclass

@@ -43,6 +43,7 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.protocol import ACTION_NAMES
+from oasis_torchrl.train.aux_replay import AuxiliaryReplay
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.exploration import HeldNoisePolicy
 from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
@@ -196,6 +197,11 @@ class PPOTrainer:
             critic_coeff=cfg.loss.critic_coeff,
             loss_critic_type=cfg.loss.loss_critic_type,
             normalize_advantage=True,
+        )
+        self.aux_replay = (
+            AuxiliaryReplay(self.loss, cfg.aux_replay.capacity, cfg.aux_replay.mini_batch_size)
+            if cfg.aux_replay.capacity
+            else None
         )
         # Without vmap the critic runs on the batch and on its next observations as two plain
         # calls: under vmap the encoder's input preparation was a third of an update's time.
@@ -378,7 +384,8 @@ class PPOTrainer:
             losses = self.loss(minibatch)
             if not critic_only and self._kl_exceeded(losses):
                 break
-            grad_norm = self._step(losses, critic_only)
+            terms = ("loss_critic",) if critic_only else self.loss.terms
+            grad_norm = self._step(sum(losses[key] for key in terms), critic_only)
             if grad_norm is None:
                 skipped += 1
                 continue
@@ -398,11 +405,26 @@ class PPOTrainer:
                 skipped,
             )
         metrics = {key: value / max(updates, 1) for key, value in sums.items()}
+        if self.aux_replay is not None and not critic_only:
+            metrics.update(self._replay_aux(flat))
         metrics["optim/skipped_minibatches"] = float(skipped)
         metrics["optim/updates"] = float(updates)
         metrics["optim/lr"] = cfg.optim.lr * factor
         metrics.update(self._scale_metrics())
         return metrics
+
+    def _replay_aux(self, flat: TensorDictBase) -> dict[str, float]:
+        """Add the batch to the auxiliary replay, then ``aux_replay.steps`` auxiliary-only
+        steps on minibatches drawn from it; their mean loss and the replay's size."""
+        replay = self.aux_replay
+        replay.extend(flat)
+        values = []
+        for _ in range(self.cfg.aux_replay.steps):
+            loss = replay.loss()
+            if self._step(loss) is not None:
+                values.append(loss.item())
+        mean = sum(values) / len(values) if values else float("nan")
+        return {"loss/aux_replay": mean, "optim/aux_replay_rows": float(len(replay))}
 
     def _scale_metrics(self) -> dict[str, float]:
         """The action scale's mean per action number (over chunk and components)."""
@@ -436,11 +458,9 @@ class PPOTrainer:
         target = self.cfg.optim.get("target_kl")
         return target is not None and float(losses["kl_approx"].mean()) > target
 
-    def _step(self, losses: TensorDictBase, critic_only: bool) -> float | None:
-        """One optimizer step on the loss terms; the gradient norm, or ``None`` when the loss or
+    def _step(self, total: torch.Tensor, critic_only: bool = False) -> float | None:
+        """One optimizer step on the summed loss; the gradient norm, or ``None`` when the loss or
         gradient is not finite (the step is skipped)."""
-        terms = ("loss_critic",) if critic_only else self.loss.terms
-        total = sum(losses[key] for key in terms)
         if not torch.isfinite(total):
             return None
         self.optimizer.zero_grad(set_to_none=True)

@@ -75,7 +75,12 @@ class DrivingPPOLoss(nn.Module):
         minibatch = self.features(minibatch.clone(False))
         losses = self.ppo(minibatch)
         if self.aux_coeff:
-            prediction = self.net.predict_aux(minibatch.get(FEATURES))
-            aux = torch.nn.functional.mse_loss(prediction, minibatch.get(CRITIC_INPUTS))
-            losses[AUX_TERM] = aux * self.aux_coeff
+            losses[AUX_TERM] = self.aux_loss(minibatch)
         return losses
+
+    def aux_loss(self, encoded: TensorDictBase) -> torch.Tensor:
+        """``aux_coeff`` x the auxiliary head's mean squared error on ``"critic_inputs"``, from
+        the ``"features"`` of an encoded minibatch."""
+        prediction = self.net.predict_aux(encoded.get(FEATURES))
+        error = torch.nn.functional.mse_loss(prediction, encoded.get(CRITIC_INPUTS))
+        return error * self.aux_coeff
