@@ -17,10 +17,9 @@ Every ``--eval-every`` env steps the policy drives the selection episodes (urban
 32 episodes of up to 150 chunks, deterministic); the best is kept and reported on the learning
 benchmark's evaluation episodes (urban, seed 1000), against the best constant action there.
 
-The loop is a short one over TorchRL's Collector and GAE and the project's ``DrivingPPOLoss``
-with the trainer's settings (three learning-rate groups annealed to 5%, gradient clipping,
-epochs of minibatches); ``PPOTrainer`` itself builds the camera env. Unlike the trainer it has
-no KL stop (off by default there) and does not skip non-finite steps.
+The loop is TorchRL's Collector over this script's env feeding the trainer's update
+(:class:`~oasis_torchrl.train.ppo_update.PPOUpdate`: GAE, the loss, the optimiser and its
+schedule), so only the env and the network's input differ from ``PPOTrainer``'s runs.
 
 Usage: ``python benchmarks/state_ppo.py [--frames 204800 --seeds 0 1]``; prints JSON (about
 5 min per seed on 2 cores).
@@ -42,7 +41,6 @@ from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 from torchrl.envs import EnvBase
-from torchrl.objectives.value import GAE
 from tqdm import tqdm
 
 from oasis_torchrl.config import load_config
@@ -55,7 +53,7 @@ from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.sim.simulator import Simulator
 from oasis_torchrl.sim.world import FrameTruth
 from oasis_torchrl.train.evaluate import EvalReport, episode_results, rollout_episodes
-from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
+from oasis_torchrl.train.ppo_update import PPOUpdate
 
 OBSERVATION = "observation"
 TRUTH_FIELDS = ("progress", "distance", "collided", "lane_offset", "obstacle_distance")
@@ -205,30 +203,8 @@ def train(seed: int, args: argparse.Namespace) -> dict:
     cfg = load_config("ppo", list(args.overrides))
     torch.manual_seed(seed)
     net, features = state_policy(cfg)
-    if cfg.optim.pool_scale:
-        net.pool_scale_gradients()
     modules = make_actor_critic(net, features=features)
-    loss = DrivingPPOLoss(
-        modules,
-        clip_epsilon=cfg.loss.clip_epsilon,
-        entropy_coeff=cfg.loss.entropy_coeff,
-        critic_coeff=cfg.loss.critic_coeff,
-        loss_critic_type=cfg.loss.loss_critic_type,
-        normalize_advantage=True,
-    )
-    advantage = GAE(
-        gamma=cfg.loss.gamma,
-        lmbda=cfg.loss.lmbda,
-        value_network=modules.value,
-        deactivate_vmap=True,
-    )
-    groups = [
-        {"params": [*features.parameters(), *net.actor.parameters()], "lr": cfg.optim.lr},
-        {"params": list(net.critic.parameters()), "lr": cfg.optim.critic_lr},
-        {"params": [net.log_scale], "lr": cfg.optim.scale_lr},
-    ]
-    base_lrs = [group["lr"] for group in groups]
-    optimizer = torch.optim.Adam(groups)
+    update = PPOUpdate(modules, cfg, args.frames)
     env = StateDrivingEnv(
         TRAINING_PROMPTS, cfg.env.num_envs, cfg.env.max_steps, cfg.env.reward, seed
     )
@@ -239,26 +215,14 @@ def train(seed: int, args: argparse.Namespace) -> dict:
         total_frames=args.frames,
     )
     curve, kept, frames = [], {}, 0
-    parameters = [*features.parameters(), *net.parameters()]
     bar = tqdm(collector, total=args.frames // cfg.collector.frames_per_batch, desc=f"seed {seed}")
     for batch in bar:
         frames += batch.numel()
-        factor = max(1.0 - frames / args.frames, 0.05)
-        for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
-            group["lr"] = base * factor
-        with torch.no_grad():
-            batch = advantage(batch)
-        flat = batch.exclude("next").reshape(-1)
-        for _ in range(cfg.optim.epochs):
-            for index in torch.randperm(flat.numel()).split(cfg.optim.mini_batch_size):
-                losses = loss(flat[index])
-                optimizer.zero_grad()
-                sum(losses[key] for key in loss.terms).backward()
-                nn.utils.clip_grad_norm_(parameters, cfg.optim.max_grad_norm)
-                optimizer.step()
+        update(batch, frames)
         if frames % args.eval_every == 0:
             rated = evaluate(modules.policy, cfg, args.selection_seed, args.episodes)
-            curve.append({"frames": frames, "scale": scale_of(net), **rated})
+            scale = list(update.scale_metrics().values())  # [throttle, steering]
+            curve.append({"frames": frames, "scale": scale, **rated})
             kept[frames] = copy.deepcopy(modules.policy.state_dict())
             bar.set_postfix(selection=f"{rated['mean_distance']:.1f} m")
     collector.shutdown()
@@ -277,12 +241,6 @@ def train(seed: int, args: argparse.Namespace) -> dict:
             "over_best_constant": final["mean_distance"] / BEST_CONSTANT,
         }
     return {"seed": seed, "curve": curve, "within": reports}
-
-
-def scale_of(net: DrivingNet) -> list[float]:
-    """The action scale per action number, [throttle, steering]."""
-    dims = tuple(range(net.log_scale.dim() - 1))
-    return net.log_scale.exp().mean(dims).tolist()
 
 
 def main() -> None:

@@ -177,6 +177,10 @@ class OptimConfig:
     mini_batch_size: int = option(128, help="env steps per minibatch")
     anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
 
+    def __post_init__(self) -> None:
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise ValueError(f"optim.target_kl must be positive or null, got {self.target_kl}")
+
 
 @dataclass
 class PPOEvaluationConfig(EvaluationConfig):

@@ -2,14 +2,15 @@
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
 distribution over the 4-action chunk, its noise drawn afresh every chunk or held over several:
-:mod:`oasis_torchrl.train.exploration`); :class:`~torchrl.objectives.value.GAE` computes advantages
-with the critic; :class:`~torchrl.objectives.ClipPPOLoss` trains both (shared encoder, run once
-per minibatch: :mod:`oasis_torchrl.train.ppo_loss`) for a few epochs of minibatches per batch.
-Around that: TorchRL loggers (CSV or TensorBoard), a tqdm bar, checkpoints with resume,
-periodic deterministic evaluation episodes (recorded to rerun and/or a LeRobot dataset when
-configured; on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early
-stopping that never looks at the seeds reported at the end), a warm start from a
-behaviour-cloning policy, and the kept policy exported as a LeRobot policy folder. Config:
+:mod:`oasis_torchrl.train.exploration`); :class:`~oasis_torchrl.train.ppo_update.PPOUpdate`
+turns each batch into new weights (GAE advantages with the critic, then
+:class:`~torchrl.objectives.ClipPPOLoss` on both heads, the shared encoder run once per
+minibatch, for a few epochs of minibatches; optionally an auxiliary replay). Around that:
+TorchRL loggers (CSV or TensorBoard), a tqdm bar, checkpoints with resume, periodic
+deterministic evaluation episodes (recorded to rerun and/or a LeRobot dataset when configured;
+on ``eval.selection_seeds``, if set, they choose the policy the run keeps: early stopping that
+never looks at the seeds reported at the end), a warm start from a behaviour-cloning policy,
+and the kept policy exported as a LeRobot policy folder. Config:
 :class:`~oasis_torchrl.config.PPOConfig`.
 """
 
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,6 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
-from torchrl.objectives.value import GAE
 from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
@@ -42,22 +42,11 @@ from oasis_torchrl.models.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
-from oasis_torchrl.protocol import ACTION_NAMES
-from oasis_torchrl.train.aux_replay import AuxiliaryReplay
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.exploration import HeldNoisePolicy
-from oasis_torchrl.train.ppo_loss import AUX_TERM, PPO_TERMS, DrivingPPOLoss
+from oasis_torchrl.train.ppo_update import PPOUpdate
 
 logger = logging.getLogger(__name__)
-
-LOGGED_LOSS_KEYS = (
-    *PPO_TERMS,
-    AUX_TERM,
-    "entropy",
-    "kl_approx",
-    "clip_fraction",
-    "explained_variance",
-)
 
 
 @dataclass
@@ -161,9 +150,6 @@ class PPOTrainer:
     """
 
     def __init__(self, cfg: DictConfig) -> None:
-        target_kl = cfg.optim.get("target_kl")
-        if target_kl is not None and not target_kl > 0:
-            raise ValueError(f"optim.target_kl must be positive or null, got {target_kl}")
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
@@ -182,39 +168,15 @@ class PPOTrainer:
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.env.append_transform(ChunkFrameStack(cameras, depth=self.net.config.frames))
-        if cfg.optim.pool_scale:
-            self.net.pool_scale_gradients()
         self.modules = make_actor_critic(self.net)
         hold = cfg.exploration.hold_chunks
         self.collecting_policy = (
             HeldNoisePolicy(self.modules.policy, hold) if hold > 1 else self.modules.policy
         )
-        self.loss = DrivingPPOLoss(
-            self.modules,
-            aux_coeff=cfg.loss.aux_coeff,
-            clip_epsilon=cfg.loss.clip_epsilon,
-            entropy_coeff=cfg.loss.entropy_coeff,
-            critic_coeff=cfg.loss.critic_coeff,
-            loss_critic_type=cfg.loss.loss_critic_type,
-            normalize_advantage=True,
-        )
-        self.aux_replay = (
-            AuxiliaryReplay(self.loss, cfg.aux_replay.capacity, cfg.aux_replay.mini_batch_size)
-            if cfg.aux_replay.capacity
-            else None
-        )
-        # Without vmap the critic runs on the batch and on its next observations as two plain
-        # calls: under vmap the encoder's input preparation was a third of an update's time.
-        self.advantage = GAE(
-            gamma=cfg.loss.gamma,
-            lmbda=cfg.loss.lmbda,
-            value_network=self.modules.value,
-            deactivate_vmap=True,
-        )
-        self.optimizer = torch.optim.Adam(self._param_groups(), lr=cfg.optim.lr)
+        self.update = PPOUpdate(self.modules, cfg, cfg.collector.total_frames)
         if resumed:
             try:
-                self.optimizer.load_state_dict(resumed["optimizer"])
+                self.update.optimizer.load_state_dict(resumed["optimizer"])
             except ValueError as error:  # e.g. one parameter group, before optim.critic_lr
                 self.env.close()
                 raise ValueError(
@@ -228,41 +190,6 @@ class PPOTrainer:
         )
         self._evaluator: Evaluator | None = None
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
-
-    def _param_groups(self) -> list[dict[str, Any]]:
-        """Three groups: the acting parts (encoder, actor) at ``optim.lr``; the fresh heads
-        (critic, auxiliary) at ``optim.critic_lr``; the action scale at ``optim.scale_lr``
-        (``null``: ``optim.lr``).
-
-        Why the heads: a fresh critic on a warm-started encoder (whose features are small,
-        ~0.08) moves too slowly at the actor's fine-tuning rate: measured on 1536 steps of the
-        cloned policy, a critic fitted for 320 minibatches explains 31% of the returns' variance
-        at 1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
-
-        Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
-        the mean did worse), so at the actor's rate Adam moves it by little more than a random
-        walk: measured, PPO's scale stayed at its initial 0.5 through 184k env steps, and the
-        policy drove 260 m deterministically but 224 m with that noise. With the scale pooled
-        per action number (``optim.pool_scale``) and this rate, a clone fine-tuned from a
-        scale of 1.0 cut its steering scale to 0.67 in 20,480 env steps and kept its throttle
-        scale near 0.94 (BENCHMARKS.md, "Exploration that shrinks").
-        """
-        heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
-        head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
-        scale_id = id(self.net.log_scale)
-        parameters = list(self.loss.parameters())
-        return [
-            {"params": [p for p in parameters if id(p) not in head_ids and id(p) != scale_id]},
-            {"params": [p for p in parameters if id(p) in head_ids]},
-            {"params": [self.net.log_scale]},
-        ]
-
-    def _base_lrs(self) -> tuple[float, float, float]:
-        """The un-annealed learning rates of the parameter groups (acting parts, heads,
-        scale)."""
-        optim = self.cfg.optim
-        critic_lr = optim.lr if optim.critic_lr is None else optim.critic_lr
-        return optim.lr, critic_lr, optim.lr if optim.scale_lr is None else optim.scale_lr
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume
@@ -317,7 +244,9 @@ class PPOTrainer:
                     batch = batch.flatten(0, 1)
                 self.frames += batch.numel()
                 self.iteration += 1
-                metrics = {**_prefixed("train", episode_stats(batch)), **self._update(batch)}
+                critic_only = self.iteration <= cfg.loss.critic_warmup_iters
+                updated_metrics = self.update(batch, self.frames, critic_only)
+                metrics = {**_prefixed("train", episode_stats(batch)), **updated_metrics}
                 updated = time.perf_counter()
                 metrics["time/collect_s"] = collected - waiting
                 metrics["time/update_s"] = updated - collected
@@ -368,112 +297,6 @@ class PPOTrainer:
             total_frames=remaining,
             auto_register_policy_transforms=False,
         )
-
-    def _update(self, batch: TensorDictBase) -> dict[str, float]:
-        """Advantages, then ``optim.epochs`` passes of minibatch PPO updates (fewer when the
-        approximate KL to the collecting policy passes ``optim.target_kl``)."""
-        cfg = self.cfg
-        critic_only = self.iteration <= cfg.loss.critic_warmup_iters
-        factor = self._anneal()
-        with torch.no_grad():
-            batch = self.advantage(batch)
-        flat = batch.exclude("next").reshape(-1)  # the loss reads no next observation
-        sums: dict[str, float] = {}
-        updates = skipped = 0
-        for minibatch in self._minibatches(flat):
-            losses = self.loss(minibatch)
-            if not critic_only and self._kl_exceeded(losses):
-                break
-            terms = ("loss_critic",) if critic_only else self.loss.terms
-            grad_norm = self._step(sum(losses[key] for key in terms), critic_only)
-            if grad_norm is None:
-                skipped += 1
-                continue
-            updates += 1
-            sums["optim/grad_norm"] = sums.get("optim/grad_norm", 0.0) + grad_norm
-            for key in LOGGED_LOSS_KEYS:
-                if key in losses.keys():
-                    name = f"loss/{key}"
-                    sums[name] = sums.get(name, 0.0) + losses[key].mean().item()
-        if skipped:
-            # Near-saturated tanh actions (a fine-tuned clone's) can give an infinite ratio or
-            # gradient; one such step turns every weight into NaN, so it is left out, as AMP
-            # skips steps with non-finite gradients.
-            logger.warning(
-                "iteration %d: %d minibatches with a non-finite loss or gradient skipped",
-                self.iteration,
-                skipped,
-            )
-        metrics = {key: value / max(updates, 1) for key, value in sums.items()}
-        if self.aux_replay is not None and not critic_only:
-            metrics.update(self._replay_aux(flat))
-        metrics["optim/skipped_minibatches"] = float(skipped)
-        metrics["optim/updates"] = float(updates)
-        metrics["optim/lr"] = cfg.optim.lr * factor
-        metrics.update(self._scale_metrics())
-        return metrics
-
-    def _replay_aux(self, flat: TensorDictBase) -> dict[str, float]:
-        """Add the batch to the auxiliary replay, then ``aux_replay.steps`` auxiliary-only
-        steps on minibatches drawn from it; their mean loss and the replay's size."""
-        replay = self.aux_replay
-        replay.extend(flat)
-        values = []
-        for _ in range(self.cfg.aux_replay.steps):
-            loss = replay.loss()
-            if self._step(loss) is not None:
-                values.append(loss.item())
-        mean = sum(values) / len(values) if values else float("nan")
-        return {"loss/aux_replay": mean, "optim/aux_replay_rows": float(len(replay))}
-
-    def _scale_metrics(self) -> dict[str, float]:
-        """The action scale's mean per action number (over chunk and components)."""
-        scale = self.net.log_scale.detach().exp().reshape(-1, self.net.config.action_dim)
-        means = zip(ACTION_NAMES, scale.mean(0).tolist(), strict=True)
-        return {f"policy/scale_{name}": value for name, value in means}
-
-    def _anneal(self) -> float:
-        """Set this iteration's learning rates (linear decay to 5%); the decay factor."""
-        cfg = self.cfg
-        factor = 1.0
-        if cfg.optim.anneal_lr:
-            factor = max(1.0 - self.frames / cfg.collector.total_frames, 0.05)
-        for group, base_lr in zip(self.optimizer.param_groups, self._base_lrs(), strict=True):
-            group["lr"] = base_lr * factor
-        return factor
-
-    def _minibatches(self, flat: TensorDictBase) -> Iterator[TensorDictBase]:
-        """``optim.epochs`` shuffled passes over ``flat`` in ``optim.mini_batch_size`` pieces."""
-        for _ in range(self.cfg.optim.epochs):
-            for index in torch.randperm(flat.numel()).split(self.cfg.optim.mini_batch_size):
-                yield flat[index]
-
-    def _kl_exceeded(self, losses: TensorDictBase) -> bool:
-        """Whether the minibatch's approximate KL passes ``optim.target_kl`` (``null``: never).
-
-        Why: a clone's near-saturated actions make single updates jump (approximate KL up to
-        2.5 measured while fine-tuning at lr 3e-4); stopping the iteration's remaining
-        minibatches then, as Stable-Baselines3's ``target_kl`` does, keeps PPO's trust region.
-        """
-        target = self.cfg.optim.get("target_kl")
-        return target is not None and float(losses["kl_approx"].mean()) > target
-
-    def _step(self, total: torch.Tensor, critic_only: bool = False) -> float | None:
-        """One optimizer step on the summed loss; the gradient norm, or ``None`` when the loss or
-        gradient is not finite (the step is skipped)."""
-        if not torch.isfinite(total):
-            return None
-        self.optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        if critic_only:  # the encoder is the actor's too: warm up the critic head only
-            self.net.encoder.zero_grad(set_to_none=True)
-        grad_norm = torch.nn.utils.clip_grad_norm_(
-            self.loss.parameters(), self.cfg.optim.max_grad_norm
-        )
-        if not torch.isfinite(grad_norm):
-            return None
-        self.optimizer.step()
-        return float(grad_norm)
 
     # -- evaluation, logging, files ----------------------------------------------------------
 
@@ -586,7 +409,7 @@ class PPOTrainer:
         return save_checkpoint(
             self.checkpoint_dir / LATEST,
             self.net,
-            optimizer=self.optimizer.state_dict(),
+            optimizer=self.update.optimizer.state_dict(),
             iteration=self.iteration,
             frames=self.frames,
             history=self.history,

@@ -65,11 +65,11 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     scale = after["log_scale"]  # optim.pool_scale: one learned value per action number
     torch.testing.assert_close(scale, scale[:1, :1].expand_as(scale))
     assert result.net.config.critic_inputs == len(PRIVILEGED_FIELDS)  # the asymmetric critic
-    assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(1.0)}))  # null: off
+    assert not trainer.update.kl_exceeded(TensorDict({"kl_approx": torch.tensor(1.0)}))  # null: off
     trainer.cfg.optim.target_kl = 0.05
-    assert trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.06)}))
-    assert not trainer._kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.04)}))
-    actor_group, critic_group, scale_group = trainer.optimizer.param_groups  # annealed alike
+    assert trainer.update.kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.06)}))
+    assert not trainer.update.kl_exceeded(TensorDict({"kl_approx": torch.tensor(0.04)}))
+    actor_group, critic_group, scale_group = trainer.update.optimizer.param_groups  # annealed alike
     assert critic_group["lr"] == pytest.approx(5 * actor_group["lr"])
     assert scale_group["lr"] == pytest.approx(50 * actor_group["lr"])  # optim.scale_lr 1e-2
     heads = [*result.net.critic.parameters(), *result.net.aux.parameters()]
