@@ -143,8 +143,15 @@ class AuxReplayConfig:
     )
     steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
+    mirror: float = option(
+        0.0,
+        help="share of replayed rows reflected left to right (cameras flipped and swapped, "
+        "steering and the privileged state's sides mirrored; 0: off)",
+    )
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.mirror <= 1.0:
+            raise ValueError(f"aux_replay.mirror is a share in [0, 1], got {self.mirror}")
         if self.capacity < 0 or self.steps < 0:
             raise ValueError(
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "

@@ -23,7 +23,9 @@ from tensordict import TensorDictBase
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 
-from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, observation_keys
+from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FRAME_STACK, STATE, observation_keys
+from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
+from oasis_torchrl.train.mirror import Mirror
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
 
@@ -35,6 +37,9 @@ class AuxiliaryReplay:
             head and a positive ``aux_coeff``; the replayed loss has the same weight).
         capacity: rows kept (the oldest are overwritten).
         mini_batch_size: rows per replayed minibatch.
+        mirror: the share of replayed rows reflected left to right
+            (:class:`~oasis_torchrl.train.mirror.Mirror`: cameras flipped and swapped, the
+            previous action's steering and the privileged state's sides mirrored).
 
     Raises:
         ValueError: no auxiliary loss to replay, or a capacity below one minibatch.
@@ -52,7 +57,9 @@ class AuxiliaryReplay:
         (16, torch.Size([]))
     """
 
-    def __init__(self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int) -> None:
+    def __init__(
+        self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int, mirror: float = 0.0
+    ) -> None:
         if not loss.aux_coeff:
             raise ValueError(
                 "the auxiliary replay trains the auxiliary loss: set loss.aux_coeff > 0 "
@@ -70,6 +77,18 @@ class AuxiliaryReplay:
             sampler=RandomSampler(),
             batch_size=mini_batch_size,
         )
+        self.mirror = (
+            Mirror(
+                [(FRAME_STACK, camera) for camera in loss.net.config.cameras],
+                PRIVILEGED_FIELDS,
+                share=mirror,
+                steering_keys=[STATE],
+                privileged_key=CRITIC_INPUTS,
+                width_dim=-2,
+            )
+            if mirror
+            else None
+        )
 
     def __len__(self) -> int:
         return len(self.buffer)
@@ -83,5 +102,8 @@ class AuxiliaryReplay:
         the encoder and the auxiliary head)."""
         if not len(self.buffer):
             raise RuntimeError("the auxiliary replay is empty: extend it with a batch first")
-        minibatch = self._loss.features(self.buffer.sample())
+        sample = self.buffer.sample()
+        if self.mirror is not None:
+            sample = self.mirror(sample)
+        minibatch = self._loss.features(sample)
         return self._loss.aux_loss(minibatch)

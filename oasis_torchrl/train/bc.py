@@ -22,6 +22,7 @@ from typing import Any
 
 import torch
 import torch.nn.functional as F
+from lerobot.utils.constants import ACTION, OBS_STATE
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader
 from torchrl.record.loggers import get_logger
@@ -217,7 +218,12 @@ class BCTrainer:
     def _mirror(self, features: dict[str, Any]) -> Mirror:
         privileged = features.get(PRIVILEGED_KEY)
         names = privileged["names"] if privileged else None
-        return Mirror(self.image_keys, names, share=self.cfg.train.mirror)
+        return Mirror(
+            self.image_keys,
+            names,
+            share=self.cfg.train.mirror,
+            steering_keys=(ACTION, OBS_STATE),
+        )
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:
         """The batch through the policy's preprocessor, the privileged state kept beside it

@@ -7,18 +7,25 @@ swapped, steering negated, and in the privileged state the signed lateral fields
 left and right fields swapped. It doubles the scenes a clone learns to see from, and it balances
 the lane changes between the sides (the autopilot prefers the left of two free lanes, so right
 ones are rare in its demonstrations).
+
+One :class:`Mirror` serves both layouts the project trains on: behaviour cloning's raw LeRobot
+batches (dicts of ``observation.images.<camera>`` ``[B, T, 3, H, W]``) and PPO's TensorDicts
+(``("frame_stack", <camera>)`` ``[B, depth, H, W, 3]``, the auxiliary replay's minibatches).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
+from typing import TypeVar
 
 import torch
-from lerobot.utils.constants import ACTION, OBS_STATE
 
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.protocol import CAMERAS
+
+Key = str | tuple[str, ...]
+"""A batch key: ``"<prefix>.<camera>"`` in a dict, ``(<prefix>, <camera>)`` in a TensorDict."""
+Batch = TypeVar("Batch")
 
 MIRRORED_CAMERA = dict(zip(CAMERAS, reversed(CAMERAS), strict=True))
 """The camera that sees, in the mirrored world, what each camera sees (the rig is symmetric)."""
@@ -41,15 +48,19 @@ def mirrored_field(name: str) -> str:
 
 
 class Mirror:
-    """Reflect a random share of a raw behaviour-cloning batch left to right.
+    """Reflect a random share of a batch left to right.
 
     Args:
-        image_keys: the batch's camera keys, ``<prefix>.<camera>`` with cameras of
-            :data:`MIRRORED_CAMERA`.
+        image_keys: the batch's camera keys, each naming a camera of :data:`MIRRORED_CAMERA`
+            (``"<prefix>.<camera>"`` or ``(<prefix>, <camera>)``).
         privileged_names: the fields of the batch's privileged state, in order (None: the
             batch has none).
         share: the probability that a sample is reflected.
         generator: the random draws' generator (None: torch's global one).
+        steering_keys: the ``[..., 2k]`` ``[throttle, steering, ...]`` entries whose steering is
+            negated (those absent from a batch are skipped).
+        privileged_key: the privileged state's entry.
+        width_dim: the images' width dimension (-1 channels-first, -2 channels-last).
 
     Raises:
         ValueError: a camera or a privileged field without a mirrored counterpart.
@@ -57,7 +68,7 @@ class Mirror:
     Example:
         >>> mirror = Mirror(["observation.images.left_forward", "observation.images.front",
         ...                  "observation.images.right_forward"], ["lane_offset", "lanes_left",
-        ...                  "lanes_right"], share=1.0)
+        ...                  "lanes_right"], share=1.0, steering_keys=["action"])
         >>> batch = {"observation.images.left_forward": torch.zeros(1, 1, 3, 2, 2),
         ...          "observation.images.front": torch.arange(4.0).reshape(1, 1, 1, 2, 2),
         ...          "observation.images.right_forward": torch.ones(1, 1, 3, 2, 2),
@@ -74,17 +85,24 @@ class Mirror:
 
     def __init__(
         self,
-        image_keys: Sequence[str],
+        image_keys: Sequence[Key],
         privileged_names: Sequence[str] | None,
         share: float = 0.5,
         generator: torch.Generator | None = None,
+        *,
+        steering_keys: Sequence[Key] = (),
+        privileged_key: Key = PRIVILEGED_KEY,
+        width_dim: int = -1,
     ) -> None:
         if not 0.0 <= share <= 1.0:
             raise ValueError(f"the mirrored share must be in [0, 1], got {share}")
         self.share = share
         self.generator = generator
+        self.steering_keys = list(steering_keys)
+        self.privileged_key = privileged_key
+        self.width_dim = width_dim
         self.partner = {key: _mirrored_image_key(key) for key in image_keys}
-        missing = sorted(set(self.partner.values()) - set(image_keys))
+        missing = sorted(map(str, set(self.partner.values()) - set(image_keys)))
         if missing:
             raise ValueError(f"mirroring needs the cameras {missing} beside {list(image_keys)}")
         self.field_order: torch.Tensor | None = None
@@ -92,31 +110,35 @@ class Mirror:
         if privileged_names is not None:
             self.field_order, self.field_signs = _mirrored_fields(list(privileged_names))
 
-    def __call__(self, batch: Mapping[str, Any]) -> dict[str, Any]:
-        """A copy of ``batch`` with each sample reflected with probability ``share``."""
-        out = dict(batch)
+    def __call__(self, batch: Batch) -> Batch:
+        """A shallow copy of ``batch`` (a dict or a TensorDict) with each sample reflected with
+        probability ``share``."""
+        out = batch.copy()
         some = next(iter(self.partner))
         flip = torch.rand(batch[some].shape[0], generator=self.generator) < self.share
         if not flip.any():
             return out
         for key, partner in self.partner.items():
-            out[key] = _where(flip, batch[partner].flip(-1), batch[key])
-        for key in (ACTION, OBS_STATE):
-            if key in batch:
-                out[key] = _where(flip, _negated_steering(batch[key]), batch[key])
-        if self.field_order is not None and PRIVILEGED_KEY in batch:
-            state = batch[PRIVILEGED_KEY]
+            out[key] = _where(flip, batch[partner].flip(self.width_dim), batch[key])
+        for key in self.steering_keys:
+            actions = batch.get(key, None)
+            if actions is not None:
+                out[key] = _where(flip, _negated_steering(actions), actions)
+        state = batch.get(self.privileged_key, None)
+        if self.field_order is not None and state is not None:
             mirrored = state[..., self.field_order] * self.field_signs
-            out[PRIVILEGED_KEY] = _where(flip, mirrored, state)
+            out[self.privileged_key] = _where(flip, mirrored, state)
         return out
 
 
-def _mirrored_image_key(key: str) -> str:
-    prefix, _, camera = key.rpartition(".")
+def _mirrored_image_key(key: Key) -> Key:
+    prefix, camera = (key[:-1], key[-1]) if isinstance(key, tuple) else key.rpartition(".")[::2]
     if camera not in MIRRORED_CAMERA:
         raise ValueError(
             f"cannot mirror the camera of {key!r}: the mirror knows {sorted(MIRRORED_CAMERA)}"
         )
+    if isinstance(key, tuple):
+        return (*prefix, MIRRORED_CAMERA[camera])
     return f"{prefix}.{MIRRORED_CAMERA[camera]}"
 
 

@@ -85,7 +85,7 @@ class PPOUpdate:
         self._anneal(0)
         replay = cfg.aux_replay
         self.aux_replay = (
-            AuxiliaryReplay(self.loss, replay.capacity, replay.mini_batch_size)
+            AuxiliaryReplay(self.loss, replay.capacity, replay.mini_batch_size, replay.mirror)
             if replay.capacity
             else None
         )

@@ -81,9 +81,11 @@ def test_bad_settings_are_refused() -> None:
         load_config("ppo", ["aux_replay.capacity=1024", "loss.aux_coeff=0"])
     with pytest.raises(ValueError, match="must be >= 0"):
         load_config("ppo", ["aux_replay.steps=-1"])
+    with pytest.raises(ValueError, match=r"aux_replay\.mirror is a share in \[0, 1\], got 1\.5"):
+        load_config("ppo", ["aux_replay.mirror=1.5"])
 
 
-def test_ppo_replays_every_batch_it_collected(tmp_path: Path) -> None:
+def test_ppo_replays_every_batch_it_collected_mirrored_in_part(tmp_path: Path) -> None:
     overrides = [
         *TINY_ENV,
         "env.num_envs=2",
@@ -99,8 +101,10 @@ def test_ppo_replays_every_batch_it_collected(tmp_path: Path) -> None:
         "aux_replay.capacity=40",
         "aux_replay.steps=3",
         "aux_replay.mini_batch_size=8",
+        "aux_replay.mirror=0.5",
     ]
     trainer = PPOTrainer(load_config("ppo", overrides))
+    assert trainer.update.aux_replay.mirror is not None
     trainer.run()
     scalars = tmp_path / "logs" / "ppo" / "scalars"
     with (scalars / "optim" / "aux_replay_rows.csv").open() as handle:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
@@ -13,6 +14,7 @@ from oasis_torchrl.train.bc import BCTrainer
 from oasis_torchrl.train.mirror import Mirror
 
 LEFT, FRONT, RIGHT = (f"observation.images.{c}" for c in ("left_forward", "front", "right_forward"))
+STEERING = ("action", "observation.state")
 
 
 def _trainer(dataset: Path, output: Path, *extra: str) -> BCTrainer:
@@ -41,7 +43,7 @@ def batch(tiny_dataset: Path, tmp_path: Path) -> dict:
 
 
 def test_a_reflection_flips_and_swaps_cameras_and_mirrors_steering_and_sides(batch: dict) -> None:
-    out = Mirror([LEFT, FRONT, RIGHT], PRIVILEGED_FIELDS, share=1.0)(batch)
+    out = Mirror([LEFT, FRONT, RIGHT], PRIVILEGED_FIELDS, share=1.0, steering_keys=STEERING)(batch)
 
     torch.testing.assert_close(out[FRONT], batch[FRONT].flip(-1))
     torch.testing.assert_close(out[LEFT], batch[RIGHT].flip(-1))
@@ -65,12 +67,18 @@ def test_a_reflection_flips_and_swaps_cameras_and_mirrors_steering_and_sides(bat
 
 def test_reflecting_twice_gives_the_batch_back_and_share_picks_samples(batch: dict) -> None:
     keys = [LEFT, FRONT, RIGHT]
-    always = Mirror(keys, PRIVILEGED_FIELDS, share=1.0)
+    always = Mirror(keys, PRIVILEGED_FIELDS, share=1.0, steering_keys=STEERING)
     twice = always(always(batch))
     for key in (*keys, "action", "observation.state", PRIVILEGED_KEY):
         torch.testing.assert_close(twice[key], batch[key], msg=key)
 
-    half = Mirror(keys, PRIVILEGED_FIELDS, share=0.5, generator=torch.Generator().manual_seed(0))
+    half = Mirror(
+        keys,
+        PRIVILEGED_FIELDS,
+        share=0.5,
+        generator=torch.Generator().manual_seed(0),
+        steering_keys=STEERING,
+    )
     out = half(batch)
     reflected = out[FRONT].ne(batch[FRONT]).flatten(1).any(-1)
     assert 0 < int(reflected.sum()) < len(reflected)
@@ -98,3 +106,37 @@ def test_the_trainer_mirrors_when_asked(tiny_dataset: Path, tmp_path: Path) -> N
     assert trainer.mirror is not None and trainer.mirror.share == 0.5
     result = trainer.run()
     assert torch.isfinite(torch.tensor(result.final_loss))
+
+
+def test_a_ppo_tensordict_is_reflected_in_its_own_layout() -> None:
+    cameras = ("left_forward", "front", "right_forward")
+    frames = torch.randint(0, 255, (3, 4, 2, 6, 8, 3), dtype=torch.uint8)  # camera, B, depth...
+    state = torch.rand(4, len(PRIVILEGED_FIELDS))
+    batch = TensorDict(
+        {
+            "frame_stack": {camera: frames[i] for i, camera in enumerate(cameras)},
+            "state": torch.tensor([[0.7, 0.2]]).expand(4, 2).clone(),
+            "critic_inputs": state,
+        },
+        [4],
+    )
+    mirror = Mirror(
+        [("frame_stack", camera) for camera in cameras],
+        PRIVILEGED_FIELDS,
+        share=1.0,
+        steering_keys=["state"],
+        privileged_key="critic_inputs",
+        width_dim=-2,
+    )
+    out = mirror(batch)
+    # channels-last frames flip along their width, not their colour
+    torch.testing.assert_close(out["frame_stack", "left_forward"], frames[2].flip(-2))
+    torch.testing.assert_close(out["frame_stack", "front"], frames[1].flip(-2))
+    assert out["state"][:, 1].eq(-0.2).all() and out["state"][:, 0].eq(0.7).all()
+    field = {name: i for i, name in enumerate(PRIVILEGED_FIELDS)}
+    torch.testing.assert_close(out["critic_inputs"][:, field["lanes_left"]], state[:, 5])
+    torch.testing.assert_close(out["critic_inputs"][:, field["lane_offset"]], -state[:, 3])
+    assert torch.equal(batch["frame_stack", "front"], frames[1])  # the input is left alone
+    twice = mirror(out)
+    for key in batch.keys(include_nested=True, leaves_only=True):
+        torch.testing.assert_close(twice[key], batch[key], msg=str(key))
