@@ -31,6 +31,29 @@ class LoggerConfig:
             raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
+def mirror_option(rows: str) -> float:
+    """The option of the share of ``rows`` reflected left to right
+    (:class:`oasis_torchrl.train.mirror.Mirror`)."""
+    return option(
+        0.0,
+        help=f"share of {rows} reflected left to right (cameras flipped and swapped, steering "
+        "and the privileged state's sides mirrored; 0: off)",
+    )
+
+
+def check_share(name: str, value: float) -> None:
+    """Refuse a share outside [0, 1], naming the option.
+
+    Example:
+        >>> check_share("train.mirror", 1.5)
+        Traceback (most recent call last):
+        ...
+        ValueError: train.mirror is a share in [0, 1], got 1.5
+    """
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{name} is a share in [0, 1], got {value}")
+
+
 # -- the driving network -----------------------------------------------------------------------
 
 
@@ -143,15 +166,10 @@ class AuxReplayConfig:
     )
     steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
-    mirror: float = option(
-        0.0,
-        help="share of replayed rows reflected left to right (cameras flipped and swapped, "
-        "steering and the privileged state's sides mirrored; 0: off)",
-    )
+    mirror: float = mirror_option("replayed rows")
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.mirror <= 1.0:
-            raise ValueError(f"aux_replay.mirror is a share in [0, 1], got {self.mirror}")
+        check_share("aux_replay.mirror", self.mirror)
         if self.capacity < 0 or self.steps < 0:
             raise ValueError(
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
@@ -331,19 +349,14 @@ class BCTrainConfig:
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
     shift_pad: int = option(4, help="random-shift augmentation in pixels (0: off)")
-    mirror: float = option(
-        0.0,
-        help="share of the samples reflected left to right (cameras flipped and swapped, "
-        "steering and the privileged state's sides mirrored; 0: off)",
-    )
+    mirror: float = mirror_option("the samples")
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
         1000, help="also save the policy folder every N steps (0: only at the end)"
     )
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.mirror <= 1.0:
-            raise ValueError(f"train.mirror is a share of the samples in [0, 1], got {self.mirror}")
+        check_share("train.mirror", self.mirror)
 
 
 @dataclass
