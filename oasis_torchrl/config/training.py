@@ -175,6 +175,11 @@ class AuxReplayConfig:
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
                 f"and {self.steps}"
             )
+        if self.capacity and not self.capacity >= self.mini_batch_size > 0:
+            raise ValueError(
+                f"aux_replay.capacity ({self.capacity}) must hold at least one minibatch "
+                f"(aux_replay.mini_batch_size {self.mini_batch_size}, > 0)"
+            )
 
 
 @dataclass

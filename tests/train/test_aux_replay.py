@@ -79,6 +79,8 @@ def test_bad_settings_are_refused() -> None:
         AuxiliaryReplay(_loss(), capacity=8, mini_batch_size=8).loss()
     with pytest.raises(ValueError, match=r"set loss\.aux_coeff > 0 too"):
         load_config("ppo", ["aux_replay.capacity=1024", "loss.aux_coeff=0"])
+    with pytest.raises(ValueError, match=r"aux_replay\.capacity \(64\) must hold at least one"):
+        load_config("ppo", ["aux_replay.capacity=64"])
     with pytest.raises(ValueError, match="must be >= 0"):
         load_config("ppo", ["aux_replay.steps=-1"])
     with pytest.raises(ValueError, match=r"aux_replay\.mirror is a share in \[0, 1\], got 1\.5"):
