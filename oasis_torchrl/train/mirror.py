@@ -1,4 +1,4 @@
-"""Mirror augmentation for behaviour cloning: demonstrations reflected left to right.
+"""Mirror augmentation: demonstrations and replayed observations reflected left to right.
 
 The camera rig is symmetric (``left_forward`` and ``right_forward`` yawed 45 degrees to either
 side of ``front``) and the worlds hold still, so a demonstration reflected left to right is a
