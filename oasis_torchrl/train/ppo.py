@@ -164,6 +164,17 @@ class PPOTrainer:
         self.env = make_env(
             cfg.env, all_frames=False, frame_stack=None, privileged=uses_ground_truth(cfg)
         )
+        try:
+            self._build(resumed)
+        except BaseException:  # a refused network, optimizer or setting leaves no server behind
+            self.env.close()
+            raise
+        self._evaluator: Evaluator | None = None
+        self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
+
+    def _build(self, resumed: dict[str, Any]) -> None:
+        """The network, its TorchRL modules, the collecting policy, the update and the logger."""
+        cfg = self.cfg
         self.env.set_seed(cfg.seed + self.iteration)
         cameras = tuple(self.env.base_env.layout.cameras)
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
@@ -178,7 +189,6 @@ class PPOTrainer:
             try:
                 self.update.optimizer.load_state_dict(resumed["optimizer"])
             except ValueError as error:  # e.g. one parameter group, before optim.critic_lr
-                self.env.close()
                 raise ValueError(
                     f"cannot resume the optimizer of {cfg.resume}: {error}; start a new run "
                     "(init_from=<the checkpoint> keeps its weights)"
@@ -188,8 +198,6 @@ class PPOTrainer:
             logger_name=str(self.output_dir / "logs"),
             experiment_name=cfg.logger.exp_name,
         )
-        self._evaluator: Evaluator | None = None
-        self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
 
     def _resume_state(self) -> dict[str, Any]:
         resume = self.cfg.resume

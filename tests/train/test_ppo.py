@@ -14,9 +14,11 @@ from tensordict import TensorDict
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
+from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.models.checkpoint import load_checkpoint
+from oasis_torchrl.train import ppo as ppo_module
 from oasis_torchrl.train.ppo import PPOResult, PPOTrainer, build_net
 
 from .conftest import TINY_ENV
@@ -228,3 +230,19 @@ def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) 
     wrong_size = load_config("ppo", [f"init_from={folder}"])  # the env's default 64x96
     with pytest.raises(ValueError, match=r"set env\.image_size to the network's size"):
         build_net(wrong_size, CAMERAS)
+
+
+def test_a_refused_network_closes_the_env_it_opened(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    opened = []
+
+    def recording_make_env(*args, **kwargs):
+        opened.append(make_env(*args, **kwargs))
+        return opened[-1]
+
+    monkeypatch.setattr(ppo_module, "make_env", recording_make_env)
+    folder = export_lerobot(DrivingNet(DrivingNetConfig(image_size=(16, 24))), tmp_path / "small")
+    with pytest.raises(ValueError, match=r"set env\.image_size to the network's size"):
+        PPOTrainer(_ppo_config(tmp_path / "run", 16, f"init_from={folder}"))
+    assert len(opened) == 1 and opened[0].is_closed  # its embedded server stopped with it
