@@ -8,7 +8,9 @@ noisily (one collision more or less moves a 32-episode mean by metres); this scr
 directly.
 
 The autopilot drives the evaluation's episodes (the env's own per-episode seeds) with Gaussian
-noise on every executed action, so the states include recoveries. At every chunk the world
+noise on every executed action, so the states include recoveries; with ``--own-drives`` each
+network drives them itself (its deterministic chunk, the same noise), which measures how well a
+policy sees on the states it reaches rather than on the autopilot's. At every chunk the world
 renders the cameras at each network's image size, as the embedded server streams them, and each
 network predicts the state from its last ``frames`` chunks' frames. The figure per field is the
 fraction of its variance explained (R^2): the prediction's squared error against that of the
@@ -20,7 +22,8 @@ often each one's chunk steers (mean ``|steering|`` above :data:`STEERS`: a lane 
 their steering correlates. A clone can read the state well and still rarely commit to a lane
 change.
 
-Usage: ``python benchmarks/perception.py [POLICY ...] [--episodes 16 --prompts urban]``
+Usage: ``python benchmarks/perception.py [POLICY ...] [--episodes 16 --prompts urban]
+[--own-drives]``
 (policy folders of behaviour cloning with ``policy.aux_weight > 0``, or PPO checkpoints with an
 auxiliary head; default: the learning benchmark's clones, without and with DAgger, under its
 default ``--work``); prints JSON (about a minute per policy on 2 cores).
@@ -41,6 +44,7 @@ from tqdm import tqdm
 
 from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 from oasis_torchrl.sim.autopilot import Autopilot
 from oasis_torchrl.sim.simulator import Simulator
 
@@ -64,27 +68,45 @@ def load_clones(paths: Sequence[str]) -> dict[str, DrivingNet]:
 
 
 def episode_chunks(
-    prompt: str, seed: int, size: tuple[int, int], frames: int, args: argparse.Namespace
-) -> Iterator[tuple[list[np.ndarray], torch.Tensor, np.ndarray]]:
-    """One noisy autopilot episode at ``(height, width)``: from its ``frames``-th chunk on, each
-    camera's last ``frames`` chunk-end frames ``[frames, H, W, 3]``, the scaled state then and
-    the chunk ``[4, 2]`` the autopilot chooses there."""
+    prompt: str,
+    seed: int,
+    net: DrivingNet,
+    args: argparse.Namespace,
+) -> Iterator[tuple[list[np.ndarray], torch.Tensor, np.ndarray, np.ndarray]]:
+    """One noisy episode at ``net``'s image size, driven by the autopilot or, with
+    ``args.own_drives``, by ``net``'s deterministic chunk once it has its frames: from its
+    ``frames``-th chunk on, each camera's last ``frames`` chunk-end frames ``[frames, H, W, 3]``,
+    the scaled state then, the chunk ``[4, 2]`` the autopilot chooses there and the driver's
+    previous chunk (before the noise)."""
     rng = np.random.default_rng(seed)
+    size, frames = tuple(net.config.image_size), net.config.frames
     simulator = Simulator(size[1], size[0])
     simulator.reset(prompt, seed)
     pilot = Autopilot(simulator)
     history = {camera: deque(maxlen=frames) for camera in simulator.camera_names}
+    previous = np.zeros((CHUNK, ACTION_DIM), np.float32)
     for _ in range(args.max_steps):
-        chunk = pilot.act()
+        chunk = driven = pilot.act()
         if len(history["front"]) == frames:
             images = [np.stack(history[camera]) for camera in simulator.camera_names]
-            yield images, state_of(simulator.truth, PRIVILEGED_FIELDS), chunk
-        executed = np.clip(chunk + args.noise * rng.standard_normal(chunk.shape), -1, 1)
+            yield images, state_of(simulator.truth, PRIVILEGED_FIELDS), chunk, previous
+            if args.own_drives:
+                driven = own_chunk(net, images, previous)
+        executed = np.clip(driven + args.noise * rng.standard_normal(driven.shape), -1, 1)
         result = simulator.step(executed.astype(np.float32), last_only=True)
+        previous = driven
         for camera, frame in result.rgb.items():
             history[camera].append(frame[0])
         if result.truth[-1].collided:
             return
+
+
+@torch.no_grad()
+def own_chunk(net: DrivingNet, images: Sequence[np.ndarray], previous: np.ndarray) -> np.ndarray:
+    """``net``'s deterministic chunk ``[4, 2]`` on one chunk's frames and its previous chunk."""
+    frames = [torch.from_numpy(image)[None] for image in images]
+    features = net.features(frames, torch.from_numpy(previous[-1])[None].float())
+    return net.deterministic_chunk(features)[0].numpy()
 
 
 @torch.no_grad()
@@ -94,28 +116,25 @@ def predictions(
     """On the episodes, per chunk: the scaled state ``"true"`` and ``net``'s prediction of it
     ``"predicted"`` ``[rows, fields]``; the autopilot's chunk ``"expert"`` and ``net``'s
     deterministic one ``"clone"`` ``[rows, 4, 2]`` (the previous action it may read: the
-    autopilot's)."""
-    size, frames = tuple(net.config.image_size), net.config.frames
+    driver's)."""
     columns: dict[str, list[torch.Tensor]] = {
         "true": [],
         "predicted": [],
         "expert": [],
         "clone": [],
     }
-    previous = torch.zeros(net.config.state_dim)
     for prompt, seed in zip(prompts, seeds, strict=True):
-        rows = list(episode_chunks(prompt, seed, size, frames, args))
+        rows = list(episode_chunks(prompt, seed, net, args))
         if not rows:
             continue
-        cameras = zip(*(images for images, _, _ in rows), strict=True)
-        images = [torch.from_numpy(np.stack(frames)) for frames in cameras]
-        expert = torch.from_numpy(np.stack([chunk for _, _, chunk in rows])).float()
-        state = torch.cat([previous[None], expert[:-1, -1]])
-        features = net.features(images, state)
+        images, truths, expert, previous = zip(*rows, strict=True)
+        cameras = [torch.from_numpy(np.stack(frames)) for frames in zip(*images, strict=True)]
+        state = torch.from_numpy(np.stack(previous)[:, -1]).float()
+        features = net.features(cameras, state)
         columns["predicted"].append(net.predict_aux(features))
         columns["clone"].append(net.deterministic_chunk(features))
-        columns["true"].append(torch.stack([truth for _, truth, _ in rows]))
-        columns["expert"].append(expert)
+        columns["true"].append(torch.stack(truths))
+        columns["expert"].append(torch.from_numpy(np.stack(expert)).float())
     return {name: torch.cat(values) for name, values in columns.items()}
 
 
@@ -153,6 +172,12 @@ def main() -> None:
     parser.add_argument("--prompts", nargs="+", default=["urban"])
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
     parser.add_argument("--noise", type=float, default=0.05, help="executed-action noise std")
+    parser.add_argument(
+        "--own-drives",
+        action="store_true",
+        help="each network drives its episodes (deterministic chunks, the same noise) instead "
+        "of the autopilot: how well it sees where it drives",
+    )
     args = parser.parse_args()
 
     nets = load_clones(args.policies)
