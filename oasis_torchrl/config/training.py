@@ -183,6 +183,33 @@ class AuxReplayConfig:
 
 
 @dataclass
+class PerceptionWarmupConfig:
+    """The encoder fitted to the privileged state of the run's first env steps, before PPO's
+    first update (oasis_torchrl.train.perception_warmup)."""
+
+    frames: int = option(
+        0,
+        help="env steps the initial policy drives for the warm-up, counted in "
+        "collector.total_frames (0: off; needs loss.aux_coeff > 0)",
+    )
+    steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
+    mini_batch_size: int = option(64, help="rows per minibatch")
+    lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up")
+
+    def __post_init__(self) -> None:
+        if self.frames < 0 or self.steps < 0 or not self.lr > 0:
+            raise ValueError(
+                f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
+                f"{self.frames}, {self.steps} and {self.lr}"
+            )
+        if self.frames and not self.frames >= self.mini_batch_size > 0:
+            raise ValueError(
+                f"warmup.frames ({self.frames}) must hold at least one minibatch "
+                f"(warmup.mini_batch_size {self.mini_batch_size}, > 0)"
+            )
+
+
+@dataclass
 class OptimConfig:
     """Adam over the actor, encoder and critic."""
 
@@ -267,6 +294,10 @@ class PPOSettings:
     aux_replay: AuxReplayConfig = option(
         default_factory=AuxReplayConfig, help="past observations replayed for the auxiliary loss"
     )
+    warmup: PerceptionWarmupConfig = option(
+        default_factory=PerceptionWarmupConfig,
+        help="the encoder fitted to the privileged state of the first env steps",
+    )
     optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
     eval: PPOEvaluationConfig = option(
         default_factory=PPOEvaluationConfig, help="evaluations during and after training"
@@ -278,9 +309,16 @@ class PPOSettings:
     )
 
     def __post_init__(self) -> None:
-        if self.aux_replay.capacity and not self.loss.aux_coeff:
+        for name, on in (
+            ("aux_replay.capacity", self.aux_replay.capacity),
+            ("warmup.frames", self.warmup.frames),
+        ):
+            if on and not self.loss.aux_coeff:
+                raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
+        if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(
-                "aux_replay.capacity replays the auxiliary loss: set loss.aux_coeff > 0 too"
+                f"warmup.frames ({self.warmup.frames}) must leave PPO some of "
+                f"collector.total_frames ({self.collector.total_frames})"
             )
 
 

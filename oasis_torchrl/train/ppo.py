@@ -18,11 +18,13 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
@@ -44,6 +46,7 @@ from oasis_torchrl.models.checkpoint import (
 )
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.exploration import HeldNoisePolicy
+from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
 
 logger = logging.getLogger(__name__)
@@ -214,10 +217,12 @@ class PPOTrainer:
         """Train until ``collector.total_frames`` env steps; evaluate and export at the end."""
         cfg = self.cfg
         save_config(cfg, self.output_dir / "config.yaml")
-        remaining = max(cfg.collector.total_frames - self.frames, 0)
         try:
             if self._selects_the_warm_start():
                 self._periodic_evaluation()
+            if self.frames < cfg.warmup.frames:
+                self._warm_up_perception()
+            remaining = max(cfg.collector.total_frames - self.frames, 0)
             if remaining:
                 self._train(remaining)
             kept, kept_checkpoint, kept_frames = self._kept_net()
@@ -233,23 +238,50 @@ class PPOTrainer:
         then keeps a policy only if it beats the one it started from on those seeds."""
         return bool(self.cfg.init_from and self.cfg.eval.get("selection_seeds")) and not self.frames
 
+    def _warm_up_perception(self) -> None:
+        """The initial policy drives the rest of ``warmup.frames`` env steps, and the encoder
+        and the auxiliary head are fitted to their privileged state
+        (:mod:`~oasis_torchrl.train.perception_warmup`); PPO's first update follows."""
+        cfg = self.cfg.warmup
+        warmup = PerceptionWarmup(self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr)
+        with self._collection(cfg.frames - self.frames) as collector:
+            for batch in tqdm(collector, desc="warm-up drives", disable=not self.cfg.progress):
+                batch = self._rows(batch)
+                flat = batch.exclude("next").reshape(-1)
+                warmup.extend(flat)
+                if self.update.aux_replay is not None:  # PPO's replay starts with these rows
+                    self.update.aux_replay.extend(flat)
+                self.frames += batch.numel()
+                self._log(_prefixed("train", episode_stats(batch)))
+        losses = warmup.fit(cfg.steps, self.cfg.progress)
+        if losses:
+            window = max(len(losses) // 10, 1)  # the first and the last tenth
+            first, last = np.mean(losses[:window]), np.mean(losses[-window:])
+            self._log({"warmup/aux_loss_first": first, "warmup/aux_loss_last": last})
+            logger.info(
+                "perception warm-up: %d env steps, %d steps, auxiliary loss %.4f -> %.4f",
+                len(warmup),
+                len(losses),
+                first,
+                last,
+            )
+        self._save_checkpoint()
+
     def _train(self, remaining: int) -> None:
         cfg = self.cfg
-        collector = self._collector(remaining)
-        bar = tqdm(
+        progress = tqdm(
             total=cfg.collector.total_frames,
             initial=self.frames,
             desc="ppo",
             unit="step",
             disable=not cfg.progress,
         )
-        try:
+        with progress as bar, self._collection(remaining) as collector:
             started = waiting = time.perf_counter()
             first_frame = self.frames
             for batch in collector:
                 collected = time.perf_counter()
-                if cfg.ray.enabled:  # [collectors, rows, time] -> [rows, time]
-                    batch = batch.flatten(0, 1)
+                batch = self._rows(batch)
                 self.frames += batch.numel()
                 self.iteration += 1
                 critic_only = self.iteration <= cfg.loss.critic_warmup_iters
@@ -269,12 +301,23 @@ class PPOTrainer:
                 if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
                     collector.update_policy_weights_(self.collecting_policy)
                 waiting = time.perf_counter()
+
+    @contextmanager
+    def _collection(self, frames: int) -> Iterator[Any]:
+        """A collector of ``frames`` env steps, shut down afterwards (this process's env stays
+        open for the next collection and the evaluations)."""
+        collector = self._collector(frames)
+        try:
+            yield collector
         finally:
-            bar.close()
-            if cfg.ray.enabled:
+            if self.cfg.ray.enabled:
                 collector.close()
             else:
                 collector.shutdown(close_env=False)
+
+    def _rows(self, batch: TensorDictBase) -> TensorDictBase:
+        """A collected batch as ``[rows, time]`` (Ray's ``[collectors, rows, time]`` flattened)."""
+        return batch.flatten(0, 1) if self.cfg.ray.enabled else batch
 
     def _collector(self, remaining: int) -> Any:
         """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
