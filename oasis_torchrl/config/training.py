@@ -155,6 +155,25 @@ class LossConfig:
     )
 
 
+def check_holds_minibatch(name: str, rows: int, mini_batch_size: int) -> None:
+    """Refuse a ring of ``rows`` (0: off) that cannot hold one minibatch (its section's
+    ``mini_batch_size``, which must be positive).
+
+    Example:
+        >>> check_holds_minibatch("warmup.frames", 0, 64)  # off
+        >>> check_holds_minibatch("warmup.frames", 32, 64)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: warmup.frames (32) must hold at least one minibatch ...
+    """
+    if rows and not rows >= mini_batch_size > 0:
+        section = name.split(".")[0]
+        raise ValueError(
+            f"{name} ({rows}) must hold at least one minibatch "
+            f"({section}.mini_batch_size {mini_batch_size}, > 0)"
+        )
+
+
 @dataclass
 class AuxReplayConfig:
     """Past observations replayed for the auxiliary loss (oasis_torchrl.train.aux_replay)."""
@@ -175,11 +194,7 @@ class AuxReplayConfig:
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
                 f"and {self.steps}"
             )
-        if self.capacity and not self.capacity >= self.mini_batch_size > 0:
-            raise ValueError(
-                f"aux_replay.capacity ({self.capacity}) must hold at least one minibatch "
-                f"(aux_replay.mini_batch_size {self.mini_batch_size}, > 0)"
-            )
+        check_holds_minibatch("aux_replay.capacity", self.capacity, self.mini_batch_size)
 
 
 @dataclass
@@ -202,11 +217,7 @@ class PerceptionWarmupConfig:
                 f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
                 f"{self.frames}, {self.steps} and {self.lr}"
             )
-        if self.frames and not self.frames >= self.mini_batch_size > 0:
-            raise ValueError(
-                f"warmup.frames ({self.frames}) must hold at least one minibatch "
-                f"(warmup.mini_batch_size {self.mini_batch_size}, > 0)"
-            )
+        check_holds_minibatch("warmup.frames", self.frames, self.mini_batch_size)
 
 
 @dataclass

@@ -19,6 +19,24 @@ TINY_ENV = [
 """Overrides that make any train config's env tiny (32x48 policy images, 48x32 frames)."""
 
 
+def tiny_ppo(output: Path, total_frames: int, *extra: str) -> list[str]:
+    """Overrides of a PPO run on the tiny env: 2 rows of 6 chunks, batches of 16 env steps,
+    minibatches of 8, a final evaluation of one 2-chunk episode, no progress bars."""
+    return [
+        *TINY_ENV,
+        "env.num_envs=2",
+        "env.max_steps=6",
+        f"output_dir={output}",
+        "collector.frames_per_batch=16",
+        f"collector.total_frames={total_frames}",
+        "optim.mini_batch_size=8",
+        "eval.episodes=1",
+        "eval.max_steps=2",
+        "progress=false",
+        *extra,
+    ]
+
+
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Two 4-step autopilot episodes, frame rows (16 rows each) at 32x48, with the privileged

@@ -15,7 +15,7 @@ from oasis_torchrl.train.aux_replay import AuxiliaryReplay
 from oasis_torchrl.train.ppo import PPOTrainer
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
 
-from .conftest import TINY_ENV
+from .conftest import tiny_ppo
 
 FIELDS = 10
 
@@ -88,23 +88,15 @@ def test_bad_settings_are_refused() -> None:
 
 
 def test_ppo_replays_every_batch_it_collected_mirrored_in_part(tmp_path: Path) -> None:
-    overrides = [
-        *TINY_ENV,
-        "env.num_envs=2",
-        "env.max_steps=6",
-        f"output_dir={tmp_path}",
-        "collector.frames_per_batch=16",
-        "collector.total_frames=48",
-        "optim.mini_batch_size=8",
+    overrides = tiny_ppo(
+        tmp_path,
+        48,
         "eval.every=0",
-        "eval.episodes=1",
-        "eval.max_steps=2",
-        "progress=false",
         "aux_replay.capacity=40",
         "aux_replay.steps=3",
         "aux_replay.mini_batch_size=8",
         "aux_replay.mirror=0.5",
-    ]
+    )
     trainer = PPOTrainer(load_config("ppo", overrides))
     assert trainer.update.aux_replay.mirror is not None
     trainer.run()

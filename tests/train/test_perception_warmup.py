@@ -13,7 +13,7 @@ from oasis_torchrl.models.checkpoint import load_checkpoint, net_from_checkpoint
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo import PPOTrainer
 
-from .conftest import TINY_ENV
+from .conftest import tiny_ppo
 from .test_aux_replay import _batch, _loss
 
 
@@ -54,22 +54,14 @@ def test_bad_settings_are_refused() -> None:
 
 
 def test_ppo_starts_after_the_warmup_whose_env_steps_count(tmp_path: Path) -> None:
-    overrides = [
-        *TINY_ENV,
-        "env.num_envs=2",
-        "env.max_steps=6",
-        f"output_dir={tmp_path}",
-        "collector.frames_per_batch=16",
-        "collector.total_frames=48",
-        "optim.mini_batch_size=8",
+    overrides = tiny_ppo(
+        tmp_path,
+        48,
         "eval.every=0",
-        "eval.episodes=1",
-        "eval.max_steps=2",
-        "progress=false",
         "warmup.frames=32",
         "warmup.steps=40",
         "warmup.mini_batch_size=8",
-    ]
+    )
     trainer = PPOTrainer(load_config("ppo", overrides))
     fresh = {key: value.clone() for key, value in trainer.net.state_dict().items()}
     trainer.run()

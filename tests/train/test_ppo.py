@@ -21,32 +21,20 @@ from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train import ppo as ppo_module
 from oasis_torchrl.train.ppo import PPOResult, PPOTrainer, build_net
 
-from .conftest import TINY_ENV
+from .conftest import TINY_ENV, tiny_ppo
 
 CAMERAS = ("left_forward", "front", "right_forward")
 
 
 def _ppo_config(output: Path, total: int, *extra: str):
-    return load_config(
-        "ppo",
-        [
-            *TINY_ENV,
-            "env.num_envs=2",
-            "env.max_steps=6",
-            f"output_dir={output}",
-            "collector.frames_per_batch=16",
-            f"collector.total_frames={total}",
-            "optim.mini_batch_size=8",
-            "optim.epochs=2",
-            "eval.every=1",
-            "eval.episodes=1",
-            "eval.max_steps=2",
-            "progress=false",
-            "privileged_critic=true",
-            "env.reward.clearance_weight=0.2",
-            *extra,
-        ],
+    extra = (
+        "optim.epochs=2",
+        "eval.every=1",
+        "privileged_critic=true",
+        "env.reward.clearance_weight=0.2",
+        *extra,
     )
+    return load_config("ppo", tiny_ppo(output, total, *extra))
 
 
 def _csv_values(path: Path) -> list[float]:
