@@ -204,8 +204,13 @@ class PerceptionWarmupConfig:
 
     frames: int = option(
         0,
-        help="env steps the initial policy drives for the warm-up, counted in "
+        help="env steps driven for the warm-up (warmup.driver), counted in "
         "collector.total_frames (0: off; needs loss.aux_coeff > 0)",
+    )
+    driver: str | None = option(
+        None,
+        help="who drives them: null, the policy itself (its initial exploration), or a driver "
+        "that needs no expert, e.g. 'constant:throttle=1.0,steering=0.0' (oasis_torchrl.drivers)",
     )
     steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
     mini_batch_size: int = option(64, help="rows per minibatch")

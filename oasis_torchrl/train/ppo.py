@@ -33,6 +33,7 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.drivers import DriverSpec
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
@@ -239,12 +240,18 @@ class PPOTrainer:
         return bool(self.cfg.init_from and self.cfg.eval.get("selection_seeds")) and not self.frames
 
     def _warm_up_perception(self) -> None:
-        """The initial policy drives the rest of ``warmup.frames`` env steps, and the encoder
-        and the auxiliary head are fitted to their privileged state
+        """The initial policy (or ``warmup.driver``) drives the rest of ``warmup.frames`` env
+        steps, and the encoder and the auxiliary head are fitted to their privileged state
         (:mod:`~oasis_torchrl.train.perception_warmup`); PPO's first update follows."""
         cfg = self.cfg.warmup
         warmup = PerceptionWarmup(self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr)
-        with self._collection(cfg.frames - self.frames) as collector:
+        driver = DriverSpec(cfg.driver) if cfg.driver else None
+        if driver is not None and driver().needs_expert:
+            raise ValueError(
+                f"warmup.driver={cfg.driver!r} drives with the embedded server's expert, which "
+                "PPO's env does not ask for: name a driver that needs no expert"
+            )
+        with self._collection(cfg.frames - self.frames, driver) as collector:
             for batch in tqdm(collector, desc="warm-up drives", disable=not self.cfg.progress):
                 batch = self._rows(batch)
                 flat = batch.exclude("next").reshape(-1)
@@ -303,10 +310,10 @@ class PPOTrainer:
                 waiting = time.perf_counter()
 
     @contextmanager
-    def _collection(self, frames: int) -> Iterator[Any]:
+    def _collection(self, frames: int, driver: DriverSpec | None = None) -> Iterator[Any]:
         """A collector of ``frames`` env steps, shut down afterwards (this process's env stays
         open for the next collection and the evaluations)."""
-        collector = self._collector(frames)
+        collector = self._collector(frames, driver)
         try:
             yield collector
         finally:
@@ -319,8 +326,9 @@ class PPOTrainer:
         """A collected batch as ``[rows, time]`` (Ray's ``[collectors, rows, time]`` flattened)."""
         return batch.flatten(0, 1) if self.cfg.ray.enabled else batch
 
-    def _collector(self, remaining: int) -> Any:
-        """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``)."""
+    def _collector(self, remaining: int, driver: DriverSpec | None = None) -> Any:
+        """TorchRL's Collector over this process's env, or its RayCollector (``ray.enabled``),
+        driven by the collecting policy or ``driver`` (built in each Ray worker)."""
         cfg = self.cfg
         if cfg.ray.enabled:
             from oasis_torchrl.config.ray import RayCollectionConfig
@@ -336,14 +344,15 @@ class PPOTrainer:
                     frame_stack=self.net.config.frames,
                     privileged=uses_ground_truth(cfg),
                 ),
-                self.collecting_policy,
+                None if driver else self.collecting_policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
                 auto_register_policy_transforms=False,
+                policy_factory=driver,
             )
         return Collector(
             self.env,
-            self.collecting_policy,
+            driver() if driver else self.collecting_policy,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
             auto_register_policy_transforms=False,

@@ -79,3 +79,28 @@ def test_ppo_starts_after_the_warmup_whose_env_steps_count(tmp_path: Path) -> No
     resumed = PPOTrainer(load_config("ppo", [*overrides, "resume=latest"]))
     resumed.run()  # past the warm-up: it is not driven again
     assert _csv(scalars / "warmup" / "aux_loss_first.csv") == [first]
+
+
+def test_a_named_driver_drives_the_warmup(tmp_path: Path) -> None:
+    overrides = tiny_ppo(
+        tmp_path,
+        48,
+        "eval.every=0",
+        "warmup.frames=32",
+        "warmup.steps=2",
+        "warmup.mini_batch_size=8",
+        "warmup.driver=constant:throttle=1.0,steering=0.0",
+        "aux_replay.capacity=48",
+        "aux_replay.mini_batch_size=8",
+    )
+    trainer = PPOTrainer(load_config("ppo", overrides))
+    trainer.run()
+    previous = trainer.update.aux_replay.buffer.storage[:]["state"]  # the previous chunk's action
+    warmup, ppo = previous[:32], previous[32:]
+    driven = warmup[warmup.abs().sum(-1) > 0]  # an episode's first row has none
+    assert len(driven) >= 16 and torch.equal(driven, torch.tensor([1.0, 0.0]).expand_as(driven))
+    assert not torch.equal(ppo[ppo.abs().sum(-1) > 0][:1], torch.tensor([[1.0, 0.0]]))
+
+    expert = load_config("ppo", [*overrides[:-2], "warmup.driver=autopilot"])
+    with pytest.raises(ValueError, match=r"warmup\.driver='autopilot' drives with the embedded"):
+        PPOTrainer(expert).run()
