@@ -31,8 +31,10 @@ def run(cfg: DictConfig) -> int:
     timings is its ``summary.json``); exit code 2 on bad settings, 130 when interrupted.
 
     Example:
+        >>> import tempfile
         >>> from oasis_torchrl.config import load_config
-        >>> run(load_config("demo", ["record.episodes=0"]))
+        >>> fresh = f"output_dir={tempfile.mkdtemp()}"  # a finished run's stages would be reused
+        >>> run(load_config("demo", ["record.episodes=0", fresh]))
         2
     """
     from oasis_torchrl.train.pipeline import run_pipeline
