@@ -13,8 +13,9 @@ that needs no expert (``warmup.driver``), and counted in ``collector.total_frame
 observations and privileged state go into a ring
 (:class:`~oasis_torchrl.train.aux_replay.AuxiliaryReplay`), and the encoder and the auxiliary head
 take ``warmup.steps`` minibatches of the auxiliary loss alone, with an Adam of their own. Then PPO
-starts, its actor and critic fresh on features that already see. No demonstration: only the
-simulator's privileged state is a label.
+starts, its actor and critic fresh on features that already see (its learning rates anneal over
+the whole budget, the warm-up's env steps included). No demonstration: only the simulator's
+privileged state is a label.
 
 Measured (20,480 env steps of warm-up; BENCHMARKS.md, "PPO from scratch"): driven by the initial
 policy, whose episodes end after 40-50 m, 1.18x the best constant within 102,400 env steps, like

@@ -260,19 +260,23 @@ class PPOTrainer:
                     self.update.aux_replay.extend(flat)
                 self.frames += batch.numel()
                 self._log(_prefixed("train", episode_stats(batch)))
-        losses = warmup.fit(cfg.steps, self.cfg.progress)
-        if losses:
-            window = max(len(losses) // 10, 1)  # the first and the last tenth
-            first, last = np.mean(losses[:window]), np.mean(losses[-window:])
-            self._log({"warmup/aux_loss_first": first, "warmup/aux_loss_last": last})
-            logger.info(
-                "perception warm-up: %d env steps, %d steps, auxiliary loss %.4f -> %.4f",
-                len(warmup),
-                len(losses),
-                first,
-                last,
-            )
+        self._log_warmup(warmup.fit(cfg.steps, self.cfg.progress), len(warmup))
         self._save_checkpoint()
+
+    def _log_warmup(self, losses: list[float], rows: int) -> None:
+        """The warm-up's auxiliary loss over its first and its last tenth of steps."""
+        if not losses:
+            return
+        window = max(len(losses) // 10, 1)
+        first, last = float(np.mean(losses[:window])), float(np.mean(losses[-window:]))
+        self._log({"warmup/aux_loss_first": first, "warmup/aux_loss_last": last})
+        logger.info(
+            "perception warm-up on %d rows: auxiliary loss %.4f -> %.4f in %d steps",
+            rows,
+            first,
+            last,
+            len(losses),
+        )
 
     def _train(self, remaining: int) -> None:
         cfg = self.cfg
