@@ -189,14 +189,14 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     train = render(list(TRAINING_PROMPTS), range(5000, 5000 + args.episodes), size, rng)
     held_out = render(["urban"], range(900_000, 900_000 + args.held_out), size, rng)
+    if args.ppo_checkpoint:
+        print(json.dumps(fit_ppo_encoder(train, held_out, args), indent=2))
+        return
     smallest = min(s or len(train.state) for s in args.sizes)
     runs = [(smallest, 0.0), (smallest, args.mirror)]
     runs += [
         (s or len(train.state), 0.0) for s in args.sizes if (s or len(train.state)) != smallest
     ]
-    if args.ppo_checkpoint:
-        print(json.dumps(fit_ppo_encoder(train, held_out, args), indent=2))
-        return
     results = []
     for rows, mirror in runs:
         model = encoder_and_head(args.seed)
