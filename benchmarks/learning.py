@@ -30,7 +30,9 @@ Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 2
 (several hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO from scratch in
 one process (``--stages ppo_scratch``) and the rest in another; a last run with every stage then
 assembles the report from the cache. A partial run writes what it ran, with the targets its
-stages allow, to ``learning_<stages>.json`` and ``.png`` beside the full report.
+stages allow, to ``learning_<stages>.json`` and ``.png`` beside the full report. To rate only
+the first budget of the full schedule, stop PPO from scratch there and keep the schedule of the
+whole: ``--ppo-frames 102400 --ppo-overrides optim.anneal_frames=204800``.
 """
 
 from __future__ import annotations

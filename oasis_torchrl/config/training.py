@@ -249,10 +249,22 @@ class OptimConfig:
     )
     mini_batch_size: int = option(128, help="env steps per minibatch")
     anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
+    # A schedule longer than the run makes a shorter run the exact start of a longer one (the
+    # learning benchmark rates the first 102,400 env steps of a 204,800-env-step schedule), and
+    # keeps the schedule when a resumed run is given a larger budget.
+    anneal_frames: int | None = option(
+        None,
+        help="env steps the learning rates decay over (null: collector.total_frames; larger: "
+        "the run stops part-way through the schedule)",
+    )
 
     def __post_init__(self) -> None:
         if self.target_kl is not None and not self.target_kl > 0:
             raise ValueError(f"optim.target_kl must be positive or null, got {self.target_kl}")
+        if self.anneal_frames is not None and self.anneal_frames <= 0:
+            raise ValueError(
+                f"optim.anneal_frames must be positive or null, got {self.anneal_frames}"
+            )
 
 
 @dataclass

@@ -188,7 +188,8 @@ class PPOTrainer:
         self.collecting_policy = (
             HeldNoisePolicy(self.modules.policy, hold) if hold > 1 else self.modules.policy
         )
-        self.update = PPOUpdate(self.modules, cfg, cfg.collector.total_frames)
+        anneal_frames = cfg.optim.anneal_frames or cfg.collector.total_frames
+        self.update = PPOUpdate(self.modules, cfg, anneal_frames)
         if resumed:
             try:
                 self.update.optimizer.load_state_dict(resumed["optimizer"])

@@ -44,7 +44,8 @@ class PPOUpdate:
     Args:
         modules: the actor-critic modules of the network (:func:`make_actor_critic`).
         cfg: the PPO settings.
-        total_frames: env steps of the whole run, over which the learning rates anneal.
+        anneal_frames: env steps over which the learning rates anneal (the run's, or the
+            longer schedule it is the start of: ``optim.anneal_frames``).
 
     Raises:
         ValueError: an auxiliary replay without an auxiliary loss.
@@ -58,9 +59,9 @@ class PPOUpdate:
         >>> metrics = update(batch, frames=512)  # doctest: +SKIP
     """
 
-    def __init__(self, modules: ActorCritic, cfg: DictConfig, total_frames: int) -> None:
+    def __init__(self, modules: ActorCritic, cfg: DictConfig, anneal_frames: int) -> None:
         self.cfg = cfg
-        self.total_frames = total_frames
+        self.anneal_frames = anneal_frames
         self.net = modules.net
         if cfg.optim.pool_scale:
             self.net.pool_scale_gradients()
@@ -173,7 +174,7 @@ class PPOUpdate:
         the decay factor."""
         factor = 1.0
         if self.cfg.optim.anneal_lr:
-            factor = max(1.0 - frames / self.total_frames, 0.05)
+            factor = max(1.0 - frames / self.anneal_frames, 0.05)
         for group, base_lr in zip(self.optimizer.param_groups, self._base_lrs(), strict=True):
             group["lr"] = base_lr * factor
         return factor

@@ -44,7 +44,8 @@ def _csv_values(path: Path) -> list[float]:
 
 def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     overrides = ("optim.lr=2e-4", "optim.critic_lr=1e-3", "network.init_scale=[0.5,0.1]")
-    trainer = PPOTrainer(_ppo_config(tmp_path, 16, *overrides))
+    first_half = "optim.anneal_frames=32"  # the resumed run's schedule, stopped half-way
+    trainer = PPOTrainer(_ppo_config(tmp_path, 16, *overrides, first_half))
     before = {key: value.clone() for key, value in trainer.net.state_dict().items()}
     result = trainer.run()
 
@@ -86,10 +87,12 @@ def test_ppo_updates_checkpoints_and_resumes(tmp_path: Path) -> None:
     assert exported.config.critic_inputs == 0
     torch.testing.assert_close(exported.state_dict()["actor.2.bias"], after["actor.2.bias"])
 
-    resumed = PPOTrainer(_ppo_config(tmp_path, 32, "resume=latest")).run()
+    resumed = PPOTrainer(_ppo_config(tmp_path, 32, *overrides, "resume=latest")).run()
     state = load_checkpoint(resumed.checkpoint)
     assert (state["iteration"], state["frames"]) == (2, 32)
     assert [entry["frames"] for entry in resumed.history] == [16, 32]
+    learning_rates = _csv_values(scalars / "optim" / "lr.csv")
+    assert learning_rates == pytest.approx([2e-4 * 0.5, 2e-4 * 0.05])  # one schedule over 32
     assert not torch.equal(resumed.net.state_dict()["actor.0.weight"], after["actor.0.weight"])
 
     old = torch.load(resumed.checkpoint, weights_only=False)  # one parameter group: an old run's

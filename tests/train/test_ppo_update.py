@@ -19,7 +19,7 @@ def _update(*overrides: str) -> PPOUpdate:
     torch.manual_seed(0)
     net = DrivingNet(DrivingNetConfig(image_size=(32, 48), critic_inputs=10, aux_outputs=10))
     cfg = load_config("ppo", ["optim.mini_batch_size=4", "optim.epochs=2", *overrides])
-    return PPOUpdate(make_actor_critic(net), cfg, total_frames=1000)
+    return PPOUpdate(make_actor_critic(net), cfg, anneal_frames=1000)
 
 
 def _observations(net: DrivingNet) -> TensorDict:
@@ -60,6 +60,11 @@ def test_the_learning_rates_anneal_over_the_run_to_five_percent() -> None:
     metrics = update(_batch(update), frames=1000)
     assert metrics["optim/lr"] == pytest.approx(0.05 * 3e-4)
     assert metrics["optim/updates"] == 2 * ROWS * TIME / 4  # epochs x minibatches
+
+
+def test_a_schedule_must_be_positive() -> None:
+    with pytest.raises(ValueError, match=r"optim\.anneal_frames must be positive or null, got 0"):
+        load_config("ppo", ["optim.anneal_frames=0"])
 
 
 def test_a_critic_warm_up_trains_the_critic_head_alone() -> None:
