@@ -17,6 +17,7 @@ from oasis_torchrl.models import DrivingNet, DrivingNetConfig
 from oasis_torchrl.models.checkpoint import save_checkpoint
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.sim.vehicle import VehicleParams, VehicleState, step_vehicle
 
 
 def test_autopilot_drives_with_the_servers_expert() -> None:
@@ -54,6 +55,22 @@ def test_scripted_driver_follows_its_spec() -> None:
     assert (first[..., 0] == -0.2).all() and first.shape == (3, 4, 2)
     for spec, problem in (("speed=1", "speed=1"), ("steering=sine:1", "sine:AMPLITUDE")):
         with pytest.raises(ValueError, match=problem):
+            ScriptedDriver.from_spec(spec)
+
+
+def test_a_weave_changes_lane_and_back_on_either_side() -> None:
+    driver = ScriptedDriver.from_spec("throttle=1.0,steering=weave:0.088:20:100")
+    td = TensorDict(batch_size=[2])
+    steering = torch.cat([driver(td)["action"][0, :, 1] for _ in range(100)]).tolist()
+    car, params, lateral = VehicleState(0.0, 0.0, 0.0, 14.0), VehicleParams(), []
+    for frame, steer in enumerate(steering):
+        car = step_vehicle(car, 1.0, steer, params, 0.05)
+        if frame % 100 == 99:  # each S-curve done: one lane across, heading straight again
+            lateral.append(car.y)
+            assert car.heading == pytest.approx(0.0, abs=1e-6)
+    assert lateral == pytest.approx([-3.18, 0.0, 3.18, 0.0], abs=0.05)  # + steers right
+    for spec in ("steering=weave:0.1:20", "steering=weave:0.1:20:30", "steering=weave:0.1:0:30"):
+        with pytest.raises(ValueError, match="weave:AMPLITUDE:PULSE_FRAMES:GAP_FRAMES"):
             ScriptedDriver.from_spec(spec)
 
 
