@@ -270,7 +270,8 @@ def main() -> None:
         "of its defaults, e.g. bc.policy.pool_grid=[8,12]; applied after the budgets above",
     )
     args = parser.parse_args()
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    # force: LeRobot's import checks log first, which gives the root logger a WARNING handler.
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", force=True)
 
     cfg = benchmark_config(args)
     cache = StageCache(args.work / "stages.json")

@@ -109,6 +109,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
+    # basicConfig does nothing once the root logger has a handler, and a library can give it
+    # one at import (LeRobot's import checks log before anything is configured).
+    logging.getLogger().setLevel(args.log_level)
     command = args.command
     try:
         cfg = load_from_args(args, args.schema)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -54,6 +56,21 @@ def test_commands_report_bad_settings(tmp_path: Path, caplog: pytest.LogCaptureF
     assert main(["train", "bc", "--dataset.root", str(missing)]) == 2
     assert f"{missing} is not a LeRobot dataset" in caplog.text
     assert main(["record", "--episodes", "3"]) == 2  # no --root
+
+
+def test_the_log_level_holds_after_a_library_configured_logging() -> None:
+    script = (
+        "import logging\n"
+        "logging.debug('a library logs at import')  # gives the root logger a WARNING handler\n"
+        "from oasis_torchrl.cli import main\n"
+        "main(['--log-level', 'INFO', 'eval', 'episodes=-1'])\n"
+        "print(logging.getLevelName(logging.getLogger().level))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert done.stdout.split() == ["INFO"]
+    assert "eval: bad settings" in done.stderr
 
 
 def test_file_then_flags_then_overrides(tmp_path: Path) -> None:
