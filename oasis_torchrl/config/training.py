@@ -250,8 +250,8 @@ class OptimConfig:
     mini_batch_size: int = option(128, help="env steps per minibatch")
     anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
     # A schedule longer than the run makes a shorter run the exact start of a longer one (the
-    # learning benchmark rates the first 102,400 env steps of a 204,800-env-step schedule), and
-    # keeps the schedule when a resumed run is given a larger budget.
+    # learning benchmark rates the first 102,400 env steps of a 204,800-env-step schedule),
+    # which a resume with the larger budget then completes.
     anneal_frames: int | None = option(
         None,
         help="env steps the learning rates decay over (null: collector.total_frames; larger: "
