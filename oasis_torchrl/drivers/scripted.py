@@ -55,12 +55,12 @@ def _parse_signal(name: str, text: str) -> Signal:
             amplitude, period = float(parts[1]), float(parts[2])
             offset = float(parts[3]) if len(parts) == 4 else 0.0
             if period <= 0:
-                raise ValueError
+                raise ValueError(f"the period must be positive, got {period}")
             return lambda frames: offset + amplitude * np.sin(2 * np.pi * frames / period)
         if parts[0] == "weave" and len(parts) == 4:
             return weave(float(parts[1]), int(parts[2]), int(parts[3]))
-    except ValueError:
-        pass
+    except ValueError as error:  # a bad number, or a weave's bad pulse and gap: say which
+        raise ValueError(f"{name}={text!r}: {error}; expected {SIGNALS}") from None
     raise ValueError(f"{name}={text!r}: expected {SIGNALS}")
 
 

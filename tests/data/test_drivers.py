@@ -69,8 +69,12 @@ def test_a_weave_changes_lane_and_back_on_either_side() -> None:
             lateral.append(car.y)
             assert car.heading == pytest.approx(0.0, abs=1e-6)
     assert lateral == pytest.approx([-3.18, 0.0, 3.18, 0.0], abs=0.05)  # + steers right
-    for spec in ("steering=weave:0.1:20", "steering=weave:0.1:20:30", "steering=weave:0.1:0:30"):
-        with pytest.raises(ValueError, match="weave:AMPLITUDE:PULSE_FRAMES:GAP_FRAMES"):
+    for spec, problem in (
+        ("steering=weave:0.1:20", "expected .*weave:AMPLITUDE:PULSE_FRAMES:GAP_FRAMES"),
+        ("steering=weave:0.1:20:30", "2 x pulse <= gap, got 20 and 30"),
+        ("steering=weave:0.1:2.5:30", "invalid literal for int"),
+    ):
+        with pytest.raises(ValueError, match=problem):
             ScriptedDriver.from_spec(spec)
 
 
