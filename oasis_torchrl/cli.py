@@ -106,11 +106,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         2
     """
     args = parse_arguments(build_parser(), argv)
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
-    )
-    # basicConfig does nothing once the root logger has a handler, and a library can give it
-    # one at import (LeRobot's import checks log before anything is configured).
+    logging.basicConfig(format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # The level is set apart: basicConfig does nothing once the root logger has a handler, and
+    # a library can give it one at import (LeRobot's import checks log before anything else).
     logging.getLogger().setLevel(args.log_level)
     command = args.command
     try:
