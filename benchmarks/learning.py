@@ -48,6 +48,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from oasis_torchrl.allocator import keep_batches_in_heap
 from oasis_torchrl.config import load_config
 from oasis_torchrl.train.evaluate import paired_difference
 from oasis_torchrl.train.pipeline import (
@@ -272,6 +273,7 @@ def main() -> None:
     args = parser.parse_args()
     # force: LeRobot's import checks log first, which gives the root logger a WARNING handler.
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", force=True)
+    keep_batches_in_heap()  # as the oasis-torchrl command does
 
     cfg = benchmark_config(args)
     cache = StageCache(args.work / "stages.json")

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from types import ModuleType
 
 from oasis_torchrl import __version__, commands
+from oasis_torchrl.allocator import keep_batches_in_heap
 from oasis_torchrl.config.arguments import (
     OVERRIDES,
     add_config_arguments,
@@ -110,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # The level is set apart: basicConfig does nothing once the root logger has a handler, and
     # a library can give it one at import (LeRobot's import checks log before anything else).
     logging.getLogger().setLevel(args.log_level)
+    keep_batches_in_heap()
     command = args.command
     try:
         cfg = load_from_args(args, args.schema)
