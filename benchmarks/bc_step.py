@@ -91,9 +91,12 @@ def trainer(dataset: Path, output: Path, image_size: list[int], steps: int) -> B
 
 
 def baseline_loader(ours: BCTrainer) -> DataLoader:
-    """Per-sample fetches of a cache at the dataset's size (the preprocessor resizes)."""
+    """Per-sample fetches of a cache at the dataset's size (the preprocessor resizes), with
+    ours' random shifts."""
     lerobot = open_dataset(ours.cfg.dataset, ours.policy_config)
-    full_size = InMemoryBCDataset(lerobot, progress=False)
+    full_size = InMemoryBCDataset(
+        lerobot, progress=False, frame_transform=ours.loader.dataset.frame_transform
+    )
     return DataLoader(
         OneSampleAtATime(full_size),
         batch_size=ours.loader.batch_size,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -145,9 +146,14 @@ class BCTrainer:
             self.policy_config, dataset_stats=dataset.meta.stats
         )
         cached = None
+        shift = partial(random_shift, pad=cfg.train.shift_pad) if cfg.train.shift_pad else None
         if cfg.dataset.cache:  # frames kept at the policy's size: no resize per batch
             size = tuple(self.policy_config.image_size)
-            cached = InMemoryBCDataset(dataset, image_size=size, progress=cfg.progress)
+            cached = InMemoryBCDataset(
+                dataset, image_size=size, progress=cfg.progress, frame_transform=shift
+            )
+        # The cache shifts the frames while they are bytes; LeRobot's dataset gives floats.
+        self.shift_in_loop = shift if cached is None else None
         data = dataset if cached is None else cached
         self.loader = DataLoader(
             data,
@@ -192,8 +198,9 @@ class BCTrainer:
             for step in bar:
                 raw = next(batches)
                 batch = self._preprocessed(self.mirror(raw) if self.mirror else raw)
-                for key in self.image_keys:
-                    batch[key] = random_shift(batch[key], cfg.shift_pad)
+                if self.shift_in_loop is not None:
+                    for key in self.image_keys:
+                        batch[key] = self.shift_in_loop(batch[key])
                 loss, info = self.policy.forward(batch)
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()

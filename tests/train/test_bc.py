@@ -145,3 +145,23 @@ def test_the_cache_keeps_frames_at_the_policys_size(tiny_dataset: Path, tmp_path
         for key in cached.camera_keys:
             assert cached[index][key].shape == (2, 3, 16, 24)
             torch.testing.assert_close(cached[index][key], expected[key], atol=2 / 255, rtol=0)
+
+
+def test_the_cache_shifts_the_frames_as_bytes(tiny_dataset: Path, tmp_path: Path) -> None:
+    cfg = _bc_config(tiny_dataset, tmp_path, "train.shift_pad=2")
+    dataset = open_dataset(cfg.dataset, OasisConfig(device="cpu"))
+    seen: list[torch.dtype] = []
+
+    def invert(frames: torch.Tensor) -> torch.Tensor:
+        seen.append(frames.dtype)
+        return 255 - frames
+
+    plain = InMemoryBCDataset(dataset, progress=False)
+    inverted = InMemoryBCDataset(dataset, progress=False, frame_transform=invert)
+    for key in plain.camera_keys:
+        torch.testing.assert_close(inverted[3][key], 1 - plain[3][key])
+    assert set(seen) == {torch.uint8}
+    # The trainer hands its random shifts to the cache instead of shifting floats per batch.
+    trainer = BCTrainer(cfg)
+    assert trainer.shift_in_loop is None
+    assert trainer.loader.dataset.frame_transform.keywords == {"pad": 2}
