@@ -9,9 +9,10 @@ in again, zero-filled by the kernel, on every step. Fixing the threshold at glib
 (32 MiB on 64-bit) keeps those blocks in the heap for the next step.
 
 Measured (``benchmarks/allocator.py``, BENCHMARKS.md): 7x fewer page faults over timed BC
-steps and PPO updates, BC steps about 1.1x faster, PPO updates unchanged. ``oasis-torchrl`` calls :func:`keep_batches_in_heap`
-before any command; other entry points (``lerobot-train``, your own script) get the same with
-``MALLOC_MMAP_THRESHOLD_=33554432`` in the environment, or by calling it first.
+steps and PPO updates, BC steps about 1.1x faster, PPO updates unchanged. ``oasis-torchrl``
+calls :func:`keep_batches_in_heap` before any command; other entry points (``lerobot-train``,
+your own script) get the same with ``MALLOC_MMAP_THRESHOLD_=33554432`` in the environment, or
+by calling it first.
 """
 
 from __future__ import annotations
