@@ -283,6 +283,11 @@ class PPOEvaluationConfig(EvaluationConfig):
         help="standard errors of the paired per-episode difference by which a policy must beat "
         "the kept one on the selection seeds to replace it (0: any higher mean distance)",
     )
+    final: bool = option(
+        True,
+        help="evaluate the kept policy on `seeds` at the end (the main job's own comparison "
+        "does, so its PPO stage does not)",
+    )
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -41,7 +41,7 @@ from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
-from oasis_torchrl.train.evaluate import Evaluator
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 
 logger = logging.getLogger(__name__)
 
@@ -263,28 +263,33 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     """Evaluate each named policy spec on the config's fixed prompts and seeds: the aggregates
     and every episode (:meth:`~oasis_torchrl.train.evaluate.EvalReport.to_dict`).
 
-    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``).
+    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``). A spec
+    named twice is evaluated once: evaluations are deterministic, so a second run would repeat
+    the first to the digit.
 
     Example:
         >>> evaluate_all(load_config("demo"), {"autopilot": "autopilot"})  # doctest: +SKIP
         {'autopilot': {'mean_distance': ..., 'collision_rate': 0.0, ..., 'per_episode': [...]}}
     """
     plain = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
+    recorded = list(policies.values())[-1] if policies else None
+    reports: dict[str, EvalReport] = {}
     results = {}
-    names = list(policies)
-    for name in names:
-        driver = load_driver(policies[name])
-        eval_cfg = cfg.eval if name == names[-1] else plain
-        with Evaluator.for_driver(cfg.env, eval_cfg, driver, progress=cfg.progress) as evaluator:
-            report = evaluator.evaluate(driver)
-        results[name] = report.to_dict()
-        logger.info("%s: %s", name, report.summary())
+    for name, spec in policies.items():
+        if spec not in reports:
+            driver = load_driver(spec)
+            eval_cfg = cfg.eval if spec == recorded else plain
+            with Evaluator.for_driver(cfg.env, eval_cfg, driver, progress=cfg.progress) as run:
+                reports[spec] = run.evaluate(driver)
+        results[name] = reports[spec].to_dict()
+        logger.info("%s: %s", name, reports[spec].summary())
     return results
 
 
 @dataclass
 class PPOStage:
-    """A finished (or reused) PPO stage: its policy folder and evaluation history.
+    """A finished (or reused) PPO stage: its policy folder, the checkpoint of that policy, the
+    env steps it trained for (0: a fine-tuning kept its warm start) and the evaluation history.
 
     Example:
         >>> run_ppo(ppo_config(load_config("demo"), None)).history  # doctest: +SKIP
@@ -292,6 +297,7 @@ class PPOStage:
 
     policy_dir: Path
     checkpoint: Path
+    policy_frames: int
     history: list[dict[str, float]]
 
 
@@ -301,18 +307,22 @@ def run_ppo(ppo_cfg: DictConfig) -> PPOStage:
     Example:
         >>> stage = run_ppo(ppo_config(load_config("demo"), None))  # doctest: +SKIP
     """
-    from oasis_torchrl.models.checkpoint import LATEST, load_checkpoint
+    from oasis_torchrl.models.checkpoint import BEST, LATEST, load_checkpoint
     from oasis_torchrl.train.ppo import train_ppo
 
     out = Path(ppo_cfg.output_dir)
-    policy, checkpoint = out / "policy", out / "checkpoints" / LATEST
+    policy, checkpoints = out / "policy", out / "checkpoints"
     if (policy / "model.safetensors").exists():
         logger.info("reusing %s", policy)
-        return PPOStage(policy, checkpoint, load_checkpoint(checkpoint)["history"])
-    if checkpoint.exists():
-        ppo_cfg.resume = "latest"
-    result = train_ppo(ppo_cfg)
-    return PPOStage(result.policy_dir or policy, result.checkpoint, result.history)
+        history = load_checkpoint(checkpoints / LATEST)["history"]
+    else:
+        if (checkpoints / LATEST).exists():
+            ppo_cfg.resume = "latest"
+        result = train_ppo(ppo_cfg)
+        policy, history = result.policy_dir or policy, result.history
+    # The policy a stage leaves: the selection's choice (best.pt) if it made one, else the last.
+    kept = checkpoints / BEST if (checkpoints / BEST).exists() else checkpoints / LATEST
+    return PPOStage(policy, kept, load_checkpoint(kept)["frames"], history)
 
 
 def run_pipeline(cfg: DictConfig) -> PipelineResult:
@@ -333,9 +343,13 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     with timed_stage(seconds, "bc"):
         bc_policy = clone(cfg, dataset)
     with timed_stage(seconds, "ppo"):
-        ppo = run_ppo(ppo_config(cfg, bc_policy))
+        # The eval stage evaluates the kept policy on the same prompts and seeds right after:
+        # PPO's own final evaluation would repeat it.
+        ppo = run_ppo(OmegaConf.merge(ppo_config(cfg, bc_policy), {"eval": {"final": False}}))
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
-    policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(ppo.policy_dir)}
+    # A fine-tuning that kept its warm start left the clone: one evaluation serves both rows.
+    fine_tuned = bc_policy if ppo.policy_frames == 0 else ppo.policy_dir
+    policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(fine_tuned)}
     with timed_stage(seconds, "eval"):
         evaluations = evaluate_all(cfg, policies)
     rerun = cfg.eval.rerun

@@ -174,6 +174,9 @@ class PPOTrainer:
             self.env.close()
             raise
         self._evaluator: Evaluator | None = None
+        # Updates that changed what the policy does (the critic-only warm-up does not); with
+        # the seeds, what tells whether the last evaluation already measured this policy.
+        self._actor_updates = 0
         self._last_eval: tuple[int, tuple[int, ...], EvalReport] | None = None
 
     def _build(self, resumed: dict[str, Any]) -> None:
@@ -228,7 +231,8 @@ class PPOTrainer:
             if remaining:
                 self._train(remaining)
             kept, kept_checkpoint, kept_frames = self._kept_net()
-            final = self._final_evaluation(kept, kept_frames) if cfg.eval.episodes else None
+            final_wanted = cfg.eval.episodes and cfg.eval.final
+            final = self._final_evaluation(kept, kept_frames) if final_wanted else None
             checkpoint = self._save_checkpoint()
             policy_dir = self._export(kept)
         finally:
@@ -262,6 +266,7 @@ class PPOTrainer:
                 self.frames += batch.numel()
                 self._log(_prefixed("train", episode_stats(batch)))
         self._log_warmup(warmup.fit(cfg.steps, self.cfg.progress), len(warmup))
+        self._actor_updates += 1
         self._save_checkpoint()
 
     def _log_warmup(self, losses: list[float], rows: int) -> None:
@@ -298,6 +303,7 @@ class PPOTrainer:
                 self.iteration += 1
                 critic_only = self.iteration <= cfg.loss.critic_warmup_iters
                 updated_metrics = self.update(batch, self.frames, critic_only)
+                self._actor_updates += not critic_only
                 metrics = {**_prefixed("train", episode_stats(batch)), **updated_metrics}
                 updated = time.perf_counter()
                 metrics["time/collect_s"] = collected - waiting
@@ -420,13 +426,22 @@ class PPOTrainer:
         return net_from_checkpoint(state), path, state["frames"]
 
     def _final_evaluation(self, net: DrivingNet, policy_frames: int) -> EvalReport:
-        """The evaluation of the kept policy on ``eval.seeds`` (reusing the last one if it
-        evaluated the same policy on those seeds)."""
-        seeds = tuple(self.cfg.eval.seeds)
-        last = self._last_eval
-        if net is self.net and last is not None and last[:2] == (self.frames, seeds):
-            return last[2]
+        """The evaluation of the kept policy on ``eval.seeds`` (the last one if it evaluated
+        the same policy on those seeds)."""
+        seeds = tuple(int(seed) for seed in self.cfg.eval.seeds)
+        unchanged = self._unchanged_evaluation(net, seeds)
+        if unchanged is not None:
+            return unchanged
         return self._evaluate(net, policy_frames=policy_frames)
+
+    def _unchanged_evaluation(self, net: DrivingNet, seeds: tuple[int, ...]) -> EvalReport | None:
+        """The last evaluation's report if it evaluated this policy as it is now on ``seeds``.
+        Evaluations are deterministic, so running it again would repeat it to the digit (e.g.
+        a warm start rated again after the critic-only warm-up)."""
+        last = self._last_eval
+        if net is self.net and last is not None and last[:2] == (self._actor_updates, seeds):
+            return last[2]
+        return None
 
     def _evaluate(
         self,
@@ -447,12 +462,16 @@ class PPOTrainer:
             )
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
         seeds = tuple(int(seed) for seed in (seeds or self.cfg.eval.seeds))
-        net.eval()
-        try:
-            report = self._evaluator.evaluate(policy, seeds)
-        finally:
-            net.train()
-        self._last_eval = (self.frames, seeds, report)
+        report = self._unchanged_evaluation(net, seeds)
+        if report is None:
+            net.eval()
+            try:
+                report = self._evaluator.evaluate(policy, seeds)
+            finally:
+                net.train()
+            self._last_eval = (self._actor_updates, seeds, report)
+        else:
+            logger.info("the policy is unchanged since its last evaluation on seeds %s", seeds)
         self.history.append(
             report.to_dict(
                 iteration=self.iteration,

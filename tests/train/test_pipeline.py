@@ -13,6 +13,7 @@ from viz._readback import Readback
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
+from oasis_torchrl.train import pipeline
 from oasis_torchrl.train.pipeline import clone, demonstrations
 
 from .conftest import TINY_ENV
@@ -59,12 +60,39 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     # the fine-tuned policy is kept only if it beats the clone on the selection seeds
     kept = load_checkpoint(paths["ppo_checkpoint"])
     assert paths["ppo_checkpoint"].name == "best.pt" and kept["frames"] in (0, 12)
-    assert load_checkpoint(paths["ppo_checkpoint"].with_name("latest.pt"))["frames"] == 12
+    latest = load_checkpoint(paths["ppo_checkpoint"].with_name("latest.pt"))
+    assert latest["frames"] == 12
+    # PPO evaluated on its selection seeds only: the eval stage is the final evaluation
+    assert {tuple(entry["seeds"]) for entry in latest["history"]} == {(2000,)}
+    evaluations = summary["evaluations"]
+    if kept["frames"] == 0:  # the clone kept: its one evaluation is both rows
+        assert evaluations["bc+ppo"] == evaluations["bc"]
     assert paths["recording"] == tmp_path / "eval.rrd"
     recording = Readback(paths["recording"])
     assert any("front" in entity for entity in recording.entities())
     _, roads = recording.column("env/0/topdown/road", "LineStrips2D:strips")
     assert any(roads)  # the evaluator's env handed its scenes to the top-down view
+
+
+def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    opened = []
+    for_driver = pipeline.Evaluator.for_driver
+
+    def counting_for_driver(env_cfg, eval_cfg, driver, **kwargs):
+        opened.append(eval_cfg.rerun)
+        return for_driver(env_cfg, eval_cfg, driver, **kwargs)
+
+    monkeypatch.setattr(pipeline.Evaluator, "for_driver", counting_for_driver)
+    rerun = tmp_path / "eval.rrd"
+    cfg = load_config("demo", [*TINY_PIPELINE, f"output_dir={tmp_path}", f"eval.rerun={rerun}"])
+    slow, fast = "constant:throttle=0.5", "constant:throttle=1.0"
+    results = pipeline.evaluate_all(cfg, {"slow": slow, "fast": fast, "again": fast})
+    assert opened == [None, str(rerun)]  # the last name's policy, recorded the first time
+    assert results["again"] == results["fast"] != results["slow"]
+    assert results["again"] is not results["fast"]  # separate rows of the summary
+    assert rerun.stat().st_size > 0
 
 
 def test_dagger_from_scratch_trains_a_fresh_clone_on_everything(tmp_path: Path) -> None:

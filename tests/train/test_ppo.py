@@ -201,6 +201,29 @@ def test_a_margin_keeps_the_warm_start_against_gains_within_noise(tmp_path: Path
         _ppo_config(tmp_path, 32, "eval.selection_margin=-1")
 
 
+def test_an_unchanged_policy_is_not_evaluated_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The critic-only warm-up leaves the actor as it was, so the evaluation after it is the
+    warm start's, reused; without ``eval.final`` the run ends without evaluating on ``seeds``."""
+    evaluated = []
+    evaluate = ppo_module.Evaluator.evaluate
+
+    def counting_evaluate(self, policy, seeds):
+        evaluated.append(tuple(seeds))
+        return evaluate(self, policy, seeds)
+
+    monkeypatch.setattr(ppo_module.Evaluator, "evaluate", counting_evaluate)
+    _, result = _fine_tune(
+        tmp_path, "loss.critic_warmup_iters=1", "eval.every=1", "eval.final=false"
+    )
+    assert [entry["frames"] for entry in result.history] == [0, 16, 32]
+    warm_start, after_warm_up, _ = result.history
+    assert after_warm_up["per_episode"] == warm_start["per_episode"]
+    assert evaluated == [(5,), (5,)]  # the warm start and the policy of 32 env steps
+    assert result.final_eval is None
+
+
 def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) -> None:
     source = DrivingNet(DrivingNetConfig(image_size=(32, 48), init_scale=(1.5, 0.3)))
     folder = export_lerobot(source, tmp_path / "bc_policy")
