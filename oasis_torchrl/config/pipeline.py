@@ -173,6 +173,6 @@ class DemoConfig:
         default_factory=lambda: PipelineEvaluationConfig(
             episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd"
         ),
-        help="the final comparison (the fine-tuned policy's episodes are recorded)",
+        help="the final comparison (the final policy's episodes are recorded)",
     )
     progress: bool = option(True, help="tqdm progress bars")
