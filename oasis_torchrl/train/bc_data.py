@@ -2,9 +2,10 @@
 
 ``LeRobotDataset.__getitem__`` decodes every camera's video from the nearest keyframe for every
 sample, which costs far more than a training step of the oasis network.
-:class:`InMemoryBCDataset` decodes each episode's videos in one sequential pass through LeRobot's
-own decoder, keeps the frames as uint8 (at the policy's size, if given: resized once, not per
-batch), and serves the same sample dict
+:class:`InMemoryBCDataset` decodes each video file in one sequential pass (PyAV's frames, as
+LeRobot's ``pyav`` backend gives them; :mod:`oasis_torchrl.data.video_frames`), keeps the
+frames as uint8 (at the policy's size, if given: resized once, not per batch), and serves the
+same sample dict
 (``observation.images.<camera>`` float in ``[0, 1]``, ``observation.state``, ``action``,
 ``privileged_state`` where recorded, the ``<key>_is_pad`` masks and the indices) by LeRobot's
 delta-index rules: a key with delta indices stacks the rows at those offsets within the same
@@ -19,17 +20,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from contextlib import closing
+from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from lerobot.datasets.feature_utils import get_delta_indices
-from lerobot.datasets.video_utils import decode_video_frames
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from oasis_torchrl.data.images import resize_frames
-from oasis_torchrl.data.loading import default_video_backend
+from oasis_torchrl.data.video_frames import frames_at
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 
 logger = logging.getLogger(__name__)
@@ -101,31 +104,45 @@ class InMemoryBCDataset(Dataset):
 
     def _decode(self, dataset: Any, key: str, episodes: list[int], progress: bool) -> torch.Tensor:
         """uint8 ``[rows, 3, H, W]`` of one camera, in hf-dataset row order (at
-        ``image_size`` if set)."""
+        ``image_size`` if set): each video file decoded in one pass, images read with the
+        table."""
+        rows = {ep: (self.columns["episode_index"] == ep).nonzero().flatten() for ep in episodes}
+        if key in dataset.meta.video_keys:
+            frames = self._decode_videos(dataset, key, rows, progress)
+        else:
+            frames = {}
+            for ep, ep_rows in rows.items():
+                images = torch.stack([dataset[int(row)][key] for row in ep_rows])
+                frames[ep] = (images * 255).round_().to(torch.uint8).permute(0, 2, 3, 1)
         chunks = []
-        for ep in tqdm(episodes, desc=f"decoding {key}", unit="episode", disable=not progress):
-            rows = (self.columns["episode_index"] == ep).nonzero().flatten()
-            meta = dataset.meta.episodes[ep]
-            if key in dataset.meta.video_keys:
-                start = meta[f"videos/{key}/from_timestamp"]
-                # float64: float32 sums lose the 0.1 ms tolerance after ~15 min of video.
-                timestamps = (start + self.columns["timestamp"][rows].double()).tolist()
-                path = dataset.root / dataset.meta.get_video_file_path(ep, key)
-                frames = decode_video_frames(
-                    path,
-                    timestamps,
-                    dataset.tolerance_s,
-                    default_video_backend(),
-                    return_uint8=True,
-                )
-            else:
-                images = torch.stack([dataset[int(row)][key] for row in rows])
-                frames = (images * 255).round_().to(torch.uint8)
-            if self.image_size is not None:  # HWC views for resize_frames, then back
-                frames = resize_frames(frames.permute(0, 2, 3, 1), self.image_size)
-                frames = frames.permute(0, 3, 1, 2)
-            chunks.append(frames)
+        for ep in episodes:
+            chunk = frames.pop(ep)  # HWC; each episode's frames freed once resized
+            if self.image_size is not None:
+                chunk = resize_frames(chunk, self.image_size)
+            chunks.append(chunk.permute(0, 3, 1, 2))
         return torch.cat(chunks)
+
+    def _decode_videos(
+        self, dataset: Any, key: str, rows: dict[int, torch.Tensor], progress: bool
+    ) -> dict[int, torch.Tensor]:
+        """Each episode's uint8 HWC frames of camera ``key``, every video file decoded once
+        (:func:`~oasis_torchrl.data.video_frames.frames_at`)."""
+        files: dict[Path, list[tuple[float, int]]] = {}
+        for ep in rows:
+            start = float(dataset.meta.episodes[ep][f"videos/{key}/from_timestamp"])
+            path = dataset.root / dataset.meta.get_video_file_path(ep, key)
+            files.setdefault(path, []).append((start, ep))
+        frames: dict[int, torch.Tensor] = {}
+        for path, starts in tqdm(files.items(), desc=f"decoding {key}", disable=not progress):
+            starts.sort()  # the file's episodes in the order they were written
+            # float64: float32 sums lose the 0.1 ms tolerance after ~15 min of video.
+            times = [start + self.columns["timestamp"][rows[ep]].double() for start, ep in starts]
+            wanted = torch.cat(times).numpy()
+            with closing(frames_at(path, wanted, dataset.tolerance_s)) as decoded:
+                for (_, ep), ep_times in zip(starts, times, strict=True):
+                    images = [next(decoded) for _ in range(len(ep_times))]
+                    frames[ep] = torch.from_numpy(np.stack(images))
+        return frames
 
     def __len__(self) -> int:
         return len(self.columns["index"])

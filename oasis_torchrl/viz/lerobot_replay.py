@@ -2,7 +2,8 @@
 as live rollouts (cameras, actions, state, reward, events; no ground truth, so no top-down map).
 
 Tabular columns are read with LeRobot's own reader and sent as whole columns; videos are decoded
-sequentially with PyAV and logged frame by frame, so memory stays flat however long an episode is.
+sequentially with PyAV (:func:`~oasis_torchrl.data.video_frames.frames_at`) and logged frame by
+frame, so memory stays flat however long an episode is.
 Timelines: ``frame`` = the dataset's ``frame_index``, ``sim_time`` = ``frame_index / fps``.
 Needs the ``lerobot`` extra.
 """
@@ -14,11 +15,11 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-import av
 import numpy as np
 import rerun as rr
 
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
+from oasis_torchrl.data.video_frames import frames_at
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
@@ -34,33 +35,6 @@ STATE, ACTION, REWARD, DONE, SEED = (
     "next.done",
     "episode_seed",
 )
-
-
-def video_frames(
-    path: Path, start_s: float, count: int, tolerance_s: float
-) -> Iterator[np.ndarray]:
-    """``count`` RGB frames of a video from ``start_s`` seconds on, decoded in order.
-
-    Example:
-        >>> import tempfile
-        >>> from oasis_torchrl.video import StripVideoWriter
-        >>> path = Path(tempfile.mkdtemp()) / "clip.mp4"
-        >>> with StripVideoWriter(path, ["front"], fps=20) as video:
-        ...     video.write({"front": [np.zeros((64, 96, 3), np.uint8)] * 4})
-        >>> [frame.shape for frame in video_frames(path, 0.1, 2, tolerance_s=0.025)]
-        [(64, 96, 3), (64, 96, 3)]
-    """
-    with av.open(str(path)) as container:
-        stream = container.streams.video[0]
-        container.seek(int(start_s / stream.time_base), stream=stream, backward=True)
-        produced = 0
-        for frame in container.decode(stream):
-            if frame.time is None or frame.time < start_s - tolerance_s:
-                continue
-            yield frame.to_ndarray(format="rgb24")
-            produced += 1
-            if produced == count:
-                return
 
 
 def _names(feature: dict[str, Any], width: int) -> list[str]:
@@ -201,4 +175,5 @@ class DatasetReplay:
             return
         start = float(self.meta.episodes[episode][f"videos/{key}/from_timestamp"])
         path = self.root / self.meta.get_video_file_path(episode, key)
-        yield from video_frames(path, start, count, tolerance_s=0.5 / self.meta.fps)
+        times = start + np.arange(count) / self.meta.fps
+        yield from frames_at(path, times, tolerance_s=0.5 / self.meta.fps)
