@@ -27,6 +27,7 @@ from oasis_torchrl.compat import dropped_video_frames, wait_for_encoder_room
 from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.features import Feature, check_same_features
 from oasis_torchrl.data.loading import default_repo_id, default_video_backend
+from oasis_torchrl.data.quiet import keep_dataset_libraries_quiet
 
 logger = logging.getLogger(__name__)
 
@@ -207,6 +208,7 @@ def write_episode(
         if dataset.has_pending_frames():
             dataset.clear_episode_buffer(delete_images=False)
         raise
+    keep_dataset_libraries_quiet()
     with _interrupts_deferred():
         dataset.save_episode()
     return count

@@ -123,7 +123,11 @@ def record_demonstrations(
         ...                       noise=ActionNoise())  # doctest: +SKIP
     """
     from oasis_torchrl.data import LeRobotRecorder
+    from oasis_torchrl.data.quiet import quiet_dataset_libraries
 
+    # Again for every recording: LeRobot turns the bars of ``datasets`` back on when it has
+    # loaded a dataset (a DAgger round's BC before this recording), one bar per episode saved.
+    quiet_dataset_libraries()
     frame_stack = POLICY_FRAMES if learner is None else learner.frame_stack
     env = make_env(env_cfg, frame_stack=frame_stack, expert=True)
     env.set_seed(seed)

@@ -126,8 +126,6 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
     Example:
         >>> demonstrations(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
     """
-    from oasis_torchrl.data.quiet import quiet_dataset_libraries
-
     info = root / "meta" / "info.json"
     if info.exists():
         episodes = json.loads(info.read_text())["total_episodes"]
@@ -137,7 +135,6 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
         raise FileExistsError(
             f"{root} holds {episodes} of {cfg.record.episodes} episodes; delete it"
         )
-    quiet_dataset_libraries()
     reaction = cfg.record.late_reaction
     return record_demonstrations(
         cfg.env,

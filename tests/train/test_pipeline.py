@@ -43,7 +43,9 @@ TINY_PIPELINE = [
 
 def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE]) == 0
-    table = capsys.readouterr().out.splitlines()
+    printed = capsys.readouterr()
+    table = printed.out.splitlines()
+    assert "Map" not in printed.err  # no bar of `datasets` per saved episode, DAgger's included
     summary = json.loads((tmp_path / "summary.json").read_text())
     paths = {name: Path(path) for name, path in summary["paths"].items()}
     assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
