@@ -10,12 +10,12 @@ file once in order (:func:`~oasis_torchrl.data.video_frames.frames_at`). Both bu
 cache (the table, every camera, the frames at the policy's size) and must hold the same bytes.
 
 The dataset: ``--dataset`` (e.g. a main job's ``demos/``, which holds its DAgger episodes too),
-or autopilot drives recorded by the embedded server at 96x64 (``--episodes`` rows of
-``--steps`` chunks). Alternating runs, the median of ``--repeats`` each.
+or ``--episodes`` demonstrations recorded as the main job's recording stage records them.
+Alternating runs, the median of ``--repeats`` each.
 
-Usage: ``python benchmarks/bc_cache.py [--dataset DIR | --episodes 16 --steps 100] [--repeats
-3]``; prints JSON with seconds per build and ``speedup`` (the baseline's over ours; > 1: ours
-is faster).
+Usage: ``python benchmarks/bc_cache.py [--dataset DIR | --episodes 16] [--repeats 3]``;
+prints JSON with seconds per build and ``speedup`` (the baseline's over ours; > 1: ours is
+faster).
 """
 
 from __future__ import annotations
@@ -31,12 +31,10 @@ from typing import Any
 import torch
 from lerobot.datasets.video_utils import decode_video_frames
 
-from oasis_torchrl.data import LeRobotRecorder
+from oasis_torchrl.config import load_config
 from oasis_torchrl.data.loading import open_for_bc
-from oasis_torchrl.drivers import Autopilot
-from oasis_torchrl.envs import OasisEnv
-from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
+from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 
 
 class PerEpisodeDecode(InMemoryBCDataset):
@@ -55,22 +53,11 @@ class PerEpisodeDecode(InMemoryBCDataset):
         return frames
 
 
-def record(root: Path, episodes: int, steps: int) -> Path:
-    """``episodes`` autopilot drives of ``steps`` chunks, frame rows."""
-    env = OasisEnv(
-        "local",
-        num_envs=episodes,
-        prompts="urban",
-        server=ServerConfig(width=96, height=64),
-        all_frames=True,
-        max_steps=steps,
-    )
-    try:
-        with LeRobotRecorder(root) as recorder:
-            recorder.write(env.rollout(steps, Autopilot(), break_when_any_done=False))
-    finally:
-        env.close()
-    return root
+def record(root: Path, episodes: int) -> Path:
+    """``episodes`` of the main job's demonstrations (its recording stage's settings)."""
+    cfg = load_config("demo", ["progress=false"])
+    noise = ActionNoise(**cfg.record.noise)
+    return record_demonstrations(cfg.env, root, episodes=episodes, seed=1, noise=noise)
 
 
 def build(kind: type[InMemoryBCDataset], dataset: Any) -> tuple[float, InMemoryBCDataset]:
@@ -83,12 +70,11 @@ def build(kind: type[InMemoryBCDataset], dataset: Any) -> tuple[float, InMemoryB
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", type=Path, help="a recorded dataset (default: record one)")
-    parser.add_argument("--episodes", type=int, default=16)
-    parser.add_argument("--steps", type=int, default=100, help="chunks (4 rows) per episode")
+    parser.add_argument("--episodes", type=int, default=16, help="demonstrations to record")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as scratch:
-        root = args.dataset or record(Path(scratch) / "drives", args.episodes, args.steps)
+        root = args.dataset or record(Path(scratch) / "demos", args.episodes)
         dataset = open_for_bc(root, video_backend="pyav")
         times: dict[str, list[float]] = {"per_episode": [], "one_pass": []}
         for _ in range(args.repeats):
