@@ -32,7 +32,7 @@ from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from oasis_torchrl.data.images import resize_frames
-from oasis_torchrl.data.video_frames import frames_at
+from oasis_torchrl.data.video_frames import MissingFrameError, frames_at
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 
 logger = logging.getLogger(__name__)
@@ -140,7 +140,10 @@ class InMemoryBCDataset(Dataset):
             wanted = torch.cat(times).numpy()
             with closing(frames_at(path, wanted, dataset.tolerance_s)) as decoded:
                 for (_, ep), ep_times in zip(starts, times, strict=True):
-                    images = [next(decoded) for _ in range(len(ep_times))]
+                    try:
+                        images = [next(decoded) for _ in range(len(ep_times))]
+                    except MissingFrameError as error:
+                        raise MissingFrameError(f"episode {ep} of {key}: {error}") from error
                     frames[ep] = torch.from_numpy(np.stack(images))
         return frames
 

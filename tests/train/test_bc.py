@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
+import av
 import pytest
 import torch
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
@@ -11,6 +13,7 @@ from lerobot_policy_oasis.processor_oasis import ResizeFramesProcessorStep
 from torch.utils.data import DataLoader, default_collate
 
 from oasis_torchrl.config import load_config
+from oasis_torchrl.data.video_frames import MissingFrameError
 from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
@@ -32,6 +35,26 @@ def _bc_config(dataset: Path, output: Path, *extra: str):
             *extra,
         ],
     )
+
+
+def test_a_video_short_of_its_rows_is_named_by_episode_and_camera(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
+    """The cache decodes each video file once; a file that lost its last frames (here re-encoded
+    without them) fails naming the episode and the camera whose rows have no frame."""
+    root = shutil.copytree(tiny_dataset, tmp_path / "short")
+    video = next((root / "videos" / "observation.images.front").rglob("*.mp4"))
+    with av.open(str(video)) as source:
+        frames = [frame.to_ndarray(format="rgb24") for frame in source.decode(video=0)]
+    with av.open(str(video), "w") as target:
+        stream = target.add_stream("h264", rate=20)
+        stream.height, stream.width = frames[0].shape[:2]
+        for image in frames[:-3]:
+            target.mux(stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")))
+        target.mux(stream.encode())
+    dataset = open_dataset(_bc_config(root, tmp_path / "run").dataset, OasisConfig(device="cpu"))
+    with pytest.raises(MissingFrameError, match=r"episode 1 of observation\.images\.front: .*mp4"):
+        InMemoryBCDataset(dataset, progress=False)
 
 
 def test_bc_steps_train_the_actor_and_save_a_lerobot_policy(
