@@ -49,7 +49,7 @@ class PerEpisodeDecode(InMemoryBCDataset):
             times = (start + self.columns["timestamp"][ep_rows].double()).tolist()
             path = dataset.root / dataset.meta.get_video_file_path(ep, key)
             chw = decode_video_frames(path, times, dataset.tolerance_s, "pyav", return_uint8=True)
-            frames[ep] = chw.permute(0, 2, 3, 1)
+            frames[ep] = self._kept(chw.permute(0, 2, 3, 1))
         return frames
 
 

@@ -113,20 +113,21 @@ class InMemoryBCDataset(Dataset):
             frames = {}
             for ep, ep_rows in rows.items():
                 images = torch.stack([dataset[int(row)][key] for row in ep_rows])
-                frames[ep] = (images * 255).round_().to(torch.uint8).permute(0, 2, 3, 1)
-        chunks = []
-        for ep in episodes:
-            chunk = frames.pop(ep)  # HWC; each episode's frames freed once resized
-            if self.image_size is not None:
-                chunk = resize_frames(chunk, self.image_size)
-            chunks.append(chunk.permute(0, 3, 1, 2))
-        return torch.cat(chunks)
+                frames[ep] = self._kept((images * 255).round_().to(torch.uint8).movedim(1, -1))
+        return torch.cat([frames[ep] for ep in episodes])
+
+    def _kept(self, frames: torch.Tensor) -> torch.Tensor:
+        """uint8 HWC frames as the cache keeps them: ``[N, 3, H, W]`` at ``image_size`` (each
+        episode resized as it is decoded, so no more than one is held at the dataset's size)."""
+        if self.image_size is not None:
+            frames = resize_frames(frames, self.image_size)
+        return frames.permute(0, 3, 1, 2)
 
     def _decode_videos(
         self, dataset: Any, key: str, rows: dict[int, torch.Tensor], progress: bool
     ) -> dict[int, torch.Tensor]:
-        """Each episode's uint8 HWC frames of camera ``key``, every video file decoded once
-        (:func:`~oasis_torchrl.data.video_frames.frames_at`)."""
+        """Each episode's frames of camera ``key`` as the cache keeps them, every video file
+        decoded once (:func:`~oasis_torchrl.data.video_frames.frames_at`)."""
         files: dict[Path, list[tuple[float, int]]] = {}
         for ep in rows:
             start = float(dataset.meta.episodes[ep][f"videos/{key}/from_timestamp"])
@@ -144,7 +145,7 @@ class InMemoryBCDataset(Dataset):
                         images = [next(decoded) for _ in range(len(ep_times))]
                     except MissingFrameError as error:
                         raise MissingFrameError(f"episode {ep} of {key}: {error}") from error
-                    frames[ep] = torch.from_numpy(np.stack(images))
+                    frames[ep] = self._kept(torch.from_numpy(np.stack(images)))
         return frames
 
     def __len__(self) -> int:
