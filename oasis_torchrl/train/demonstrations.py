@@ -125,8 +125,8 @@ def record_demonstrations(
     from oasis_torchrl.data import LeRobotRecorder
     from oasis_torchrl.data.quiet import quiet_dataset_libraries
 
-    # Again for every recording: LeRobot turns the bars of ``datasets`` back on when it has
-    # loaded a dataset (a DAgger round's BC before this recording), one bar per episode saved.
+    # Here rather than in each caller: a DAgger round may record into a reused dataset without
+    # the main job's first recording having run; the writer keeps it quiet from then on.
     quiet_dataset_libraries()
     frame_stack = POLICY_FRAMES if learner is None else learner.frame_stack
     env = make_env(env_cfg, frame_stack=frame_stack, expert=True)
