@@ -135,6 +135,11 @@ class ExplorationConfig:
             raise ValueError(f"exploration.hold_chunks must be >= 1, got {self.hold_chunks}")
 
 
+ENCODER_GRADS = ("all", "aux")
+"""What may train PPO's camera encoder (``loss.encoder_grad``): every loss, or the auxiliary
+loss alone."""
+
+
 @dataclass
 class LossConfig:
     """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
@@ -152,6 +157,11 @@ class LossConfig:
         1.0,
         help="the camera features also learn to predict the privileged state (MSE, a "
         "training-only head; embedded server only; 0: off)",
+    )
+    encoder_grad: str = option(
+        "all",
+        help="what trains the camera encoder: 'all' (the PPO and auxiliary losses) or 'aux' "
+        "(the auxiliary loss alone; the actor and critic learn on its detached features)",
     )
 
 
@@ -348,6 +358,15 @@ class PPOSettings:
         ):
             if on and not self.loss.aux_coeff:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
+        if self.loss.encoder_grad not in ENCODER_GRADS:
+            raise ValueError(
+                f"loss.encoder_grad must be one of {ENCODER_GRADS}, got {self.loss.encoder_grad!r}"
+            )
+        if self.loss.encoder_grad == "aux" and not self.loss.aux_coeff:
+            raise ValueError(
+                "loss.encoder_grad=aux trains the encoder by the auxiliary loss alone: set "
+                "loss.aux_coeff > 0 too"
+            )
         if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(
                 f"warmup.frames ({self.warmup.frames}) must leave PPO some of "

@@ -68,6 +68,7 @@ class PPOUpdate:
         self.loss = DrivingPPOLoss(
             modules,
             aux_coeff=cfg.loss.aux_coeff,
+            encoder_grad=cfg.loss.encoder_grad,
             clip_epsilon=cfg.loss.clip_epsilon,
             entropy_coeff=cfg.loss.entropy_coeff,
             critic_coeff=cfg.loss.critic_coeff,

@@ -95,3 +95,12 @@ def test_non_finite_steps_are_skipped_and_the_weights_stay_finite() -> None:
     assert metrics["optim/updates"] == 0
     for key, value in update.net.state_dict().items():
         assert torch.equal(before[key], value), key
+
+
+def test_encoder_grad_is_checked_and_reaches_the_loss() -> None:
+    assert _update("loss.encoder_grad=aux").loss.detach_features
+    assert not _update().loss.detach_features
+    with pytest.raises(ValueError, match=r"loss\.encoder_grad must be one of \('all', 'aux'\)"):
+        load_config("ppo", ["loss.encoder_grad=actor"])
+    with pytest.raises(ValueError, match=r"loss\.encoder_grad=aux trains the encoder by the aux"):
+        load_config("ppo", ["loss.encoder_grad=aux", "loss.aux_coeff=0"])
