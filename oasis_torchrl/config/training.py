@@ -355,17 +355,13 @@ class PPOSettings:
         for name, on in (
             ("aux_replay.capacity", self.aux_replay.capacity),
             ("warmup.frames", self.warmup.frames),
+            ("loss.encoder_grad=aux", self.loss.encoder_grad == "aux"),
         ):
             if on and not self.loss.aux_coeff:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
         if self.loss.encoder_grad not in ENCODER_GRADS:
             raise ValueError(
                 f"loss.encoder_grad must be one of {ENCODER_GRADS}, got {self.loss.encoder_grad!r}"
-            )
-        if self.loss.encoder_grad == "aux" and not self.loss.aux_coeff:
-            raise ValueError(
-                "loss.encoder_grad=aux trains the encoder by the auxiliary loss alone: set "
-                "loss.aux_coeff > 0 too"
             )
         if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(

@@ -102,5 +102,6 @@ def test_encoder_grad_is_checked_and_reaches_the_loss() -> None:
     assert not _update().loss.detach_features
     with pytest.raises(ValueError, match=r"loss\.encoder_grad must be one of \('all', 'aux'\)"):
         load_config("ppo", ["loss.encoder_grad=actor"])
-    with pytest.raises(ValueError, match=r"loss\.encoder_grad=aux trains the encoder by the aux"):
+    needs_aux = r"loss\.encoder_grad=aux trains the auxiliary loss: set loss\.aux_coeff > 0"
+    with pytest.raises(ValueError, match=needs_aux):
         load_config("ppo", ["loss.encoder_grad=aux", "loss.aux_coeff=0"])
