@@ -6,14 +6,21 @@ or a policy server (``grpc://host:port``, the key in ``OASIS_POLICY_API_KEY``). 
 :class:`~oasis_torchrl.config.EvalConfig`, each a flag or a ``key=value`` override:
 ``oasis-torchrl eval policy=outputs/bc/policy seeds=[0,1] episodes=8 output=eval.json``.
 The report (mean distance before collision, collision rate, mean return, and every episode) is
-written to stdout as JSON, and to ``output`` when set.
+written to stdout as JSON, and to ``output`` when set. With ``baseline=<an earlier report>`` it
+also holds ``vs_baseline``: the mean and standard error of the per-episode distance differences
+over the episodes both ran (same prompt and episode seed), the comparison that says whether one
+policy beats another beyond the noise of the scenes:
+``oasis-torchrl eval policy=outputs/ppo/best.pt seeds=[1000] episodes=32
+baseline=constant.json``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import sys
+from typing import Any
 
 from omegaconf import DictConfig
 
@@ -27,7 +34,8 @@ CONFIG = EvalConfig
 
 
 def run(cfg: DictConfig) -> int:
-    """Evaluate and print the JSON report; exit code 2 on bad settings.
+    """Evaluate and print the JSON report; exit code 2 on bad settings, or on a baseline that
+    shares fewer than 2 episodes with the evaluation (the report is still written).
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -36,16 +44,53 @@ def run(cfg: DictConfig) -> int:
     """
     from oasis_torchrl.drivers import load_driver
     from oasis_torchrl.remote import RemotePolicyError
-    from oasis_torchrl.train.evaluate import Evaluator
+    from oasis_torchrl.train.evaluate import Evaluator, load_report
 
     try:
+        baseline = load_report(cfg.baseline) if cfg.baseline else None
         driver = load_driver(cfg.policy)
         with Evaluator.for_driver(cfg.env, cfg, driver) as evaluator:
             report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)
         return 2
+    extra: dict[str, Any] = {"policy": str(cfg.policy)}
+    code = 0
+    if baseline is not None:
+        try:
+            extra["vs_baseline"] = _versus(report.to_dict(), baseline, cfg.baseline)
+        except ValueError as error:
+            logger.error(
+                "cannot compare with the baseline %s: %s (evaluate with its prompts, seeds and "
+                "episodes)",
+                cfg.baseline,
+                error,
+            )
+            code = 2
     if cfg.output:
-        logger.info("wrote %s", report.write_json(cfg.output, policy=str(cfg.policy)))
-    sys.stdout.write(json.dumps(report.to_dict(policy=str(cfg.policy)), indent=2) + "\n")
-    return 0
+        logger.info("wrote %s", report.write_json(cfg.output, **extra))
+    sys.stdout.write(json.dumps(report.to_dict(**extra), indent=2) + "\n")
+    return code
+
+
+def _versus(result: dict[str, Any], baseline: dict[str, Any], name: str) -> dict[str, Any]:
+    """The paired difference against ``baseline``, logged for a person."""
+    from oasis_torchrl.train.evaluate import paired_difference
+
+    difference = paired_difference(result, baseline)
+    logger.info(
+        "vs %s: %+.1f ± %.1f m per episode over %d shared episodes (%.1f standard errors)",
+        name,
+        difference["mean"],
+        difference["stderr"],
+        difference["episodes"],
+        _standard_errors(difference["mean"], difference["stderr"]),
+    )
+    return {"baseline": name, **difference}
+
+
+def _standard_errors(mean: float, stderr: float) -> float:
+    """``mean`` in standard errors (0 for no difference at all, infinite for a constant one)."""
+    if stderr:
+        return mean / stderr
+    return math.copysign(math.inf, mean) if mean else 0.0

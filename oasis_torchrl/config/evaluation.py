@@ -43,6 +43,11 @@ class EvalConfig(EvaluationConfig):
         "or torch.save file) | a policy server (grpc://host:port; key in OASIS_POLICY_API_KEY)",
     )
     output: str | None = option(None, help="JSON file (the report is also printed)")
+    baseline: str | None = option(
+        None,
+        help="an earlier report (JSON) of the same prompts, seeds and episodes: the report adds "
+        "the paired per-episode distance difference against it (vs_baseline)",
+    )
     env: EnvConfig = option(
         default_factory=EnvConfig,
         help="the env (rows, prompts and episode length come from the evaluation settings; "

@@ -40,6 +40,7 @@ logger = logging.getLogger(__name__)
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 NEXT = "next"
+_PAIRED_KEYS = ("prompt", "episode_seed", "distance")
 
 
 @dataclass(frozen=True)
@@ -133,6 +134,44 @@ def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict
     mean = sum(differences) / count
     variance = sum((d - mean) ** 2 for d in differences) / (count - 1)
     return {"mean": mean, "stderr": math.sqrt(variance / count), "episodes": float(count)}
+
+
+def load_report(path: str | Path) -> dict[str, Any]:
+    """An evaluation report written by :meth:`EvalReport.write_json` (``oasis-torchrl eval
+    output=...``), checked to hold what :func:`paired_difference` reads.
+
+    Example:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> path = EvalReport([EpisodeResult("urban", 3, 50.0, True, 1.0, 9)]).write_json(
+        ...     folder / "report.json")
+        >>> load_report(path)["per_episode"][0]["distance"]
+        50.0
+        >>> _ = (folder / "other.json").write_text('{"mean_distance": 50.0}')
+        >>> load_report(folder / "other.json")
+        Traceback (most recent call last):
+        ...
+        ValueError: .../other.json is not an evaluation report: it has no per_episode list
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no evaluation report at {path}")
+    try:
+        report = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"{path} is not an evaluation report: not JSON ({error})") from None
+    episodes = report.get("per_episode") if isinstance(report, dict) else None
+    if not isinstance(episodes, list):
+        raise ValueError(f"{path} is not an evaluation report: it has no per_episode list")
+    for index, episode in enumerate(episodes):
+        missing = [
+            key for key in _PAIRED_KEYS if not isinstance(episode, dict) or key not in episode
+        ]
+        if missing:
+            raise ValueError(
+                f"{path} is not an evaluation report: episode {index} lacks {', '.join(missing)}"
+            )
+    return report
 
 
 def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float) -> bool:

@@ -85,3 +85,58 @@ def test_eval_command_prints_the_report(tmp_path: Path, capsys: pytest.CaptureFi
     assert printed == json.loads(output.read_text())
     assert set(printed) >= {"mean_distance", "collision_rate", "mean_return", "per_episode"}
     assert main(["eval", "policy=missing.pt"]) == 2
+
+
+def test_eval_command_compares_with_a_baseline(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    settings = [*TINY_ENV, "episodes=2", "max_steps=3", "seeds=[5]"]
+    constant = tmp_path / "constant.json"
+    assert main(["eval", *settings, "policy=constant:throttle=0.2", f"output={constant}"]) == 0
+    capsys.readouterr()
+    faster = tmp_path / "faster.json"
+    code = main(
+        [
+            "eval",
+            *settings,
+            "policy=constant:throttle=1.0",
+            f"baseline={constant}",
+            f"output={faster}",
+        ]
+    )
+    assert code == 0
+    report, before = json.loads(faster.read_text()), json.loads(constant.read_text())
+    versus = report["vs_baseline"]
+    assert versus["baseline"] == str(constant) and versus["episodes"] == 2.0
+    assert versus["mean"] == pytest.approx(report["mean_distance"] - before["mean_distance"])
+    assert versus["mean"] > 0
+    assert json.loads(capsys.readouterr().out) == report
+
+
+def test_eval_command_keeps_the_report_when_the_baseline_ran_other_episodes(
+    tmp_path: Path,
+) -> None:
+    baseline = tmp_path / "baseline.json"
+    output = tmp_path / "eval.json"
+    short = [*TINY_ENV, "episodes=2", "max_steps=2", "policy=constant:throttle=0.5"]
+    assert main(["eval", *short, "seeds=[5]", f"output={baseline}"]) == 0
+    code = main(["eval", *short, "seeds=[6]", f"baseline={baseline}", f"output={output}"])
+    assert code == 2
+    report = json.loads(output.read_text())
+    assert "vs_baseline" not in report and len(report["per_episode"]) == 2
+
+
+def test_eval_command_refuses_a_baseline_that_is_not_a_report(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    summary = tmp_path / "summary.json"
+    summary.write_text(json.dumps({"mean_distance": 3.0}))
+    output = tmp_path / "eval.json"
+    for baseline, problem in (
+        (summary, "no per_episode"),
+        (tmp_path / "gone.json", "no evaluation"),
+    ):
+        caplog.clear()
+        assert main(["eval", *TINY_ENV, f"baseline={baseline}", f"output={output}"]) == 2
+        assert problem in caplog.text
+    assert not output.exists()
