@@ -10,7 +10,7 @@ written to stdout as JSON, and to ``output`` when set. With ``baseline=<an earli
 also holds ``vs_baseline``: the mean and standard error of the per-episode distance differences
 over the episodes both ran (same prompt and episode seed), the comparison that says whether one
 policy beats another beyond the noise of the scenes:
-``oasis-torchrl eval policy=outputs/ppo/best.pt seeds=[1000] episodes=32
+``oasis-torchrl eval policy=outputs/ppo/policy seeds=[1000] episodes=32
 baseline=constant.json``.
 """
 
