@@ -41,6 +41,25 @@ def mirror_option(rows: str) -> float:
     )
 
 
+def shift_option(rows: str, default: int = 0) -> int:
+    """The option of the random shift of ``rows``' frames, in pixels
+    (:func:`oasis_torchrl.train.shift.random_shift`)."""
+    return option(default, help=f"random-shift augmentation of {rows}' frames, in pixels (0: off)")
+
+
+def check_shift(name: str, pad: int) -> None:
+    """Refuse a negative shift, naming the option.
+
+    Example:
+        >>> check_shift("train.shift_pad", -1)
+        Traceback (most recent call last):
+        ...
+        ValueError: train.shift_pad is a shift in pixels, >= 0, got -1
+    """
+    if pad < 0:
+        raise ValueError(f"{name} is a shift in pixels, >= 0, got {pad}")
+
+
 def check_share(name: str, value: float) -> None:
     """Refuse a share outside [0, 1], naming the option.
 
@@ -196,9 +215,11 @@ class AuxReplayConfig:
     steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
     mirror: float = mirror_option("replayed rows")
+    shift_pad: int = shift_option("replayed rows")
 
     def __post_init__(self) -> None:
         check_share("aux_replay.mirror", self.mirror)
+        check_shift("aux_replay.shift_pad", self.shift_pad)
         if self.capacity < 0 or self.steps < 0:
             raise ValueError(
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
@@ -225,8 +246,10 @@ class PerceptionWarmupConfig:
     steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
     mini_batch_size: int = option(64, help="rows per minibatch")
     lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up")
+    shift_pad: int = shift_option("the minibatch rows")
 
     def __post_init__(self) -> None:
+        check_shift("warmup.shift_pad", self.shift_pad)
         if self.frames < 0 or self.steps < 0 or not self.lr > 0:
             raise ValueError(
                 f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
@@ -439,7 +462,7 @@ class BCTrainConfig:
     steps: int = option(3000, help="gradient steps")
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
-    shift_pad: int = option(4, help="random-shift augmentation in pixels (0: off)")
+    shift_pad: int = shift_option("the samples", default=4)
     mirror: float = mirror_option("the samples")
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
@@ -448,6 +471,7 @@ class BCTrainConfig:
 
     def __post_init__(self) -> None:
         check_share("train.mirror", self.mirror)
+        check_shift("train.shift_pad", self.shift_pad)
 
 
 @dataclass

@@ -33,6 +33,7 @@ from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FRAME_STACK, STATE,
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.train.mirror import Mirror
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
+from oasis_torchrl.train.shift import random_shift
 
 
 class AuxiliaryReplay:
@@ -46,6 +47,8 @@ class AuxiliaryReplay:
         mirror: the share of replayed rows reflected left to right
             (:class:`~oasis_torchrl.train.mirror.Mirror`: cameras flipped and swapped, the
             previous action's steering and the privileged state's sides mirrored).
+        shift_pad: each replayed row's frames shifted by up to this many pixels
+            (:func:`~oasis_torchrl.train.shift.random_shift`; 0: none).
 
     Raises:
         ValueError: no auxiliary loss to replay, or a capacity below one minibatch.
@@ -64,7 +67,12 @@ class AuxiliaryReplay:
     """
 
     def __init__(
-        self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int, mirror: float = 0.0
+        self,
+        loss: DrivingPPOLoss,
+        capacity: int,
+        mini_batch_size: int,
+        mirror: float = 0.0,
+        shift_pad: int = 0,
     ) -> None:
         if not loss.aux_coeff:
             raise ValueError(
@@ -76,7 +84,10 @@ class AuxiliaryReplay:
                 f"the auxiliary replay's capacity ({capacity}) must hold at least one "
                 f"minibatch ({mini_batch_size} rows, > 0)"
             )
+        if shift_pad < 0:
+            raise ValueError(f"the auxiliary replay's shift_pad must be >= 0, got {shift_pad}")
         self._loss = loss
+        self.shift_pad = shift_pad
         self.keys = [*observation_keys(loss.net), CRITIC_INPUTS]
         self.buffer = ReplayBuffer(
             storage=LazyTensorStorage(capacity),
@@ -103,13 +114,20 @@ class AuxiliaryReplay:
         """Add the rows of a flat batch (``[N]``; its other keys are left out)."""
         self.buffer.extend(flat.select(*self.keys))
 
-    def loss(self) -> torch.Tensor:
-        """The weighted auxiliary loss on one minibatch drawn from the replay (with gradients to
-        the encoder and the auxiliary head)."""
+    def minibatch(self) -> TensorDictBase:
+        """One minibatch drawn uniformly from the replay, mirrored and shifted as configured."""
         if not len(self.buffer):
             raise RuntimeError("the auxiliary replay is empty: extend it with a batch first")
         sample = self.buffer.sample()
         if self.mirror is not None:
             sample = self.mirror(sample)
-        minibatch = self._loss.features(sample)
-        return self._loss.aux_loss(minibatch)
+        if self.shift_pad:
+            for camera in self._loss.net.config.cameras:
+                key = (FRAME_STACK, camera)
+                sample.set(key, random_shift(sample.get(key), self.shift_pad, channels_last=True))
+        return sample
+
+    def loss(self) -> torch.Tensor:
+        """The weighted auxiliary loss on one :meth:`minibatch` (with gradients to the encoder
+        and the auxiliary head)."""
+        return self._loss.aux_loss(self._loss.features(self.minibatch()))

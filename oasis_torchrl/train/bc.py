@@ -5,9 +5,9 @@ from the dataset), the plugin's processors (resize and normalisation), ``policy.
 the loss and the policy's AdamW preset. What differs: the dataset is decoded once into memory
 (:class:`~oasis_torchrl.train.bc_data.InMemoryBCDataset`; ``dataset.cache=false`` streams
 from the videos like ``lerobot-train``), optional random-shift and mirror augmentation
-(:mod:`~oasis_torchrl.train.mirror`), TorchRL loggers, tqdm, and an evaluation in the env at
-the end. The output folder is a LeRobot policy folder (``save_pretrained`` weights, config and
-processors): it loads with
+(:mod:`~oasis_torchrl.train.shift`, :mod:`~oasis_torchrl.train.mirror`), TorchRL loggers,
+tqdm, and an evaluation in the env at the end. The output folder is a LeRobot policy folder
+(``save_pretrained`` weights, config and processors): it loads with
 ``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``, and as a PPO warm start
 (``init_from``). Config: :class:`~oasis_torchrl.config.BCConfig`.
 """
@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-import torch.nn.functional as F
 from lerobot.utils.constants import ACTION, OBS_STATE
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader
@@ -36,6 +35,7 @@ from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.mirror import Mirror
+from oasis_torchrl.train.shift import random_shift
 
 logger = logging.getLogger(__name__)
 
@@ -55,30 +55,6 @@ class BCResult:
     policy_dir: Path
     final_eval: EvalReport | None
     final_loss: float
-
-
-def random_shift(images: torch.Tensor, pad: int) -> torch.Tensor:
-    """Shift each sample's frames ``[B, ..., H, W]`` by up to ``pad`` pixels, all frames of a
-    sample alike (replicate padding, DrQ style).
-
-    Example:
-        >>> random_shift(torch.rand(2, 2, 3, 8, 12), pad=2).shape
-        torch.Size([2, 2, 3, 8, 12])
-    """
-    if pad <= 0:
-        return images
-    height, width = images.shape[-2:]
-    flat = images.reshape(images.shape[0], -1, height, width)
-    padded = F.pad(flat, (pad, pad, pad, pad), mode="replicate")
-    offsets = torch.randint(0, 2 * pad + 1, (images.shape[0], 2)).tolist()
-    # One slice copy per sample is several times faster than a gather over every pixel.
-    shifted = torch.stack(
-        [
-            sample[:, r : r + height, c : c + width]
-            for sample, (r, c) in zip(padded, offsets, strict=True)
-        ]
-    )
-    return shifted.reshape(images.shape)
 
 
 def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:

@@ -52,7 +52,7 @@ class InMemoryBCDataset(Dataset):
         progress: show a progress bar while decoding.
         frame_transform: applied to each camera's frames of a batch, uint8
             ``[B, ..., 3, H, W]``, before their conversion to float (augmentation such as
-            :func:`~oasis_torchrl.train.bc.random_shift`; ``None``: none).
+            :func:`~oasis_torchrl.train.shift.random_shift`; ``None``: none).
 
     Example:
         >>> cached = InMemoryBCDataset(open_for_bc("drives"))  # doctest: +SKIP

@@ -45,6 +45,7 @@ class PerceptionWarmup:
         capacity: rows kept (the oldest are overwritten): the warm-up's env steps.
         mini_batch_size: rows per minibatch.
         lr: Adam's learning rate for the warm-up.
+        shift_pad: each minibatch row's frames shifted by up to this many pixels (0: none).
 
     Example:
         >>> from tensordict import TensorDict
@@ -61,9 +62,14 @@ class PerceptionWarmup:
     """
 
     def __init__(
-        self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int, lr: float
+        self,
+        loss: DrivingPPOLoss,
+        capacity: int,
+        mini_batch_size: int,
+        lr: float,
+        shift_pad: int = 0,
     ) -> None:
-        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size)
+        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size, shift_pad=shift_pad)
         net = loss.net
         parameters = [*net.encoder.parameters(), *net.aux.parameters()]
         self.optimizer = torch.optim.Adam(parameters, lr=lr)

@@ -249,7 +249,9 @@ class PPOTrainer:
         steps, and the encoder and the auxiliary head are fitted to their privileged state
         (:mod:`~oasis_torchrl.train.perception_warmup`); PPO's first update follows."""
         cfg = self.cfg.warmup
-        warmup = PerceptionWarmup(self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr)
+        warmup = PerceptionWarmup(
+            self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr, cfg.shift_pad
+        )
         driver = DriverSpec(cfg.driver) if cfg.driver else None
         if driver is not None and driver().needs_expert:
             raise ValueError(

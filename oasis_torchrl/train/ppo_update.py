@@ -87,7 +87,9 @@ class PPOUpdate:
         self._anneal(0)
         replay = cfg.aux_replay
         self.aux_replay = (
-            AuxiliaryReplay(self.loss, replay.capacity, replay.mini_batch_size, replay.mirror)
+            AuxiliaryReplay(
+                self.loss, replay.capacity, replay.mini_batch_size, replay.mirror, replay.shift_pad
+            )
             if replay.capacity
             else None
         )

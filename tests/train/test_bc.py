@@ -16,7 +16,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.data.video_frames import MissingFrameError
 from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
-from oasis_torchrl.train.bc import BCTrainer, open_dataset, random_shift
+from oasis_torchrl.train.bc import BCTrainer, open_dataset
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 
 
@@ -132,17 +132,6 @@ def test_in_memory_samples_and_batches_match_lerobot_samples(
     assert cached[16]["observation.images.front"].shape == (2, 3, 32, 48)
 
 
-def test_random_shift_moves_content_within_the_pad() -> None:
-    image = torch.zeros(64, 2, 1, 9, 9)
-    image[..., 4, 4] = 1.0
-    shifted = random_shift(image, pad=2)
-    torch.testing.assert_close(shifted[:, 0], shifted[:, 1])  # both frames alike
-    positions = shifted[:, 0, 0].flatten(1).argmax(1)
-    rows, cols = positions // 9, positions % 9
-    assert rows.min() >= 2 and rows.max() <= 6 and cols.min() >= 2 and cols.max() <= 6
-    assert len(set(positions.tolist())) > 5
-
-
 def test_the_cosine_schedule_warms_up_and_anneals_to_zero(
     tiny_dataset: Path, tmp_path: Path
 ) -> None:
@@ -154,9 +143,11 @@ def test_the_cosine_schedule_warms_up_and_anneals_to_zero(
     assert rates[2] > rates[3] > rates[4] > rates[5] == 0.0
 
 
-def test_an_unknown_schedule_is_refused() -> None:
+def test_an_unknown_schedule_and_a_negative_shift_are_refused() -> None:
     with pytest.raises(ValueError, match="scheduler_name must be one of"):
         OasisConfig(device="cpu", scheduler_name="linear")
+    with pytest.raises(ValueError, match=r"train\.shift_pad is a shift in pixels, >= 0, got -1"):
+        load_config("bc", ["train.shift_pad=-1"])
 
 
 def test_the_cache_keeps_frames_at_the_policys_size(tiny_dataset: Path, tmp_path: Path) -> None:
