@@ -19,7 +19,10 @@ Measured (BENCHMARKS.md, "PPO from scratch"): with 32,768 rows, PPO from scratch
 best constant within 102,400 env steps on one seed (ahead of that seed without the replay on
 every scene set, by 1.3-1.8 standard errors) and 1.16x on a second (level with it), for about
 1.4x the training time; mirroring half of each replayed minibatch did worse. So
-``aux_replay.capacity`` defaults to 0 (off).
+``aux_replay.capacity`` defaults to 0 (off). Shifting each replayed row's frames by up to 4 pixels
+(``shift_pad``, with the warm-up's) moved the best constant's multiple on the targets' seed from
+1.41x (the constant's warm-up with this replay) to 1.50-1.52x on two seeds but left the unseen
+scenes level or behind, so it is off too.
 """
 
 from __future__ import annotations
