@@ -32,6 +32,7 @@ from tensordict import TensorDictBase
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 
+from oasis_torchrl.config.training import check_shift
 from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FRAME_STACK, STATE, observation_keys
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.train.mirror import Mirror
@@ -54,7 +55,8 @@ class AuxiliaryReplay:
             (:func:`~oasis_torchrl.train.shift.random_shift`; 0: none).
 
     Raises:
-        ValueError: no auxiliary loss to replay, or a capacity below one minibatch.
+        ValueError: no auxiliary loss to replay, a capacity below one minibatch, or a negative
+            shift.
 
     Example:
         >>> from tensordict import TensorDict
@@ -87,8 +89,7 @@ class AuxiliaryReplay:
                 f"the auxiliary replay's capacity ({capacity}) must hold at least one "
                 f"minibatch ({mini_batch_size} rows, > 0)"
             )
-        if shift_pad < 0:
-            raise ValueError(f"the auxiliary replay's shift_pad must be >= 0, got {shift_pad}")
+        check_shift("shift_pad", shift_pad)
         self._loss = loss
         self.shift_pad = shift_pad
         self.keys = [*observation_keys(loss.net), CRITIC_INPUTS]

@@ -87,7 +87,7 @@ def test_bad_settings_are_refused() -> None:
         load_config("ppo", ["aux_replay.mirror=1.5"])
     with pytest.raises(ValueError, match=r"aux_replay\.shift_pad is a shift in pixels, >= 0"):
         load_config("ppo", ["aux_replay.shift_pad=-2"])
-    with pytest.raises(ValueError, match="shift_pad must be >= 0, got -1"):
+    with pytest.raises(ValueError, match=r"shift_pad is a shift in pixels, >= 0, got -1"):
         AuxiliaryReplay(_loss(), capacity=8, mini_batch_size=8, shift_pad=-1)
 
 
