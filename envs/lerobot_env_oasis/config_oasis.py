@@ -9,6 +9,7 @@ from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
+from lerobot_env_oasis.keys import AGENT_POS, PIXELS
 from oasis_torchrl.config import EmbeddedServerConfig
 from oasis_torchrl.config import EnvConfig as OasisSettings
 from oasis_torchrl.config.env import LOCAL, RewardConfig
@@ -16,8 +17,6 @@ from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, FPS
 
 ENV_TYPE = "oasis"
 REWARDS = ("distance", "return")
-AGENT_POS = "agent_pos"
-PIXELS = "pixels"
 
 _SETTINGS = OasisSettings()
 _SERVER = EmbeddedServerConfig()

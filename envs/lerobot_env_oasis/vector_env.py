@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -36,7 +36,8 @@ from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 from tensordict import TensorDictBase
 
-from lerobot_env_oasis.config_oasis import AGENT_POS, PIXELS, OasisEnvConfig
+from lerobot_env_oasis.keys import AGENT_POS, PIXELS
+from oasis_torchrl.config import EnvConfig as OasisSettings
 from oasis_torchrl.envs import make_env
 from oasis_torchrl.envs.per_frame import FrameObservation, FrameStepper
 from oasis_torchrl.protocol import ACTION_DIM, CAMERAS
@@ -44,6 +45,24 @@ from oasis_torchrl.protocol import ACTION_DIM, CAMERAS
 logger = logging.getLogger(__name__)
 
 NEXT = "next"
+
+
+class VectorEnvSettings(Protocol):
+    """What the vector env reads of its config, :class:`~lerobot_env_oasis.OasisEnvConfig` (an
+    interface of its own, so the config can build the env without the two importing each other).
+    """
+
+    task: str | None
+    fps: int
+    episode_length: int
+    observation_height: int
+    observation_width: int
+    reward: str
+    render_mode: str
+
+    def settings(self, num_envs: int) -> OasisSettings:
+        """The project's env settings of ``num_envs`` sessions."""
+        ...
 
 
 def batch_seed(seed: int | Sequence[int] | None) -> int | None:
@@ -74,6 +93,7 @@ class OasisVectorEnv(gym.vector.VectorEnv):
         num_envs: sessions (``--eval.batch_size``).
 
     Example:
+        >>> from lerobot_env_oasis import OasisEnvConfig
         >>> env = OasisVectorEnv(OasisEnvConfig(episode_length=8), num_envs=2)
         >>> observation, info = env.reset(seed=[5, 6])
         >>> observation["pixels"]["front"].shape, observation["agent_pos"].shape
@@ -89,7 +109,7 @@ class OasisVectorEnv(gym.vector.VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, config: OasisEnvConfig, num_envs: int) -> None:
+    def __init__(self, config: VectorEnvSettings, num_envs: int) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         self.config = config
