@@ -352,6 +352,11 @@ class PPOSettings:
         default_factory=lambda: [0.2, 0.05],
         help="[throttle, steering] action scale after a warm start (null: the source's)",
     )
+    warm_start_sharpen: float = option(
+        1.0,
+        help="a mixture warm start's component logits multiplied by this (> 1: PPO samples "
+        "the clone's most probable manoeuvre more often; 1 keeps them)",
+    )
     collector: CollectorConfig = option(default_factory=CollectorConfig, help="experience")
     exploration: ExplorationConfig = option(
         default_factory=ExplorationConfig, help="the collecting policy's noise"
@@ -382,6 +387,8 @@ class PPOSettings:
         ):
             if on and not self.loss.aux_coeff:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
+        if not self.warm_start_sharpen > 0:
+            raise ValueError(f"warm_start_sharpen must be positive, got {self.warm_start_sharpen}")
         if self.loss.encoder_grad not in ENCODER_GRADS:
             raise ValueError(
                 f"loss.encoder_grad must be one of {ENCODER_GRADS}, got {self.loss.encoder_grad!r}"

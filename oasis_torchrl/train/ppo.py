@@ -71,7 +71,8 @@ class PPOResult:
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with its scale reset
-    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's);
+    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's)
+    and its mixture's component logits multiplied by ``cfg.warm_start_sharpen``;
     with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
@@ -86,7 +87,14 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         net = load_net(cfg.init_from)
         if cfg.warm_start_scale is not None:
             net.set_scale(OmegaConf.to_object(cfg.warm_start_scale))
-        logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
+        if cfg.warm_start_sharpen != 1:
+            net.sharpen_components(cfg.warm_start_sharpen)
+        logger.info(
+            "warm start from %s (scale %s, component logits x%g)",
+            cfg.init_from,
+            cfg.warm_start_scale,
+            cfg.warm_start_sharpen,
+        )
     else:
         network = OmegaConf.to_container(cfg.network)
         config = {"cameras": cameras, "image_size": image_size, **network}

@@ -246,6 +246,30 @@ def test_warm_start_loads_a_lerobot_policy_and_resets_the_scale(tmp_path: Path) 
         build_net(wrong_size, CAMERAS)
 
 
+def test_a_sharpened_warm_start_commits_to_the_clones_manoeuvre(tmp_path: Path) -> None:
+    source = DrivingNet(DrivingNetConfig(image_size=(32, 48)))
+    with torch.no_grad():  # a clone that weighs its manoeuvres by what it sees
+        source.actor[-1].weight[: source.logit_outputs].normal_(0.0, 0.05)
+    folder = export_lerobot(source, tmp_path / "bc_policy")
+    cfg = load_config("ppo", [*TINY_ENV, f"init_from={folder}", "warm_start_sharpen=4"])
+    features = torch.randn(64, source.config.features_dim)
+    before = source.action_params(features)["logits"].softmax(-1)
+    after = build_net(cfg, CAMERAS).action_params(features)["logits"].softmax(-1)
+    assert torch.equal(after.argmax(-1), before.argmax(-1))  # the same deterministic action
+    assert (after.max(-1).values >= before.max(-1).values).all()
+    unchosen_before, unchosen_after = 1 - before.max(-1).values, 1 - after.max(-1).values
+    assert unchosen_before.mean() > 0.05  # the clone hedges ...
+    assert unchosen_after.mean() < unchosen_before.mean() / 4  # ... its warm start far less
+
+    with pytest.raises(ValueError, match=r"warm_start_sharpen must be positive, got 0"):
+        load_config("ppo", [*TINY_ENV, f"init_from={folder}", "warm_start_sharpen=0"])
+    unimodal = export_lerobot(
+        DrivingNet(DrivingNetConfig(image_size=(32, 48), head="tanh_normal")), tmp_path / "tanh"
+    )
+    with pytest.raises(ValueError, match=r"only the mixture head has components"):
+        build_net(OmegaConf.merge(cfg, {"init_from": str(unimodal)}), CAMERAS)
+
+
 def test_a_refused_network_closes_the_env_it_opened(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
