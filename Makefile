@@ -79,8 +79,11 @@ lock: venv-python $(STAMP)
 # hours and has its own target.
 LEARNING_BENCH := benchmarks/learning.py benchmarks/state_clone.py benchmarks/perception.py \
 	benchmarks/perception_data.py
+# Run by hand: diagnostics of a trained policy named on the command line, and PPO on the
+# privileged state (hours; BENCHMARKS.md, "state_ppo.py").
+BY_HAND := benchmarks/crashes.py benchmarks/sampled_policy.py benchmarks/state_ppo.py
 bench: venv-python $(STAMP)
-	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/*.py)); do \
+	set -e; for script in $(filter-out $(LEARNING_BENCH) $(BY_HAND),$(wildcard benchmarks/*.py)); do \
 		$(PY) $$script; done
 
 bench-learning: venv-python $(STAMP)
