@@ -36,15 +36,6 @@ from oasis_torchrl.models.distributions import ACTION_BOUND, TanhNormalMixture
 from oasis_torchrl.train.evaluate import Evaluator
 
 
-def most_probable(dist: TanhNormalMixture, values: torch.Tensor) -> torch.Tensor:
-    """``values`` ``[*B, K, *E]`` (the locations or scales) of each row's most probable
-    component, ``[*B, *E]``."""
-    component = dist.logits.argmax(-1)
-    index = component.reshape(*component.shape, 1, *([1] * dist.event_dims))
-    index = index.expand(*component.shape, 1, *dist.event_shape)
-    return values.gather(component.dim(), index).squeeze(component.dim())
-
-
 def act(dist: TanhNormalMixture, mode: str) -> torch.Tensor:
     """The action chunk of ``mode`` (see the module's docs)."""
     if mode == "deterministic":
@@ -55,7 +46,7 @@ def act(dist: TanhNormalMixture, mode: str) -> torch.Tensor:
         uniform = torch.rand(dist.batch_shape)
         return dist.from_noise(uniform, torch.zeros(*dist.batch_shape, *dist.event_shape))
     if mode == "deviations":
-        loc, scale = most_probable(dist, dist.loc), most_probable(dist, dist.scale)
+        loc, scale = dist.most_probable(dist.loc), dist.most_probable(dist.scale)
         return torch.tanh(loc + scale * torch.randn_like(loc)).clamp(-ACTION_BOUND, ACTION_BOUND)
     raise ValueError(f"unknown mode {mode!r}")
 

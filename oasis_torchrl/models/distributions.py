@@ -215,10 +215,22 @@ class TanhNormalMixture(D.Distribution):
         expanded = values.expand(*component.shape[: -len(self.batch_shape) or None], *values.shape)
         return expanded.gather(len(component.shape), index).squeeze(len(component.shape))
 
+    def most_probable(self, values: torch.Tensor) -> torch.Tensor:
+        """``values`` ``[*B, K, *E]`` (e.g. :attr:`loc` or :attr:`scale`) at each row's most
+        probable component, ``[*B, *E]``.
+
+        Example:
+            >>> loc = torch.tensor([[[-1.0], [1.0]]])
+            >>> dist = TanhNormalMixture(torch.tensor([[0.0, 2.0]]), loc, torch.ones_like(loc), 1)
+            >>> dist.most_probable(dist.loc)
+            tensor([[1.]])
+        """
+        return self._component(values, self.logits.argmax(-1))
+
     @property
     def deterministic_sample(self) -> torch.Tensor:
         """The most probable component's chunk, ``tanh(loc)`` (the policy commits to it)."""
-        return torch.tanh(self._component(self.loc, self.logits.argmax(-1)))
+        return torch.tanh(self.most_probable(self.loc))
 
     def entropy(self) -> torch.Tensor:
         """Unbiased estimate ``[*B]`` of the entropy ``-E[log p(a)]``: ``entropy_samples``
