@@ -35,6 +35,8 @@ from oasis_torchrl.models.config import MIXTURE
 from oasis_torchrl.models.distributions import ACTION_BOUND, TanhNormalMixture
 from oasis_torchrl.train.evaluate import Evaluator
 
+MODES = ("deterministic", "sampled", "components", "deviations")
+
 
 def act(dist: TanhNormalMixture, mode: str) -> torch.Tensor:
     """The action chunk of ``mode`` (see the module's docs)."""
@@ -97,9 +99,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1000)
     parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
     parser.add_argument("--prompt", default="urban")
-    parser.add_argument(
-        "--modes", nargs="+", default=["deterministic", "sampled", "components", "deviations"]
-    )
+    parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
     args = parser.parse_args()
     net = load_net(args.policy).eval()
     if net.config.head != MIXTURE:
