@@ -9,7 +9,10 @@ episode of ``--steps`` chunks), then writes it several ways, each timed best of 
 - ``lerobot``: ``LeRobotDataset.create`` + ``add_frame`` + ``save_episode`` + ``finalize`` on
   rows already in memory (LeRobot's own overhead on top of the floor);
 - ``recorder``: :class:`~oasis_torchrl.data.LeRobotRecorder` on the rollout TensorDict (adds our
-  mapping, validation and the per-episode spill of frames to disk).
+  mapping, validation and the per-episode spill of frames to disk), with the encoder threads'
+  image statistics kept from level counts (:func:`oasis_torchrl.compat.count_image_statistics`);
+- ``recorder_lerobot_stats``: the same with LeRobot's own running statistics (the baseline of
+  ``counted_stats_speedup``; ``lerobot`` runs with them too).
 
 Also reports what the time above the floor is made of: LeRobot's per-frame work in its encoder
 threads (PIL round trip, running image statistics), its per-episode work (parquet, stats,
@@ -23,13 +26,14 @@ Usage: ``python benchmarks/export_speed.py [--steps 12 --num-envs 2 --codecs h26
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from fractions import Fraction
 from pathlib import Path
 
@@ -37,12 +41,14 @@ import av
 import numpy as np
 import torch
 from lerobot.configs.video import RGBEncoderConfig
-from lerobot.datasets.compute_stats import RunningQuantileStats, auto_downsample_height_width
+from lerobot.datasets import compute_stats
+from lerobot.datasets.compute_stats import auto_downsample_height_width
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from PIL import Image
 from tensordict import TensorDictBase
 
-from oasis_torchrl.data import LeRobotRecorder
+from oasis_torchrl.compat import CountedImageStats
+from oasis_torchrl.data import LeRobotRecorder, writer
 from oasis_torchrl.data.chunk_rows import batch_to_rows, infer_layout
 from oasis_torchrl.data.episode_buffer import EpisodeBuffer
 from oasis_torchrl.data.features import build_features, check_columns
@@ -52,6 +58,21 @@ from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
 
 FPS = 20
+LEROBOT_STATS = CountedImageStats.__bases__[0]
+"""LeRobot's own ``RunningQuantileStats`` (the writer puts the counted one in its place)."""
+
+
+@contextlib.contextmanager
+def lerobot_statistics() -> Iterator[None]:
+    """The encoder threads keep LeRobot's own running image statistics within the block."""
+    installed, install = compute_stats.RunningQuantileStats, writer.count_image_statistics
+    compute_stats.RunningQuantileStats = LEROBOT_STATS
+    writer.count_image_statistics = lambda: None
+    try:
+        yield
+    finally:
+        compute_stats.RunningQuantileStats = installed
+        writer.count_image_statistics = install
 
 
 def record_rollout(num_envs: int, steps: int, width: int, height: int) -> TensorDictBase:
@@ -193,17 +214,19 @@ def lerobot_per_frame_us(image: np.ndarray, repeats: int = 50) -> dict[str, floa
             work()
         return (time.perf_counter() - start) / repeats * 1e6
 
-    stats = RunningQuantileStats()
+    def update_stats(stats: compute_stats.RunningQuantileStats) -> Callable[[], None]:
+        def update() -> None:
+            small = auto_downsample_height_width(image.transpose(2, 0, 1))
+            stats.update(small.transpose(1, 2, 0).reshape(-1, 3))
 
-    def update_stats() -> None:
-        small = auto_downsample_height_width(image.transpose(2, 0, 1))
-        stats.update(small.transpose(1, 2, 0).reshape(-1, 3))
+        return update
 
     return {
         "pil_round_trip_us": per_frame(lambda: av.VideoFrame.from_image(Image.fromarray(image))),
         "direct_from_ndarray_us": per_frame(lambda: av.VideoFrame.from_ndarray(image, "rgb24")),
         "frame_copy_us": per_frame(image.copy),
-        "running_stats_us": per_frame(update_stats),
+        "running_stats_us": per_frame(update_stats(LEROBOT_STATS())),
+        "counted_stats_us": per_frame(update_stats(CountedImageStats())),
     }
 
 
@@ -248,10 +271,12 @@ def benchmark_codec(
     floor_dir.mkdir(exist_ok=True)
     floor = best_of(repeats, lambda: time_floor(images, encoder, floor_dir))
     features = build_features(layout)
-    lerobot = min(
-        (time_lerobot(episodes, features, encoder, fresh("lerobot")) for _ in range(repeats)),
-        key=lambda timing: timing["total_s"],
-    )
+    with lerobot_statistics():
+        lerobot = min(
+            (time_lerobot(episodes, features, encoder, fresh("lerobot")) for _ in range(repeats)),
+            key=lambda timing: timing["total_s"],
+        )
+        baseline = best_of(repeats, lambda: time_recorder(rollout, encoder, fresh("recorder")))
     recorder = best_of(repeats, lambda: time_recorder(rollout, encoder, fresh("recorder")))
     rate = lambda seconds: round(total_rows / seconds, 1)  # noqa: E731
     return {
@@ -260,6 +285,8 @@ def benchmark_codec(
         "floor_rows_per_s": rate(floor),
         "lerobot_rows_per_s": rate(lerobot["total_s"]),
         "recorder_rows_per_s": rate(recorder),
+        "recorder_lerobot_stats_rows_per_s": rate(baseline),
+        "counted_stats_speedup": round(baseline / recorder, 3),
         "recorder_vs_floor": round(floor / recorder, 3),
         "lerobot_vs_floor": round(floor / lerobot["total_s"], 3),
         "seconds": {
@@ -268,6 +295,7 @@ def benchmark_codec(
             "lerobot_save_episode": round(lerobot["save_episode_s"], 3),
             "lerobot_finalize": round(lerobot["finalize_s"], 3),
             "recorder_total": round(recorder, 3),
+            "recorder_lerobot_stats_total": round(baseline, 3),
         },
         "stored_psnr_db": stored_psnr(work / "recorder", rollout),
         "bytes_per_row": round(

@@ -9,6 +9,12 @@ misbehaving on a layout it does not know). What is used, and why no public API d
   :func:`dropped_video_frames`): it was built for live cameras and drops a frame when a camera's
   queue stays full for 0.1 s. Frames replayed from a rollout must all land, so the writer waits
   for queue room before each frame and refuses to save an episode that lost one anyway.
+- LeRobot's running image statistics (:func:`count_image_statistics`): each streaming encoder
+  thread updates LeRobot's ``RunningQuantileStats`` with every frame it encodes, and at the
+  main job's 96x64 that update (float casts, reductions and a 5000-bin histogram per channel)
+  costs more than encoding the frame. For 8-bit frames :class:`CountedImageStats` derives the
+  same statistics from one count of each channel's 256 levels; the encoder thread creates its
+  tracker from LeRobot's module, so the writer puts that class there.
 - TorchRL's ``RayCollector`` (:func:`drop_ray_collectors`): it can add remote collectors but not
   remove one, so after a worker died the survivors are kept by rewriting its actor list and
   those of its weight senders.
@@ -115,6 +121,122 @@ def dropped_video_frames(dataset: Any) -> dict[str, int]:
     encoder = _streaming_encoder(dataset)
     counts = {} if encoder is None else encoder._dropped_frames
     return {key: count for key, count in counts.items() if count}
+
+
+# -- LeRobot: the streaming encoder's running image statistics ----------------------------------
+
+
+LEVELS = 256
+"""The values an 8-bit channel takes."""
+
+
+@functools.cache
+def _counted_image_stats() -> type:
+    """:class:`CountedImageStats`, built on first use (it subclasses a LeRobot class)."""
+    import numpy as np
+    from lerobot.datasets.compute_stats import RunningQuantileStats
+
+    class CountedImageStats(RunningQuantileStats):
+        """LeRobot's running statistics, updated from per-channel level counts for uint8 rows.
+
+        For ``uint8`` batches ``[..., channels]`` every statistic LeRobot keeps (min, max,
+        mean, mean of squares, the quantile histograms) follows from how often each channel
+        takes each of its 256 levels, one ``bincount`` per batch instead of float reductions
+        and a sorted histogram per channel. The histograms and extremes are LeRobot's to the
+        bit; the means are exact sums (LeRobot's float32 sums of squares put its standard
+        deviation of camera frames about 4e-5 off). Other dtypes (depth, state vectors) take
+        LeRobot's own update.
+
+        Example:
+            >>> import numpy as np
+            >>> from oasis_torchrl.compat import CountedImageStats
+            >>> LeRobotStats = CountedImageStats.__bases__[0]  # even once installed in LeRobot
+            >>> frames = np.random.default_rng(0).integers(0, 256, (2, 6144, 3), dtype=np.uint8)
+            >>> counted, lerobot = CountedImageStats(), LeRobotStats()
+            >>> for frame in frames:
+            ...     counted.update(frame)
+            ...     lerobot.update(frame)
+            >>> ours, theirs = counted.get_statistics(), lerobot.get_statistics()
+            >>> all(np.allclose(ours[key], theirs[key], rtol=1e-4) for key in theirs)
+            True
+        """
+
+        def update(self, batch: np.ndarray) -> None:
+            if batch.dtype != np.uint8:
+                super().update(batch)
+                return
+            rows = batch.reshape(-1, batch.shape[-1])
+            channels = rows.shape[1]
+            offsets = np.arange(channels, dtype=np.intp) * LEVELS
+            counts = np.bincount((rows + offsets).ravel(), minlength=channels * LEVELS)
+            counts = counts.reshape(channels, LEVELS)
+            present = counts > 0
+            low = present.argmax(axis=1).astype(np.float32)
+            high = (LEVELS - 1 - present[:, ::-1].argmax(axis=1)).astype(np.float32)
+            levels = np.arange(LEVELS, dtype=np.float64)
+            mean = (counts @ levels / len(rows)).astype(np.float32)
+            mean_of_squares = (counts @ levels**2 / len(rows)).astype(np.float32)
+            if self._count == 0:
+                self._mean, self._mean_of_squares = np.zeros_like(mean), np.zeros_like(mean)
+                self._min, self._max = low, high
+                self._histograms = [np.zeros(self._num_quantile_bins) for _ in range(channels)]
+                self._bin_edges = [
+                    np.linspace(low[i] - 1e-10, high[i] + 1e-10, self._num_quantile_bins + 1)
+                    for i in range(channels)
+                ]
+            elif channels != self._mean.size:
+                raise ValueError(
+                    f"image rows of {channels} channels after rows of {self._mean.size}"
+                )
+            elif np.any(high > self._max) or np.any(low < self._min):
+                self._max, self._min = np.maximum(self._max, high), np.minimum(self._min, low)
+                self._adjust_histograms()
+            self._count += len(rows)
+            weight = len(rows) / self._count
+            self._mean += (mean - self._mean) * weight
+            self._mean_of_squares += (mean_of_squares - self._mean_of_squares) * weight
+            self._add_level_counts(counts)
+
+        def _add_level_counts(self, counts: np.ndarray) -> None:
+            """Each level's count into the bin LeRobot's histogram puts that level in (bins
+            closed on the left, the last one on both sides)."""
+            for histogram, edges, level_counts in zip(
+                self._histograms, self._bin_edges, counts, strict=True
+            ):
+                values = np.arange(LEVELS, dtype=edges.dtype)
+                inside = (values >= edges[0]) & (values <= edges[-1])
+                bins = np.searchsorted(edges, values[inside], side="right") - 1
+                bins = np.minimum(bins, len(histogram) - 1)
+                histogram += np.bincount(bins, level_counts[inside], minlength=len(histogram))
+
+    return CountedImageStats
+
+
+def count_image_statistics() -> None:
+    """Make LeRobot's streaming encoder threads keep their image statistics with
+    :class:`CountedImageStats` (LeRobot's running statistics, updated from level counts).
+
+    Idempotent; the class replaces ``RunningQuantileStats`` in LeRobot's ``compute_stats``
+    module, which the encoder threads read when they start, and behaves as LeRobot's for every
+    input but 8-bit rows (``benchmarks/image_stats.py``).
+
+    Example:
+        >>> from lerobot.datasets import compute_stats
+        >>> count_image_statistics()
+        >>> compute_stats.RunningQuantileStats.__name__
+        'CountedImageStats'
+    """
+    require("lerobot")
+    from lerobot.datasets import compute_stats
+
+    compute_stats.RunningQuantileStats = _counted_image_stats()
+
+
+def __getattr__(name: str) -> Any:
+    # CountedImageStats is built lazily (importing this module must not import LeRobot).
+    if name == "CountedImageStats":
+        return _counted_image_stats()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # -- TorchRL: removing remote collectors from a RayCollector ------------------------------------

