@@ -162,8 +162,8 @@ def _counted_image_stats() -> type:
         """
 
         def update(self, batch: np.ndarray) -> None:
-            if batch.dtype != np.uint8:
-                super().update(batch)
+            if batch.dtype != np.uint8 or batch.size == 0:
+                super().update(batch)  # LeRobot's own update, and its error on an empty batch
                 return
             rows = batch.reshape(-1, batch.shape[-1])
             channels = rows.shape[1]
@@ -218,7 +218,7 @@ def count_image_statistics() -> None:
 
     Idempotent; the class replaces ``RunningQuantileStats`` in LeRobot's ``compute_stats``
     module, which the encoder threads read when they start, and behaves as LeRobot's for every
-    input but 8-bit rows (``benchmarks/image_stats.py``).
+    input but 8-bit rows (``benchmarks/export_speed.py`` times the recorder with both).
 
     Example:
         >>> from lerobot.datasets import compute_stats

@@ -6,7 +6,8 @@ round trip), with the codec set through LeRobot's :class:`~lerobot.configs.video
 That encoder was built for live cameras and drops a frame when its queue stays full for 0.1 s;
 replayed frames must all land, so :func:`write_episode` waits for queue room first and refuses
 to save an episode that lost a frame anyway, and its threads keep their running image
-statistics from level counts, six times faster at 96x64 (:mod:`oasis_torchrl.compat`).
+statistics from level counts, at about a fifth of LeRobot's cost at 96x64
+(:mod:`oasis_torchrl.compat`).
 """
 
 from __future__ import annotations
