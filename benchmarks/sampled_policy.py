@@ -32,7 +32,7 @@ from oasis_torchrl.drivers.policy import PolicyDriver
 from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.actor_critic import observation_keys, observation_spec
 from oasis_torchrl.models.config import MIXTURE
-from oasis_torchrl.models.distributions import ACTION_BOUND, TanhNormalMixture
+from oasis_torchrl.models.distributions import TanhNormalMixture
 from oasis_torchrl.train.evaluate import Evaluator
 
 MODES = ("deterministic", "sampled", "components", "deviations")
@@ -48,8 +48,8 @@ def act(dist: TanhNormalMixture, mode: str) -> torch.Tensor:
         uniform = torch.rand(dist.batch_shape)
         return dist.from_noise(uniform, torch.zeros(*dist.batch_shape, *dist.event_shape))
     if mode == "deviations":
-        loc, scale = dist.most_probable(dist.loc), dist.most_probable(dist.scale)
-        return torch.tanh(loc + scale * torch.randn_like(loc)).clamp(-ACTION_BOUND, ACTION_BOUND)
+        normal = torch.randn(*dist.batch_shape, *dist.event_shape)
+        return dist.component_chunk(dist.logits.argmax(-1), normal)
     raise ValueError(f"unknown mode {mode!r}")
 
 

@@ -203,6 +203,18 @@ class TanhNormalMixture(D.Distribution):
         cumulative = self.log_weights.exp().cumsum(-1)
         last = self.logits.shape[-1] - 1
         component = (cumulative < uniform.unsqueeze(-1)).sum(-1).clamp_max(last)
+        return self.component_chunk(component, normal)
+
+    def component_chunk(self, component: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
+        """``tanh(loc + scale * normal)`` ``[*B, *E]`` of each row's ``component`` ``[*B]``,
+        with ``normal`` ``[*B, *E]`` standard normal deviations (bounded as every action is).
+
+        Example:
+            >>> loc = torch.tensor([[[-1.0], [1.0]]])
+            >>> dist = TanhNormalMixture(torch.zeros(1, 2), loc, torch.ones_like(loc), 1)
+            >>> dist.component_chunk(torch.tensor([1]), torch.zeros(1, 1))
+            tensor([[0.7616]])
+        """
         pre_tanh = self._component(self.loc, component) + self._component(
             self.scale, component
         ) * normal.to(self.loc.dtype)
