@@ -60,7 +60,7 @@ class DemonstrationsConfig:
     # Late reactions record the states a clone reaches when it misses the early cue (the
     # autopilot's own drives change lanes 30-45 m ahead and hold none of them); with the
     # manoeuvre loss and enough demonstrations they are what makes a clone avoid obstacles
-    # (BENCHMARKS.md, "BC without DAgger": 256 of them drive 227.0 m, 256 plain ones 193.9 m).
+    # (BENCHMARKS.md, "BC without DAgger").
     late_reaction: list[float] | None = option(
         default_factory=lambda: [8.0, 40.0],
         help="[near, far] metres: the executed car keeps its lane until the obstacle in it is "
@@ -130,10 +130,9 @@ TRAINING_PROMPTS = (
     "rural road in fog",
 )
 """The scenes the main job learns on: every layout, two lightings, three weathers, and none of the
-held-out scenes the learning benchmark judges on (night, rain, a plain highway or rural road).
-Measured (BENCHMARKS.md, "The main job"): clones of urban demonstrations alone drove 27-91 m on
-those scenes, under half of full throttle's 182.5 m; clones of these five drove 126-189 m (two
-runs), at the cost of the urban scene (181-206 m against 214-242 m on seed 1000)."""
+held-out scenes the learning benchmark judges on (night, rain, a plain highway or rural road):
+clones of urban demonstrations alone drove far less than full throttle on those scenes, clones
+of these five carry over, at some cost on the urban scene (BENCHMARKS.md, "The main job")."""
 
 
 @dataclass
