@@ -102,7 +102,7 @@ class PPOUpdate:
         Why the heads: a fresh critic on a warm-started encoder (whose features are small)
         moves too slowly at the actor's fine-tuning rate and explains less of the returns'
         variance; PPO's advantages are only as good as that fit
-        (docs/experiments/2026-11-25-what-shapes-ppo.md).
+        (docs/experiments/2026-11-24-what-shapes-ppo.md).
 
         Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
         the mean did worse), so at the actor's rate Adam moves it by little more than a random
