@@ -78,9 +78,10 @@ class NetworkConfig(NetworkArchitectureConfig):
         help="a fresh mixture's components spread this far around init_action (keep, left, "
         "right), the middle one most likely",
     )
-    # Steering explores as widely as throttle from scratch: with a tenth of a lane change PPO
-    # found its first lane changes late (BENCHMARKS.md, "PPO from scratch"); the learned scale
-    # shrinks it where the noise costs. A warm start keeps its own (`warm_start_scale`).
+    # Steering explores as widely as throttle from scratch: with a smaller scale PPO found its
+    # first lane changes later, and the learned scale shrinks it anyway
+    # (docs/experiments/2026-11-28-ppo-from-scratch.md). A warm start keeps its own
+    # (`warm_start_scale`).
     init_scale: list[float] = option(
         default_factory=lambda: [0.5, 0.5],
         help="initial scale (before the tanh) of [throttle, steering] of a fresh network",

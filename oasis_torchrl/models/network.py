@@ -161,7 +161,7 @@ class DrivingNet(nn.Module):
         Why bounded: demonstrations hold actions at exactly +-1 (full throttle), which push a
         clone's location far out; float32 ``atanh`` of PPO's samples there saturates near 8.4,
         so the log-probability of a stored action swings by tens of nats per small update and
-        PPO's ratio overflows (most of a fine-tuning's minibatches turned non-finite).
+        PPO's ratio overflows (non-finite fine-tuning minibatches).
         """
         raw = self.actor(features)
         loc = raw[..., self.logit_outputs :].unflatten(-1, self._chunk_shape)

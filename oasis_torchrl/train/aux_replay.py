@@ -1,16 +1,22 @@
 """A replay of past observations for the auxiliary loss: perception trained beside PPO.
 
-Why: PPO's encoder learns to see only from the batch it is updating on, and only as far as the
-policy gradient and the auxiliary head need it there; the encoder needs more frames than one
-batch to read the obstacles ahead.
+Why: PPO's encoder learns to see only from the batch it is updating on, the last 512 env steps,
+and only as far as the policy gradient and the auxiliary head need it there. The same PPO
+handed the privileged state learns to drive, while on the cameras its auxiliary head barely
+reads the obstacle in the car's own lane, and an encoder fitted to the privileged state reads
+it better the more rows it sees (docs/experiments/: the state_ppo, perception and
+perception_data pages). So the encoder needs more frames than one batch.
 
 How: every batch PPO collects also goes into a ring of ``capacity`` rows (the observations the
 encoder reads and their ``"critic_inputs"``, the frames kept as uint8), and after each PPO
 update the encoder and the auxiliary head take ``steps`` extra gradient steps on the auxiliary
 loss alone, on minibatches drawn uniformly from the ring. Only the simulator's privileged state
 is a label, so this uses no demonstrations: every row is an env step PPO counted. The ring is
-not checkpointed (a resumed run refills it). Off by default; the ``ppo_scratch`` preset turns it
-on (its measurements: docs/experiments/).
+not checkpointed (a resumed run refills it).
+
+``aux_replay.capacity`` defaults to 0 (off): alone it did not pay for its training time; the
+``ppo_scratch`` preset turns it on with the constant's warm-up
+(docs/experiments/2026-11-28-ppo-from-scratch.md has the runs).
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
 """Perception before PPO: the encoder fitted to the privileged state of the run's first env steps.
 
-Why: PPO from scratch on the cameras learns to see and to act at once; an encoder that already
-reads the road and the obstacles ahead gives its actor and critic features worth learning on.
+Why: PPO from scratch on the cameras learns to see and to act at once, and its encoders never
+learn to read the obstacle in the car's own lane, the one number a lane change hangs on; handed
+the privileged state, or started from an encoder fitted first to the autopilot's drives, the
+same PPO drives much farther (docs/experiments/2026-11-28-ppo-from-scratch.md).
 
 How: the first ``warmup.frames`` env steps are driven, by the initial policy or by a named driver
 that needs no expert (``warmup.driver``), and counted in ``collector.total_frames``; their
@@ -10,8 +12,12 @@ observations and privileged state go into a ring
 take ``warmup.steps`` minibatches of the auxiliary loss alone, with an Adam of their own. Then PPO
 starts, its actor and critic fresh on features that already see (its learning rates anneal over
 the whole budget, the warm-up's env steps included). No demonstration: only the simulator's
-privileged state is a label. Off by default; the ``ppo_scratch`` preset turns it on, driven by
-the best constant action (its measurements: docs/experiments/).
+privileged state is a label.
+
+``warmup.frames`` defaults to 0 (off): driven by the initial policy the warm-up changed
+nothing, and driven by the best constant action (``constant:throttle=1.0,steering=0.0``) it
+helped on the targets' seed but not on other seeds and prompts; the ``ppo_scratch`` preset turns
+it on (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations

@@ -96,13 +96,16 @@ class PPOUpdate:
         (``null``: ``optim.lr``).
 
         Why the heads: a fresh critic on a warm-started encoder (whose features are small)
-        moves too slowly at the actor's fine-tuning rate, and PPO's advantages are only as good
-        as the critic's fit.
+        moves too slowly at the actor's fine-tuning rate and explains less of the returns'
+        variance; PPO's advantages are only as good as that fit
+        (docs/experiments/2026-11-24-what-shapes-ppo.md).
 
         Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
         the mean did worse), so at the actor's rate Adam moves it by little more than a random
-        walk; pooled per action number (``optim.pool_scale``) and at its own rate it shrinks
-        where the noise costs reward (BENCHMARKS.md, "Exploration that shrinks").
+        walk, and PPO's scale stays near its initial value. With the scale pooled per action
+        number (``optim.pool_scale``) and its own rate, a fine-tuned clone cuts its steering
+        scale and keeps its throttle scale
+        (docs/experiments/2026-11-26-exploration-that-shrinks.md).
         """
         heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
         head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
