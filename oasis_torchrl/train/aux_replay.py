@@ -12,11 +12,8 @@ encoder reads and their ``"critic_inputs"``, the frames kept as uint8), and afte
 update the encoder and the auxiliary head take ``steps`` extra gradient steps on the auxiliary
 loss alone, on minibatches drawn uniformly from the ring. Only the simulator's privileged state
 is a label, so this uses no demonstrations: every row is an env step PPO counted. The ring is
-not checkpointed (a resumed run refills it).
-
-``aux_replay.capacity`` defaults to 0 (off): alone it did not pay for its training time; the
-``ppo_scratch`` preset turns it on with the constant's warm-up
-(docs/experiments/2026-11-28-ppo-from-scratch.md has the runs).
+not checkpointed (a resumed run refills it). Off by default; the ``ppo_scratch`` preset turns it
+on (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations
