@@ -136,10 +136,8 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.evaluate",
             "oasis_torchrl.train.comparison",
             "oasis_torchrl.train.driving",
-            "oasis_torchrl.train.exploration",
             "oasis_torchrl.train.aux_replay",
             "oasis_torchrl.train.perception_warmup",
-            "oasis_torchrl.train.mirror",
             "oasis_torchrl.train.shift",
             "oasis_torchrl.allocator",
         ),
@@ -150,6 +148,7 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.config",
             "oasis_torchrl.config.loading",
+            "oasis_torchrl.config.presets",
             "oasis_torchrl.config.arguments",
             "oasis_torchrl.config.env",
             "oasis_torchrl.config.training",
@@ -161,6 +160,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.config.ray",
             "oasis_torchrl.config.viewing",
             "oasis_torchrl.options",
+            "oasis_torchrl.shipped",
         ),
     ),
     "data": ApiPage(
