@@ -148,6 +148,7 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.config",
             "oasis_torchrl.config.loading",
+            "oasis_torchrl.config.presets",
             "oasis_torchrl.config.arguments",
             "oasis_torchrl.config.presets",
             "oasis_torchrl.config.env",
