@@ -26,8 +26,21 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
+OFFLINE_ALTERNATIVE = "env.reward.depth_model=small"
+"""The setting that needs no download: the small depth network shipped with the package."""
 DepthFn = Callable[[torch.Tensor], torch.Tensor]
 InputSize = int | tuple[int, int]
+
+
+class DepthModelError(ValueError):
+    """A depth model cannot be loaded; the message names the model, the cause and the
+    alternative.
+
+    >>> raise DepthModelError("depth model 'x' cannot be loaded: ...")
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.rewards.depth_sources.DepthModelError: depth model 'x' cannot be loaded: ...
+    """
 
 
 @runtime_checkable
@@ -252,8 +265,16 @@ class MonocularDepth:
             from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
             logger.info("loading depth model %s", self.source)
-            self._model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
-            processor = AutoImageProcessor.from_pretrained(self.source)
+            try:
+                model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
+                processor = AutoImageProcessor.from_pretrained(self.source)
+            except (OSError, ValueError) as error:  # not cached offline, no such model, bad files
+                raise DepthModelError(
+                    f"depth model {str(self.source)!r} cannot be loaded: {error_cause(error)}; "
+                    f"offline, use the small network shipped with the package: "
+                    f"{OFFLINE_ALTERNATIVE}"
+                ) from None
+            self._model = model
             self._preprocess = DepthPreprocess.from_processor(processor, self.input_size)
         return self._model, self._preprocess
 
@@ -276,3 +297,13 @@ class MonocularDepth:
             align_corners=False,
         ).squeeze(1)
         return nearness.to(rgb.device)
+
+
+def error_cause(error: BaseException) -> str:
+    """An error's type and the first line of its message, for one-line reports.
+
+    >>> error_cause(OSError("no such model\\nlong advice"))
+    'OSError: no such model'
+    """
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[0] if lines else 'no message'}"
