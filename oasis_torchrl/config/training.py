@@ -590,9 +590,9 @@ class DepthTrainConfig:
         "in turn",
     )
     num_envs: int = option(4, help="episodes driven at once (one round)")
-    episodes: int = option(48, help="episodes driven (a multiple of num_envs)")
-    steps: int = option(50, help="steps per episode (one frame each; a crash starts another)")
-    epochs: int = option(12, help="passes over the frames")
+    episodes: int = option(32, help="episodes driven (a multiple of num_envs)")
+    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)")
+    epochs: int = option(15, help="passes over the frames")
     batch_size: int = option(32, help="frames per step")
     lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
     weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
@@ -600,6 +600,11 @@ class DepthTrainConfig:
         0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
     )
     seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    frames_file: str | None = option(
+        None,
+        help="keep the driven frames and their nearness here: read when the file exists (no "
+        "driving), else written after driving (null: not kept)",
+    )
     output: str = option("outputs/depth/depth_small.pt", help="the weights file written")
     progress: bool = option(True, help="tqdm progress bars")
 

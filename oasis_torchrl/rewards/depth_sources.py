@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import torch
@@ -270,7 +272,8 @@ class MonocularDepth:
                 processor = AutoImageProcessor.from_pretrained(self.source)
             except (OSError, ValueError) as error:  # not cached offline, no such model, bad files
                 raise DepthModelError(
-                    f"depth model {str(self.source)!r} cannot be loaded: {error_cause(error)}; "
+                    f"depth model {str(self.source)!r} cannot be loaded: "
+                    f"{_why_not_loaded(self.source, error)}; "
                     f"offline, use the small network shipped with the package: "
                     f"{OFFLINE_ALTERNATIVE}"
                 ) from None
@@ -300,10 +303,26 @@ class MonocularDepth:
 
 
 def error_cause(error: BaseException) -> str:
-    """An error's type and the first line of its message, for one-line reports.
+    """An error's type and the first line of its message, for one-line reports (web addresses
+    replaced by "the hub").
 
-    >>> error_cause(OSError("no such model\\nlong advice"))
-    'OSError: no such model'
+    >>> error_cause(OSError("cannot reach 'https://example.org/x'\\nlong advice"))
+    'OSError: cannot reach the hub'
     """
     lines = str(error).strip().splitlines()
-    return f"{type(error).__name__}: {lines[0] if lines else 'no message'}"
+    first = re.sub(r"'?https?://[^\s']+'?", "the hub", lines[0]) if lines else "no message"
+    return f"{type(error).__name__}: {first}"
+
+
+def _why_not_loaded(source: str | os.PathLike[str], error: BaseException) -> str:
+    """Why ``from_pretrained(source)`` failed, in words a user can act on."""
+    from huggingface_hub import constants
+
+    text = str(source)
+    if Path(text).expanduser().is_dir():
+        return f"the folder holds no depth model ({error_cause(error)})"
+    if isinstance(source, os.PathLike) or text.startswith(("/", ".", "~")):
+        return "no such folder"
+    if constants.HF_HUB_OFFLINE:
+        return "it is not in the local cache, and downloads are off (HF_HUB_OFFLINE)"
+    return error_cause(error)

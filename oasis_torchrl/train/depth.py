@@ -62,6 +62,26 @@ class DepthFrames:
         """The rows where ``mask`` is True."""
         return DepthFrames(self.frames[mask], self.nearness[mask], self.rounds[mask])
 
+    def save(self, path: str | Path) -> None:
+        """Write the rows to ``path`` (a torch file; nearness as float16)."""
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        rows = dataclasses.asdict(self) | {"nearness": self.nearness.half()}
+        torch.save(rows, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> DepthFrames:
+        """The rows :meth:`save` wrote to ``path``.
+
+        Example:
+            >>> import tempfile
+            >>> path = f"{tempfile.mkdtemp()}/frames.pt"
+            >>> DepthFrames(torch.zeros(2, 1, 1, 3), torch.ones(2, 1, 1), torch.zeros(2)).save(path)
+            >>> DepthFrames.load(path).nearness.dtype
+            torch.float32
+        """
+        rows = torch.load(path, weights_only=True)
+        return cls(rows["frames"], rows["nearness"].float(), rows["rounds"])
+
 
 @dataclass
 class DepthTrainResult:
@@ -123,6 +143,19 @@ def collect_depth_frames(settings: DepthTrainConfig) -> DepthFrames:
     finally:
         env.close()
     return DepthFrames(torch.cat(frames), torch.cat(nearness), torch.cat(round_ids))
+
+
+def frames_for(settings: DepthTrainConfig) -> DepthFrames:
+    """The frames of ``settings.frames_file`` if it exists, else freshly driven ones (kept there
+    when it is set)."""
+    kept = settings.frames_file
+    if kept is not None and Path(kept).exists():
+        logger.info("reading the frames of %s (no driving)", kept)
+        return DepthFrames.load(kept)
+    data = collect_depth_frames(settings)
+    if kept is not None:
+        data.save(kept)
+    return data
 
 
 def split_rounds(data: DepthFrames, validation: float) -> tuple[DepthFrames, DepthFrames | None]:
@@ -215,7 +248,7 @@ def train_depth(cfg: DepthTrainConfig | DictConfig) -> DepthTrainResult:
     """Collect frames and depth, train the network, write the weights file (``output``)."""
     settings = as_settings(cfg)
     started = time.perf_counter()
-    data = collect_depth_frames(settings)
+    data = frames_for(settings)
     collected = time.perf_counter()
     train, held = split_rounds(data, settings.validation)
     logger.info(
