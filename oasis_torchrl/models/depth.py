@@ -107,11 +107,11 @@ class DepthNet(nn.Module):
 def check_frames(rgb: torch.Tensor, divisor: int) -> None:
     """Refuse anything but uint8 ``[N, H, W, 3]`` with H and W multiples of ``divisor``.
 
-    >>> check_frames(torch.zeros(1, 6, 8, 3, dtype=torch.uint8), 4)
+    >>> check_frames(torch.zeros(1, 6, 8, 3, dtype=torch.uint8), 4)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: DepthNet needs uint8 [N, H, W, 3] frames with H and W multiples of 4, got torch.uint8 [1, 6, 8, 3]
-    """  # noqa: E501
+    ValueError: DepthNet needs uint8 [N, H, W, 3] frames ... got torch.uint8 [1, 6, 8, 3]
+    """
     if (
         rgb.dtype != torch.uint8
         or rgb.ndim != 4

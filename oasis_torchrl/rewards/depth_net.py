@@ -135,6 +135,26 @@ def save_weights(
     return target
 
 
+def check_fits(net: torch.nn.Module, state: dict[str, torch.Tensor]) -> None:
+    """Refuse a state dict whose names or shapes differ from ``net``'s, naming the first misfit.
+
+    >>> check_fits(torch.nn.Linear(2, 1), {"weight": torch.zeros(1, 3), "bias": torch.zeros(1)})
+    Traceback (most recent call last):
+    ...
+    ValueError: the weights do not fit their config: weight is [1, 3], not [1, 2]
+    """
+    expected = net.state_dict()
+    for name in sorted(expected.keys() | state.keys()):
+        if name not in state or name not in expected:
+            where = "missing from the file" if name not in state else "not in the network"
+            problem = f"{name} is {where}"
+        elif state[name].shape != expected[name].shape:
+            problem = f"{name} is {list(state[name].shape)}, not {list(expected[name].shape)}"
+        else:
+            continue
+        raise ValueError(f"the weights do not fit their config: {problem}")
+
+
 def load_small_depth(
     camera: str = "front", path: str | os.PathLike[str] | None = None
 ) -> SmallDepth:
@@ -154,6 +174,7 @@ def load_small_depth(
         if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
             raise ValueError(f"not a weights file of {WEIGHTS_FORMAT!r}")
         net = DepthNet(config_from_dict(payload["config"]))
+        check_fits(net, payload["state_dict"])
         net.load_state_dict(payload["state_dict"])
         image_size = tuple(payload["image_size"])
     except Exception as error:  # any failure to read the file is reported the same way
