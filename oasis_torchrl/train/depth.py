@@ -273,7 +273,8 @@ def train_depth(cfg: DepthTrainConfig | DictConfig) -> DepthTrainResult:
     validation_loss = evaluate_loss(net, held) if held is not None else None
     finished = time.perf_counter()
     meta = {
-        "settings": dataclasses.asdict(settings),
+        # Where files were is of no use to a reader of the weights (and names this machine).
+        "settings": dataclasses.asdict(settings) | {"output": None, "frames_file": None},
         "frames": len(data),
         "train_loss": losses[-1],
         "validation_loss": validation_loss,
