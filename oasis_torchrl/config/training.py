@@ -521,6 +521,7 @@ class DepthTrainConfig:
         for name, value in positive.items():
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
-        check_share("validation", self.validation)
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
         if not self.drivers or not self.prompts:
             raise ValueError("drivers and prompts must each name at least one")
