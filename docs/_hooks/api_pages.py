@@ -55,6 +55,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.rewards.base",
             "oasis_torchrl.rewards.depth_collision",
             "oasis_torchrl.rewards.depth_sources",
+            "oasis_torchrl.rewards.depth_net",
             "oasis_torchrl.rewards.ground_truth",
             "oasis_torchrl.rewards.shaping",
         ),
@@ -119,6 +120,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.models.actor_critic",
             "oasis_torchrl.models.privileged",
             "oasis_torchrl.models.checkpoint",
+            "oasis_torchrl.models.depth",
         ),
     ),
     "train": ApiPage(
@@ -139,6 +141,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.aux_replay",
             "oasis_torchrl.train.perception_warmup",
             "oasis_torchrl.train.shift",
+            "oasis_torchrl.train.depth",
             "oasis_torchrl.allocator",
         ),
     ),
