@@ -153,7 +153,6 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.config.loading",
             "oasis_torchrl.config.presets",
             "oasis_torchrl.config.arguments",
-            "oasis_torchrl.config.presets",
             "oasis_torchrl.config.env",
             "oasis_torchrl.config.training",
             "oasis_torchrl.config.evaluation",
