@@ -20,6 +20,7 @@ from oasis_torchrl.rewards.depth_collision import (
     normalize_per_image,
     straightness_penalty,
 )
+from oasis_torchrl.rewards.depth_models import SMALL_DEPTH_MODEL, NamedDepth, load_depth_source
 from oasis_torchrl.rewards.depth_sources import (
     DEFAULT_DEPTH_MODEL,
     CallableDepth,
@@ -33,6 +34,7 @@ from oasis_torchrl.rewards.shaping import ClearanceShaping
 
 __all__ = [
     "DEFAULT_DEPTH_MODEL",
+    "SMALL_DEPTH_MODEL",
     "CallableDepth",
     "CallableReward",
     "ClearanceShaping",
@@ -43,12 +45,14 @@ __all__ = [
     "GroundTruthDepth",
     "GroundTruthReward",
     "MonocularDepth",
+    "NamedDepth",
     "RewardFn",
     "RewardModule",
     "RowState",
     "as_reward_module",
     "collision_risk",
     "forward_reward",
+    "load_depth_source",
     "normalize_per_image",
     "reward_output",
     "straightness_penalty",
