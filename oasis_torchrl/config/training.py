@@ -159,6 +159,10 @@ ENCODER_GRADS = ("all", "aux")
 loss alone."""
 
 
+AUX_COEFF = 1.0
+"""``loss.aux_coeff`` where the endpoint sends ground truth and the setting is null."""
+
+
 @dataclass
 class LossConfig:
     """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
@@ -172,10 +176,11 @@ class LossConfig:
     critic_warmup_iters: int = option(
         0, help="first iterations train the critic only (use after a warm start)"
     )
-    aux_coeff: float = option(
-        1.0,
+    aux_coeff: float | None = option(
+        None,
         help="the camera features also learn to predict the privileged state (MSE, a "
-        "training-only head; embedded server only; 0: off)",
+        f"training-only head; needs ground truth; 0: off; null: {AUX_COEFF} where the endpoint "
+        "sends ground truth, else 0)",
     )
     encoder_grad: str = option(
         "all",
@@ -345,8 +350,8 @@ class PPOSettings:
     """A PPO training stage: network, warm start, collection, loss, optimiser, evaluations."""
 
     network: NetworkConfig = option(default_factory=NetworkConfig, help="the fresh network")
-    privileged_critic: bool = option(
-        True, help="the critic also reads ground truth (embedded server only)"
+    privileged_critic: bool | None = option(
+        None, help="the critic also reads ground truth (null: where the endpoint sends it)"
     )
     warm_start_scale: list[float] | None = option(
         default_factory=lambda: [0.2, 0.05],
@@ -385,7 +390,7 @@ class PPOSettings:
             ("warmup.frames", self.warmup.frames),
             ("loss.encoder_grad=aux", self.loss.encoder_grad == "aux"),
         ):
-            if on and not self.loss.aux_coeff:
+            if on and self.loss.aux_coeff == 0:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
         if not self.warm_start_sharpen > 0:
             raise ValueError(f"warm_start_sharpen must be positive, got {self.warm_start_sharpen}")

@@ -8,6 +8,14 @@ episode ending *terminated* (the ground-truth collision, or the reward's termina
 return sums the rewards up to and including that step. With the same policy, prompts, seeds
 and server, the numbers are the same run after run.
 
+On an endpoint that sends frames only (the hosted service, a hosted-like server) there is no
+distance and no ground-truth collision: the report gives what frames give, the return under the
+env's reward (the reference's depth-collision reward there), the episode length, the
+likely-collision terminations (that reward's) and the reference's progress term (the sum of its
+``forward`` term), and says ``ground_truth: false``. Such an endpoint ignores seeds, so its
+episodes cannot be paired across policies: comparisons (:func:`difference`) then use the
+unpaired (Welch) standard error of the difference in mean return.
+
 The ``eval`` config section: ``prompts``, ``episodes`` (rows per prompt), ``seeds`` (one batch of
 episodes per seed), ``max_steps``, and optionally ``rerun`` (an ``.rrd`` path, ``spawn`` or a
 viewer URL) and ``lerobot`` (a dataset folder) to record the episodes.
@@ -59,6 +67,10 @@ episode_return=2.0, steps=60)
     collided: bool
     episode_return: float
     steps: int
+    progress: float = math.nan
+    """The reference reward's progress (its ``forward`` term) summed; NaN under another reward."""
+    likely_collision: bool = False
+    """The episode ended by the reward's termination (the depth reward's likely collision)."""
 
 
 @dataclass
@@ -73,6 +85,8 @@ class EvalReport:
     """
 
     episodes: list[EpisodeResult] = field(default_factory=list)
+    ground_truth: bool = True
+    """Whether the endpoint sent ground truth (distance, collisions) and honoured the seeds."""
 
     @property
     def mean_distance(self) -> float:
@@ -89,18 +103,45 @@ class EvalReport:
         """Mean episode return."""
         return _mean([episode.episode_return for episode in self.episodes])
 
+    @property
+    def mean_steps(self) -> float:
+        """Mean episode length, steps (chunks)."""
+        return _mean([float(episode.steps) for episode in self.episodes])
+
+    @property
+    def mean_progress(self) -> float:
+        """Mean of the reference reward's progress term (NaN under another reward)."""
+        return _mean([episode.progress for episode in self.episodes])
+
+    @property
+    def likely_collision_rate(self) -> float:
+        """Fraction of episodes the reward ended (the depth reward's likely collisions)."""
+        return _mean([float(episode.likely_collision) for episode in self.episodes])
+
     def summary(self) -> dict[str, float]:
         """The aggregates (for loggers and progress bars)."""
         return {
             "mean_distance": self.mean_distance,
             "collision_rate": self.collision_rate,
             "mean_return": self.mean_return,
+            "mean_steps": self.mean_steps,
+            "mean_progress": self.mean_progress,
+            "likely_collision_rate": self.likely_collision_rate,
             "episodes": float(len(self.episodes)),
         }
 
     def to_dict(self, **extra: Any) -> dict[str, Any]:
-        """``extra`` items, the aggregates and every episode, JSON-ready."""
-        return {**extra, **self.summary(), "per_episode": [asdict(e) for e in self.episodes]}
+        """``extra`` items, the aggregates and every episode, JSON-ready; a frames-only report
+        says what its figures are."""
+        labels = {"ground_truth": self.ground_truth}
+        if not self.ground_truth:
+            labels["note"] = FRAMES_ONLY_NOTE
+        return {
+            **extra,
+            **labels,
+            **self.summary(),
+            "per_episode": [asdict(e) for e in self.episodes],
+        }
 
     def write_json(self, path: str | Path, **extra: Any) -> Path:
         """Write :meth:`to_dict` as JSON."""
@@ -108,6 +149,64 @@ class EvalReport:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.to_dict(**extra), indent=2))
         return path
+
+
+FRAMES_ONLY_NOTE = (
+    "frames only: no ground-truth distance or collisions (collision_rate counts the reward's "
+    "likely-collision terminations); the endpoint ignores seeds, so episodes are not paired"
+)
+
+
+def difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, Any]:
+    """``treated - baseline`` (two :meth:`EvalReport.to_dict` results): the paired distance
+    difference where both had ground truth and seeds, else the unpaired (Welch) difference in
+    mean return (a frames-only endpoint ignores seeds, so no episode pairs with another).
+
+    Example:
+        >>> def report(*returns):
+        ...     runs = [EpisodeResult("urban", 0, math.nan, False, r, 9) for r in returns]
+        ...     return EvalReport(runs, ground_truth=False).to_dict()
+        >>> gain = difference(report(3.0, 5.0), report(1.0, 2.0, 3.0))
+        >>> gain["mean"], round(gain["stderr"], 3), gain["metric"], gain["paired"]
+        (2.0, 1.155, 'episode_return', False)
+    """
+    if treated.get("ground_truth", True) and baseline.get("ground_truth", True):
+        return {**paired_difference(treated, baseline), "metric": "distance", "paired": True}
+    return {
+        **unpaired_difference(treated, baseline, "episode_return"),
+        "metric": "episode_return",
+        "paired": False,
+    }
+
+
+def unpaired_difference(
+    treated: dict[str, Any], baseline: dict[str, Any], key: str
+) -> dict[str, float]:
+    """Difference in the mean of episode ``key`` and its Welch standard error
+    ``sqrt(s1^2/n1 + s2^2/n2)``: no pairing of episodes assumed.
+
+    Example:
+        >>> def report(*values):
+        ...     return {"per_episode": [{"episode_return": v} for v in values]}
+        >>> unpaired_difference(report(2.0, 4.0), report(1.0, 1.0), "episode_return")
+        {'mean': 2.0, 'stderr': 1.0, 'episodes': 4.0}
+    """
+    groups = [[float(e[key]) for e in report["per_episode"]] for report in (treated, baseline)]
+    if min(len(values) for values in groups) < 2:
+        raise ValueError(
+            f"an unpaired difference needs at least 2 episodes on each side, got "
+            f"{len(groups[0])} and {len(groups[1])}"
+        )
+    means = [sum(values) / len(values) for values in groups]
+    variances = [
+        sum((v - mean) ** 2 for v in values) / (len(values) - 1) / len(values)
+        for values, mean in zip(groups, means, strict=True)
+    ]
+    return {
+        "mean": means[0] - means[1],
+        "stderr": math.sqrt(sum(variances)),
+        "episodes": float(len(groups[0]) + len(groups[1])),
+    }
 
 
 def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, float]:
@@ -192,15 +291,16 @@ def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float)
     if kept is None:
         return True
     if not margin:
-        return candidate["mean_distance"] > kept["mean_distance"]
+        key = "mean_distance" if kept.get("ground_truth", True) else "mean_return"
+        return candidate[key] > kept[key]
     if len(kept["per_episode"]) < 2:
         raise ValueError(
             f"a selection margin ({margin} standard errors) needs at least 2 evaluation "
             f"episodes on the selection seeds, got {len(kept['per_episode'])}: raise "
             "eval.episodes or set eval.selection_margin=0"
         )
-    difference = paired_difference(candidate, kept)
-    return difference["mean"] > margin * difference["stderr"]
+    gain = difference(candidate, kept)
+    return gain["mean"] > margin * gain["stderr"]
 
 
 def _mean(values: Sequence[float]) -> float:
@@ -280,6 +380,12 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     reward = rollout.get((NEXT, "reward")).reshape(rollout.batch_size).cpu()
     returns = (reward * within).sum(1)
     collided = rollout.get((NEXT, "terminated")).reshape(rollout.batch_size).cpu()[rows, end]
+    likely = collided.clone()
+    forward = rollout.get((NEXT, "reward_terms", "forward"), None)
+    if forward is None:
+        progress = torch.full((done.shape[0],), math.nan)
+    else:
+        progress = (forward.reshape(rollout.batch_size).cpu() * within).sum(1)
     truth = rollout.get((NEXT, "truth"), None)
     if truth is not None:
         distance = truth.get("distance")[rows, end, -1].cpu()
@@ -287,11 +393,29 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     else:
         distance = torch.full((done.shape[0],), math.nan)
     seeds = rollout.get("episode_seed")[:, 0].reshape(-1).tolist()
+    rows_of = zip(
+        _row_prompts(rollout),
+        seeds,
+        distance,
+        collided,
+        returns,
+        end,
+        progress,
+        likely,
+        strict=True,
+    )
     return [
-        EpisodeResult(prompt, int(seed), float(dist), bool(hit), float(ret), int(last) + 1)
-        for prompt, seed, dist, hit, ret, last in zip(
-            _row_prompts(rollout), seeds, distance, collided, returns, end, strict=True
+        EpisodeResult(
+            prompt,
+            int(seed),
+            float(dist),
+            bool(hit),
+            float(ret),
+            int(last) + 1,
+            float(gone),
+            bool(ended),
         )
+        for prompt, seed, dist, hit, ret, last, gone, ended in rows_of
     ]
 
 
@@ -430,7 +554,7 @@ class Evaluator:
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
         """Run one batch of episodes per seed (``seeds``, default ``eval.seeds``); the report
         holds all of them."""
-        report = EvalReport()
+        report = EvalReport(ground_truth=bool(self.env.base_env.ground_truth))
         seeds = [int(seed) for seed in (self.cfg.seeds if seeds is None else seeds)]
         if not seeds:
             raise ValueError("evaluate needs at least one seed")
