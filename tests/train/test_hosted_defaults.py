@@ -1,0 +1,62 @@
+"""Every command with its defaults against the hosted-like server (frames only), and nothing
+privileged (truth, expert, depth) in what they make."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import pytest
+
+from oasis_torchrl.cli import main
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
+
+from .conftest import TINY_ENV, tiny_ppo
+
+HOSTED = ["env.server.hosted=true"]
+PRIVILEGED_WORDS = ("truth", "expert", "depth", "critic_inputs", "privileged")
+PRIVILEGED_KEYS_IN_LOGS = ("'truth'", "expert_action", "critic_inputs", "('depth'")
+
+
+def _privileged(names: object) -> list[str]:
+    return [str(name) for name in names if any(w in str(name) for w in PRIVILEGED_WORDS)]
+
+
+def test_hosted_like_env_sends_frames_and_scores_them_with_the_depth_reward() -> None:
+    env = OasisEnv("local", 2, server=ServerConfig(width=96, height=64, hosted=True), max_steps=3)
+    try:
+        rollout = env.rollout(3, break_when_any_done=False)
+    finally:
+        env.close()
+    keys = rollout.keys(include_nested=True, leaves_only=True)
+    assert not _privileged(keys)
+    assert ("next", "reward_terms", "forward") in keys  # the reference's depth-collision reward
+    assert rollout["next", "pixels", "front"].shape == (2, 3, 64, 96, 3)
+
+
+def test_train_eval_record_defaults_run_on_frames_alone(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO)
+    assert main(["train", "ppo", *tiny_ppo(tmp_path / "ppo", 16, *HOSTED)]) == 0
+    assert caplog.text.count("sends frames only") == 1
+
+    report_path = tmp_path / "eval.json"
+    rerun_path = tmp_path / "eval.rrd"
+    evaluated = [f"policy={tmp_path / 'ppo' / 'policy'}", "episodes=2", "max_steps=3"]
+    outputs = [f"output={report_path}", f"rerun={rerun_path}"]
+    assert main(["eval", *evaluated, *outputs, *TINY_ENV, *HOSTED]) == 0
+    report = json.loads(report_path.read_text())
+    assert report["ground_truth"] is False and "ignores seeds" in report["note"]
+    assert 1 <= report["mean_steps"] <= 3 and report["mean_progress"] >= 0
+
+    root = tmp_path / "recorded"
+    sizes = ["env.server.width=96", "env.server.height=64", "env.num_envs=1", "env.max_steps=2"]
+    assert main(["record", "--root", str(root), "episodes=1", *sizes, *HOSTED]) == 0
+    features = json.loads((root / "meta" / "info.json").read_text())["features"]
+    assert "observation.images.front" in features
+    assert not _privileged(features)
+    assert not [key for key in PRIVILEGED_KEYS_IN_LOGS if key in caplog.text]
+    assert rerun_path.stat().st_size > 0
