@@ -60,3 +60,31 @@ def test_train_eval_record_defaults_run_on_frames_alone(
     assert not _privileged(features)
     assert not [key for key in PRIVILEGED_KEYS_IN_LOGS if key in caplog.text]
     assert rerun_path.stat().st_size > 0
+
+
+def test_demo_on_frames_alone_stops_at_once_without_a_source(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    assert main(["demo", f"output_dir={tmp_path}", *HOSTED]) == 2
+    assert "pass record.source=" in caplog.text
+    assert not (tmp_path / "demos").exists()
+
+
+def test_demo_runs_the_whole_loop_on_frames_alone(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    from viz._readback import Readback
+
+    from .test_pipeline import TINY_PIPELINE
+
+    demonstrator = "record.source=constant:throttle=0.6,steering=0.0"
+    assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE, *HOSTED, demonstrator]) == 0
+    table = capsys.readouterr().out.splitlines()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    assert all(not report["ground_truth"] for report in summary["evaluations"].values())
+    assert "mean return (frames only)" in table[0]
+    features = json.loads((tmp_path / "demos" / "meta" / "info.json").read_text())["features"]
+    assert not _privileged(features)
+    recording = Readback(tmp_path / "eval.rrd")
+    assert not _privileged(recording.entities())
