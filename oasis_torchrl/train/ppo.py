@@ -407,8 +407,11 @@ class PPOTrainer:
 
     @property
     def best_selection(self) -> float | None:
-        """Mean distance of the kept policy on the selection seeds (None: none chosen yet)."""
-        return None if self.kept_selection is None else self.kept_selection["mean_distance"]
+        """Mean distance of the kept policy on the selection seeds, or on frames alone its mean
+        return (None: none chosen yet)."""
+        if self.kept_selection is None:
+            return None
+        return self.kept_selection[_selection_key(self.kept_selection)]
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
@@ -453,8 +456,9 @@ class PPOTrainer:
         path = self.checkpoint_dir / BEST
         state = load_checkpoint(path)
         logger.info(
-            "keeping the policy of %d env steps (mean distance %.1f on the selection seeds)",
+            "keeping the policy of %d env steps (%s %.2f on the selection seeds)",
             state["frames"],
+            _selection_key(self.kept_selection),
             self.best_selection,
         )
         return net_from_checkpoint(state), path, state["frames"]
@@ -563,6 +567,11 @@ def evaluated_checkpoint_name(frames: int) -> str:
         'frames_10240.pt'
     """
     return f"frames_{frames}.pt"
+
+
+def _selection_key(evaluation: dict[str, Any]) -> str:
+    """What selection compares: the mean distance, or on frames alone the mean return."""
+    return "mean_distance" if evaluation.get("ground_truth", True) else "mean_return"
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
