@@ -58,7 +58,7 @@ class EpisodeResult:
     Example:
         >>> EpisodeResult("urban", 7, distance=120.5, collided=True, episode_return=2.0, steps=60)
         EpisodeResult(prompt='urban', episode_seed=7, distance=120.5, collided=True, \
-episode_return=2.0, steps=60)
+episode_return=2.0, steps=60, progress=None, likely_collision=False)
     """
 
     prompt: str
@@ -67,8 +67,9 @@ episode_return=2.0, steps=60)
     collided: bool
     episode_return: float
     steps: int
-    progress: float = math.nan
-    """The reference reward's progress (its ``forward`` term) summed; NaN under another reward."""
+    progress: float | None = None
+    """The reference reward's progress (its ``forward`` term) summed; None under another
+    reward."""
     likely_collision: bool = False
     """The episode ended by the reward's termination (the depth reward's likely collision)."""
 
@@ -109,9 +110,10 @@ class EvalReport:
         return _mean([float(episode.steps) for episode in self.episodes])
 
     @property
-    def mean_progress(self) -> float:
-        """Mean of the reference reward's progress term (NaN under another reward)."""
-        return _mean([episode.progress for episode in self.episodes])
+    def mean_progress(self) -> float | None:
+        """Mean of the reference reward's progress term (None under another reward)."""
+        progress = [episode.progress for episode in self.episodes]
+        return None if None in progress else _mean(progress)
 
     @property
     def likely_collision_rate(self) -> float:
@@ -119,13 +121,15 @@ class EvalReport:
         return _mean([float(episode.likely_collision) for episode in self.episodes])
 
     def summary(self) -> dict[str, float]:
-        """The aggregates (for loggers and progress bars)."""
+        """The aggregates (for loggers and progress bars; ``mean_progress`` under the
+        reference reward only)."""
+        progress = self.mean_progress
         return {
             "mean_distance": self.mean_distance,
             "collision_rate": self.collision_rate,
             "mean_return": self.mean_return,
             "mean_steps": self.mean_steps,
-            "mean_progress": self.mean_progress,
+            **({} if progress is None else {"mean_progress": progress}),
             "likely_collision_rate": self.likely_collision_rate,
             "episodes": float(len(self.episodes)),
         }
@@ -382,9 +386,8 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     collided = rollout.get((NEXT, "terminated")).reshape(rollout.batch_size).cpu()[rows, end]
     likely = collided.clone()
     forward = rollout.get((NEXT, "reward_terms", "forward"), None)
-    if forward is None:
-        progress = torch.full((done.shape[0],), math.nan)
-    else:
+    progress = None
+    if forward is not None:
         progress = (forward.reshape(rollout.batch_size).cpu() * within).sum(1)
     truth = rollout.get((NEXT, "truth"), None)
     if truth is not None:
@@ -400,7 +403,7 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
         collided,
         returns,
         end,
-        progress,
+        [None] * len(seeds) if progress is None else progress,
         likely,
         strict=True,
     )
@@ -412,7 +415,7 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
             bool(hit),
             float(ret),
             int(last) + 1,
-            float(gone),
+            None if gone is None else float(gone),
             bool(ended),
         )
         for prompt, seed, dist, hit, ret, last, gone, ended in rows_of

@@ -78,13 +78,16 @@ def test_demo_runs_the_whole_loop_on_frames_alone(
     from .test_pipeline import TINY_PIPELINE
 
     demonstrator = "record.source=constant:throttle=0.6,steering=0.0"
-    assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE, *HOSTED, demonstrator]) == 0
+    lighter = ["eval.reference=[autopilot]", "ppo.eval.episodes=1", "ppo.eval.selection_margin=0"]
+    settings = [*TINY_PIPELINE, *HOSTED, demonstrator, *lighter]
+    assert main(["demo", f"output_dir={tmp_path}", *settings]) == 0
     table = capsys.readouterr().out.splitlines()
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    assert list(summary["evaluations"]) == ["bc", "bc+ppo"]  # no autopilot on frames alone
+    dataset = json.loads((tmp_path / "demos" / "meta" / "info.json").read_text())
+    assert dataset["total_episodes"] == 4  # 2 demonstrations + 2 DAgger episodes
     assert all(not report["ground_truth"] for report in summary["evaluations"].values())
     assert "mean return (frames only)" in table[0]
-    features = json.loads((tmp_path / "demos" / "meta" / "info.json").read_text())["features"]
-    assert not _privileged(features)
+    assert not _privileged(dataset["features"])
     recording = Readback(tmp_path / "eval.rrd")
     assert not _privileged(recording.entities())
