@@ -225,6 +225,11 @@ class OasisWrapper(_EnvWrapper):
                 raise
         return pool
 
+    @property
+    def reward_module(self) -> RewardModule:
+        """The module that scores every step (the ``reward`` given, or the default)."""
+        return self._reward
+
     def scene_source(self) -> SceneSource:
         """The layouts of this env's scenes, asked of its server through the protocol
         (``SimService/GetScene``, embedded servers only): ``source(prompt, seed)``, for

@@ -8,11 +8,12 @@ episode ending *terminated* (the ground-truth collision, or the reward's termina
 return sums the rewards up to and including that step. With the same policy, prompts, seeds
 and server, the numbers are the same run after run.
 
-On an endpoint that sends frames only (the hosted service, a hosted-like server) there is no
-distance and no ground-truth collision: the report gives what frames give, the return under the
-env's reward (the reference's depth-collision reward there), the episode length, the
-likely-collision terminations (that reward's) and the reference's progress term (the sum of its
-``forward`` term), and says ``ground_truth: false``. Such an endpoint ignores seeds, so its
+Every endpoint also gets what frames give: the return under the reference's depth-collision
+reward (the env's reward on frames alone, else scored beside it: :class:`ReferenceScore`), the
+episode length, the likely-collision terminations (that reward's) and the reference's progress
+term (the sum of its ``forward`` term). On an endpoint that sends frames only (the hosted
+service, a hosted-like server) there is no distance and no ground-truth collision, and the
+report says ``ground_truth: false``. Such an endpoint ignores seeds, so its
 episodes cannot be paired across policies: comparisons (:func:`difference`) then use the
 unpaired (Welch) standard error of the difference in mean return.
 
@@ -33,7 +34,7 @@ from typing import Any
 
 import torch
 from omegaconf import DictConfig
-from tensordict import NonTensorData, TensorDictBase
+from tensordict import NonTensorData, TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 from tqdm import tqdm
 
@@ -42,12 +43,15 @@ from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
+from oasis_torchrl.rewards import DepthCollisionReward, NamedDepth
 from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 NEXT = "next"
+REFERENCE = "reference"
+"""Where :class:`ReferenceScore` puts the reference reward's entries of a step."""
 _PAIRED_KEYS = ("prompt", "episode_seed", "distance")
 
 
@@ -58,7 +62,7 @@ class EpisodeResult:
     Example:
         >>> EpisodeResult("urban", 7, distance=120.5, collided=True, episode_return=2.0, steps=60)
         EpisodeResult(prompt='urban', episode_seed=7, distance=120.5, collided=True, \
-episode_return=2.0, steps=60, progress=None, likely_collision=False)
+episode_return=2.0, steps=60, progress=None, likely_collision=False, reference_return=None)
     """
 
     prompt: str
@@ -68,10 +72,11 @@ episode_return=2.0, steps=60, progress=None, likely_collision=False)
     episode_return: float
     steps: int
     progress: float | None = None
-    """The reference reward's progress (its ``forward`` term) summed; None under another
-    reward."""
+    """The reference reward's progress (its ``forward`` term) summed (None: not scored)."""
     likely_collision: bool = False
-    """The episode ended by the reward's termination (the depth reward's likely collision)."""
+    """The reference reward terminated within the episode (a likely collision, from frames)."""
+    reference_return: float | None = None
+    """The return under the reference's depth-collision reward (None: not scored)."""
 
 
 @dataclass
@@ -116,6 +121,12 @@ class EvalReport:
         return None if None in progress else _mean(progress)
 
     @property
+    def mean_reference_return(self) -> float | None:
+        """Mean return under the reference's depth-collision reward (None: not scored)."""
+        values = [episode.reference_return for episode in self.episodes]
+        return None if None in values else _mean(values)
+
+    @property
     def likely_collision_rate(self) -> float:
         """Fraction of episodes the reward ended (the depth reward's likely collisions)."""
         return _mean([float(episode.likely_collision) for episode in self.episodes])
@@ -123,12 +134,13 @@ class EvalReport:
     def summary(self) -> dict[str, float]:
         """The aggregates (for loggers and progress bars; ``mean_progress`` under the
         reference reward only)."""
-        progress = self.mean_progress
+        progress, reference = self.mean_progress, self.mean_reference_return
         return {
             "mean_distance": self.mean_distance,
             "collision_rate": self.collision_rate,
             "mean_return": self.mean_return,
             "mean_steps": self.mean_steps,
+            **({} if reference is None else {"mean_reference_return": reference}),
             **({} if progress is None else {"mean_progress": progress}),
             "likely_collision_rate": self.likely_collision_rate,
             "episodes": float(len(self.episodes)),
@@ -384,11 +396,9 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     reward = rollout.get((NEXT, "reward")).reshape(rollout.batch_size).cpu()
     returns = (reward * within).sum(1)
     collided = rollout.get((NEXT, "terminated")).reshape(rollout.batch_size).cpu()[rows, end]
-    likely = collided.clone()
-    forward = rollout.get((NEXT, "reward_terms", "forward"), None)
-    progress = None
-    if forward is not None:
-        progress = (forward.reshape(rollout.batch_size).cpu() * within).sum(1)
+    reference, progress, likely = _reference_sums(rollout, within)
+    if likely is None:  # nothing scored the reference: the env's terminations are all there is
+        likely = collided.clone()
     truth = rollout.get((NEXT, "truth"), None)
     if truth is not None:
         distance = truth.get("distance")[rows, end, -1].cpu()
@@ -403,8 +413,9 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
         collided,
         returns,
         end,
-        [None] * len(seeds) if progress is None else progress,
+        [None] * len(seeds) if progress is None else progress.tolist(),
         likely,
+        [None] * len(seeds) if reference is None else reference.tolist(),
         strict=True,
     )
     return [
@@ -415,11 +426,61 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
             bool(hit),
             float(ret),
             int(last) + 1,
-            None if gone is None else float(gone),
+            gone,
             bool(ended),
+            score,
         )
-        for prompt, seed, dist, hit, ret, last, gone, ended in rows_of
+        for prompt, seed, dist, hit, ret, last, gone, ended, score in rows_of
     ]
+
+
+def _reference_sums(
+    rollout: TensorDictBase, within: torch.Tensor
+) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+    """Per row: the reference reward's return, its progress term and whether it terminated
+    within the episode, from :class:`ReferenceScore`'s entries or, where the env's reward is the
+    reference, from the env's own; all None when neither is there."""
+    scored = rollout.get((NEXT, REFERENCE), None)
+    forward_key = "forward" if scored is not None else ("reward_terms", "forward")
+    scored = rollout.get(NEXT) if scored is None else scored
+    forward = scored.get(forward_key, None)
+    if forward is None:
+        return None, None, None
+    shape = rollout.batch_size
+    reference = (scored.get("reward").reshape(shape).cpu() * within).sum(1)
+    progress = (forward.reshape(shape).cpu() * within).sum(1)
+    likely = (scored.get("terminated").reshape(shape).cpu() & within).any(1)
+    return reference, progress, likely
+
+
+class ReferenceScore:
+    """The reference's depth-collision reward scored beside an env whose own reward is another
+    (the ground-truth reward): every step gets ``("next", "reference", <reward | terminated |
+    forward>)``, so an evaluation reports what frames give on every endpoint.
+
+    Example:
+        >>> score = ReferenceScore("small")
+        >>> score.reward.terms[0]
+        'forward'
+    """
+
+    def __init__(self, depth_model: str) -> None:
+        self.reward = DepthCollisionReward(NamedDepth(depth_model))
+
+    def on_reset(self, td: TensorDictBase) -> None:
+        """New episodes on every row: the reference's heading restarts."""
+        self.reward.reset(torch.ones(int(td.batch_size[0]), dtype=torch.bool))
+
+    def on_step(self, td: TensorDictBase) -> None:
+        """Score the step (``td`` holds the action and ``"next"``) into ``("next", REFERENCE)``."""
+        step = td.get(NEXT)
+        scored = self.reward(step.clone(False).set("action", td.get("action")))
+        entries = {
+            "reward": scored.get("reward").float(),
+            "terminated": scored.get("terminated"),
+            "forward": scored.get(("reward_terms", "forward")).float(),
+        }
+        step.set(REFERENCE, TensorDict(entries, batch_size=step.batch_size))
 
 
 class EpisodeRecorders:
@@ -528,6 +589,8 @@ class Evaluator:
         self.recorders = EpisodeRecorders(
             eval_cfg.get("rerun"), eval_cfg.get("lerobot"), scenes=self.env.scene_source()
         )
+        scored = isinstance(self.env.base_env.reward_module, DepthCollisionReward)
+        self.reference = None if scored else ReferenceScore(env_cfg.reward.depth_model)
 
     @classmethod
     def for_driver(
@@ -564,7 +627,14 @@ class Evaluator:
         steps = len(seeds) * self.cfg.max_steps
         with tqdm(total=steps, desc="evaluating", unit="step", disable=not self.progress) as bar:
 
+            def on_reset(td: TensorDictBase) -> None:
+                if self.reference is not None:
+                    self.reference.on_reset(td)
+                self.recorders.on_reset(td)
+
             def on_step(td: TensorDictBase) -> None:
+                if self.reference is not None:
+                    self.reference.on_step(td)
                 self.recorders.on_step(td)
                 bar.update()
 
@@ -575,7 +645,7 @@ class Evaluator:
                     policy,
                     self.cfg.max_steps,
                     keep_pixels=self.recorders.lerobot is not None,
-                    on_reset=self.recorders.on_reset,
+                    on_reset=on_reset,
                     on_step=on_step,
                 )
                 results = episode_results(rollout)

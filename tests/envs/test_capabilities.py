@@ -34,7 +34,7 @@ def test_auto_settings_follow_the_endpoint_and_explicit_ones_are_refused_on_fram
     cfg = load_config("ppo", frames)
     env = make_env(cfg.env)
     try:
-        reward = env.base_env._reward
+        reward = env.base_env.reward_module
         assert isinstance(reward, DepthCollisionReward) and not env.base_env.ground_truth
     finally:
         env.close()
@@ -45,6 +45,6 @@ def test_auto_settings_follow_the_endpoint_and_explicit_ones_are_refused_on_fram
         make_env(explicit.env)
     embedded_env = make_env(load_config("ppo", frames[1:]).env)
     try:
-        assert isinstance(embedded_env.base_env._reward.base, GroundTruthReward)
+        assert isinstance(embedded_env.base_env.reward_module.base, GroundTruthReward)
     finally:
         embedded_env.close()

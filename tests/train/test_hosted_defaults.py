@@ -91,3 +91,17 @@ def test_demo_runs_the_whole_loop_on_frames_alone(
     assert not _privileged(dataset["features"])
     recording = Readback(tmp_path / "eval.rrd")
     assert not _privileged(recording.entities())
+
+
+def test_evaluation_scores_the_reference_reward_beside_ground_truth() -> None:
+    from oasis_torchrl.config import load_config
+    from oasis_torchrl.drivers import ScriptedDriver
+    from oasis_torchrl.train.evaluate import Evaluator
+
+    cfg = load_config("eval", [*TINY_ENV, "episodes=2", "max_steps=3"])
+    with Evaluator(cfg.env, cfg, progress=False) as evaluator:
+        report = evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
+    summary = report.to_dict()
+    assert summary["ground_truth"] is True and summary["mean_distance"] > 0
+    assert summary["mean_progress"] > 0 and "mean_reference_return" in summary
+    assert all(episode["reference_return"] is not None for episode in summary["per_episode"])
