@@ -24,7 +24,7 @@ import json
 import time
 
 import torch
-from process_cpu import CpuMeter
+from _process_cpu import CpuMeter
 from tensordict import TensorDictBase
 
 from oasis_torchrl.envs import OasisEnv

@@ -128,31 +128,6 @@ class RawStubs:
         return self.a2v.Infer.with_call(request, metadata=session.metadata, timeout=30)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def small_depth_network() -> Iterator[None]:
-    """The shipped small depth network (``oasis_torchrl.rewards.depth_net``, the frames-only
-    reward's default) or, on a branch without it, a stand-in: nearness from the frames'
-    darkness, enough for tests of the plumbing, never for figures."""
-    import importlib.util
-    import sys
-    import types
-
-    if importlib.util.find_spec("oasis_torchrl.rewards.depth_net") is not None:
-        yield
-        return
-    from oasis_torchrl.rewards import CallableDepth
-
-    module = types.ModuleType("oasis_torchrl.rewards.depth_net")
-    module.load_small_depth = lambda camera="front": CallableDepth(_darkness, camera)
-    sys.modules[module.__name__] = module
-    yield
-    del sys.modules[module.__name__]
-
-
-def _darkness(rgb: Any) -> Any:
-    return 255.0 - rgb.float().mean(-1)
-
-
 @pytest.fixture(scope="session")
 def server_keys() -> tuple[str, str]:
     """The API keys every fixture server accepts."""

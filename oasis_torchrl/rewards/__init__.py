@@ -20,7 +20,8 @@ from oasis_torchrl.rewards.depth_collision import (
     normalize_per_image,
     straightness_penalty,
 )
-from oasis_torchrl.rewards.depth_models import SMALL_DEPTH_MODEL, NamedDepth, load_depth_source
+from oasis_torchrl.rewards.depth_models import NamedDepth
+from oasis_torchrl.rewards.depth_net import SMALL_DEPTH_MODEL
 from oasis_torchrl.rewards.depth_sources import (
     DEFAULT_DEPTH_MODEL,
     CallableDepth,
@@ -52,7 +53,6 @@ __all__ = [
     "as_reward_module",
     "collision_risk",
     "forward_reward",
-    "load_depth_source",
     "normalize_per_image",
     "reward_output",
     "straightness_penalty",
