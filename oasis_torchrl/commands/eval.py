@@ -12,6 +12,11 @@ over the episodes both ran (same prompt and episode seed), the comparison that s
 policy beats another beyond the noise of the scenes:
 ``oasis-torchrl eval policy=outputs/ppo/policy seeds=[1000] episodes=32
 baseline=constant.json``.
+
+On an endpoint that sends frames only (the hosted service) the report holds what frames give
+(return under the reference's depth-collision reward, episode length, likely-collision
+terminations, the reference's progress term; ``ground_truth: false``), and ``vs_baseline`` is
+the unpaired (Welch) difference in mean return: such an endpoint ignores seeds.
 """
 
 from __future__ import annotations
@@ -75,15 +80,17 @@ def run(cfg: DictConfig) -> int:
 
 def _versus(result: dict[str, Any], baseline: dict[str, Any], name: str) -> dict[str, Any]:
     """The paired difference against ``baseline``, logged for a person."""
-    from oasis_torchrl.train.evaluate import paired_difference
+    from oasis_torchrl.train.evaluate import difference as compare
 
-    difference = paired_difference(result, baseline)
+    difference = compare(result, baseline)
     logger.info(
-        "vs %s: %+.1f ± %.1f m per episode over %d shared episodes (%.1f standard errors)",
+        "vs %s: %+.2f ± %.2f %s per episode over %d %s episodes (%.1f standard errors)",
         name,
         difference["mean"],
         difference["stderr"],
+        "m" if difference["paired"] else "of return",
         difference["episodes"],
+        "shared" if difference["paired"] else "unpaired",
         _standard_errors(difference["mean"], difference["stderr"]),
     )
     return {"baseline": name, **difference}

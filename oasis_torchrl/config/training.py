@@ -96,6 +96,10 @@ class CollectorConfig:
     total_frames: int = option(20480, help="env steps in the whole run")
 
 
+AUX_COEFF = 1.0
+"""``loss.aux_coeff`` where the endpoint sends ground truth and the setting is null."""
+
+
 @dataclass
 class LossConfig:
     """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
@@ -109,10 +113,11 @@ class LossConfig:
     critic_warmup_iters: int = option(
         0, help="first iterations train the critic only (use after a warm start)"
     )
-    aux_coeff: float = option(
-        1.0,
+    aux_coeff: float | None = option(
+        None,
         help="the camera features also learn to predict the privileged state (MSE, a "
-        "training-only head; embedded server only; 0: off)",
+        f"training-only head; needs ground truth; 0: off; null: {AUX_COEFF} where the endpoint "
+        "sends ground truth, else 0)",
     )
 
 
@@ -266,8 +271,8 @@ class PPOSettings:
     """A PPO training stage: network, warm start, collection, loss, optimiser, evaluations."""
 
     network: NetworkConfig = option(default_factory=NetworkConfig, help="the fresh network")
-    privileged_critic: bool = option(
-        True, help="the critic also reads ground truth (embedded server only)"
+    privileged_critic: bool | None = option(
+        None, help="the critic also reads ground truth (null: where the endpoint sends it)"
     )
     warm_start_scale: list[float] | None = option(
         default_factory=lambda: [0.2, 0.05],
@@ -297,7 +302,7 @@ class PPOSettings:
             ("aux_replay.capacity", self.aux_replay.capacity),
             ("warmup.frames", self.warmup.frames),
         ):
-            if on and not self.loss.aux_coeff:
+            if on and self.loss.aux_coeff == 0:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
         if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(

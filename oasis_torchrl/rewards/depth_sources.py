@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import TensorDictBase
 
-from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.rewards.base import get_entry
 
 if TYPE_CHECKING:
@@ -72,14 +72,20 @@ def check_camera(camera: str) -> str:
 
 
 def read_pixels(td: TensorDictBase, camera: str, owner: str) -> torch.Tensor:
-    """The uint8 RGB frames ``[N, H, W, 3]`` of ``camera``, validated.
+    """The uint8 RGB frames ``[N, H, W, 3]`` of ``camera``, validated; of an env that returns
+    every frame of a chunk (``[N, 4, H, W, 3]``), the chunk's last, as the reference scores.
 
     >>> from tensordict import TensorDict
     >>> td = TensorDict({("pixels", "front"): torch.zeros(2, 8, 8, 3, dtype=torch.uint8)}, [2])
     >>> read_pixels(td, "front", "doc").shape
     torch.Size([2, 8, 8, 3])
+    >>> chunks = TensorDict({("pixels", "front"): torch.zeros(2, 4, 8, 8, 3).byte()}, [2])
+    >>> read_pixels(chunks, "front", "doc").shape
+    torch.Size([2, 8, 8, 3])
     """
     rgb = get_entry(td, ("pixels", camera), owner)
+    if rgb.ndim == 5 and rgb.shape[1] == CHUNK:
+        rgb = rgb[:, -1]
     if rgb.dtype != torch.uint8 or rgb.ndim != 4 or rgb.shape[-1] != 3:
         raise ValueError(
             f"{owner} needs td[('pixels', {camera!r})] as uint8 [N, H, W, 3], "
