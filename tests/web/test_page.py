@@ -131,3 +131,36 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
         chunks_later(browser, 3)
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         browser.save_screenshot(str(SCREENSHOT))
+
+
+@pytest.mark.timeout(900)
+def test_a_person_takes_over_from_a_policy_behind_a_token(
+    browser, serve_page, tmp_path: Path
+) -> None:
+    root = tmp_path / "corrections"
+    page = serve_page(f"root={root}", "policy=constant:throttle=0.4", token="s3cret")
+    browser.get(page.url.split("?")[0])
+    assert "forbidden" in browser.find_element("tag name", "body").text
+    open_page(browser, page)
+    assert status(browser)["policy"] and not status(browser)["human"]
+
+    press(browser, "r")
+    wait_until(lambda: status(browser)["recording"], "recording")
+    chunks_later(browser, 3)
+    press(browser, "t")
+    wait_until(lambda: status(browser)["human"], "the person driving")
+    hold(browser, page, "d", "heading", 0.6)
+    press(browser, "t")
+    wait_until(lambda: not status(browser)["human"], "the policy driving again")
+    chunks_later(browser, 3)
+    press(browser, "r")
+    wait_until(lambda: status(browser)["saved"] == 1, "saved episode")
+
+    dataset = LeRobotDataset("local/corrections", root=root, video_backend="pyav")
+    assert dataset.features["intervention"]["dtype"] == "bool"  # LeRobot's DAgger column
+    rows = dataset.hf_dataset.with_format("numpy")
+    person = np.stack(rows["intervention"]).reshape(-1)
+    action = np.stack(rows["action"])
+    assert person.any() and not person[:12].any() and not person[-12:].any()
+    np.testing.assert_allclose(action[~person], [[0.4, 0.0]] * int((~person).sum()))
+    assert action[person, 1].max() > 0.2  # the person steered right
