@@ -33,8 +33,9 @@ logger = logging.getLogger(__name__)
 
 STATIC = resources.files("oasis_torchrl.web") / "static"
 CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css"}
-QUEUE_MESSAGES = 64
-"""Messages waiting for one page; a slower page misses frames instead of slowing the world."""
+QUEUE_MESSAGES = 10
+"""Messages waiting for one page (two chunks: 4 frames and a status each). A page that falls
+behind loses the oldest, so what it shows stays live instead of lagging ever more."""
 
 Replayer = Callable[[int, Callable[[bytes | dict[str, Any]], Awaitable[None]]], Awaitable[None]]
 
@@ -48,11 +49,11 @@ class Page:
         self.dropped = 0
 
     def offer(self, message: bytes | dict[str, Any]) -> None:
-        """Queue a message, dropping it if the page is behind."""
-        try:
-            self.queue.put_nowait(message)
-        except asyncio.QueueFull:
+        """Queue a message; a page that is behind loses its oldest one."""
+        if self.queue.full():
+            self.queue.get_nowait()
             self.dropped += 1
+        self.queue.put_nowait(message)
 
     async def send(self, message: bytes | dict[str, Any]) -> None:
         """Send a message now (replies, replayed frames)."""
