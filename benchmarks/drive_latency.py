@@ -31,7 +31,7 @@ from pathlib import Path
 
 import aiohttp
 import numpy as np
-from process_cpu import process_cpu_seconds
+from _process_cpu import process_cpu_seconds
 
 from oasis_torchrl.web.frames import unpack_frames
 
