@@ -66,7 +66,7 @@ class PlayConfig(DatasetOutputConfig):
         help="a policy that drives until the person takes over: saved (a LeRobot policy "
         "folder, a PPO checkpoint, a TorchScript or torch.save file) or served (grpc://host:port)",
     )
-    seed: int = option(0, help="world seed of the first episode (episode N gets seed + N)")
+    seed: int = option(0, help="seed of the episode sequence (the embedded server's scenes)")
     jpeg_quality: int = option(80, help="JPEG quality 1-100 of the frames sent to the page")
     env: EnvConfig = option(
         default_factory=_play_env,

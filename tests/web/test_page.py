@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Callable
@@ -13,12 +14,14 @@ import numpy as np
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from oasis_torchrl.config import load_config
 from oasis_torchrl.data.features import DatasetLayout, build_features, user_features
 from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.train.bc import BCTrainer
 from oasis_torchrl.web import RunningPage
 
 SCREENSHOT = Path(__file__).parents[2] / "docs" / "assets" / "drive_page.png"
-UPDATE_ASSETS = os.environ.get("OASIS_UPDATE_ASSETS") == "1"
+REGENERATE = os.environ.get("OASIS_REGENERATE_ASSETS") == "1"
 WAIT_S = 120.0  # a busy CI machine; the checks themselves do not depend on timing
 
 
@@ -53,8 +56,9 @@ def chunks_later(browser, count: int) -> None:
     wait_until(lambda: status(browser)["chunk"] >= start + count, f"{count} chunks")
 
 
-def hold(browser, page: RunningPage, keys: str, field: str, seconds: float) -> float:
-    """Hold ``keys`` for ``seconds``; returns how much truth ``field`` changed meanwhile."""
+def hold(browser, page: RunningPage, keys: str, field: str, chunks: int) -> float:
+    """Hold ``keys`` while the world drives ``chunks`` chunks (however long they take on this
+    machine); returns how much truth ``field`` changed meanwhile."""
     from selenium.webdriver.common.action_chains import ActionChains
 
     chunks_later(browser, 1)
@@ -63,8 +67,7 @@ def hold(browser, page: RunningPage, keys: str, field: str, seconds: float) -> f
     for key in keys:
         actions.key_down(key)
     actions.perform()
-    time.sleep(seconds)
-    chunks_later(browser, 2)
+    chunks_later(browser, chunks)
     after = truth(page, field)
     actions = ActionChains(browser)
     for key in keys:
@@ -88,7 +91,7 @@ def open_page(browser, page: RunningPage) -> None:
 @pytest.mark.timeout(900)
 def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> None:
     root = tmp_path / "drives"
-    size = ("env.server.width=768", "env.server.height=512") if UPDATE_ASSETS else ()
+    size = ("env.server.width=384", "env.server.height=256") if REGENERATE else ()
     page = serve_page(f"root={root}", *size)
     open_page(browser, page)
     assert page_state(browser)["framesShown"] > 0
@@ -96,11 +99,11 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
 
     press(browser, "r")
     wait_until(lambda: status(browser)["recording"], "recording")
-    forward = hold(browser, page, "w", "progress", 1.2)
+    forward = hold(browser, page, "w", "progress", 6)
     assert forward > 1.0, forward  # metres along the road
     assert truth(page, "speed") > 0
-    left = hold(browser, page, "a", "heading", 0.6)  # coasting, as the ramp allows a tap
-    right = hold(browser, page, "d", "heading", 0.6)
+    left = hold(browser, page, "a", "heading", 3)  # coasting
+    right = hold(browser, page, "d", "heading", 3)
     assert right < -0.02 < 0.02 < left, (right, left)  # steering + turns clockwise
     assert status(browser)["recording"]  # one episode all along: no collision reset it
     latencies = page_state(browser)["latencies"]
@@ -111,7 +114,7 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
 
     dataset = LeRobotDataset("local/drives", root=root, video_backend="pyav")
     assert dataset.num_episodes == 1 and dataset.fps == 20
-    layout = DatasetLayout(CAMERAS, (64, 96) if not UPDATE_ASSETS else (512, 768))
+    layout = DatasetLayout(CAMERAS, (256, 384) if REGENERATE else (64, 96))
     expected = build_features(layout)
     assert {k: (v["dtype"], tuple(v["shape"])) for k, v in expected.items()} == {
         k: (v["dtype"], tuple(v["shape"])) for k, v in user_features(dataset.features).items()
@@ -126,7 +129,7 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
     wait_until(lambda: "replayed episode 0" in browser.find_element("id", "message").text, "replay")
     assert page_state(browser)["replayed"] == dataset.num_frames
 
-    if UPDATE_ASSETS:
+    if REGENERATE:
         press(browser, "w")
         chunks_later(browser, 3)
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
@@ -149,7 +152,7 @@ def test_a_person_takes_over_from_a_policy_behind_a_token(
     chunks_later(browser, 3)
     press(browser, "t")
     wait_until(lambda: status(browser)["human"], "the person driving")
-    hold(browser, page, "d", "heading", 0.6)
+    hold(browser, page, "d", "heading", 3)
     press(browser, "t")
     wait_until(lambda: not status(browser)["human"], "the policy driving again")
     chunks_later(browser, 3)
@@ -164,3 +167,9 @@ def test_a_person_takes_over_from_a_policy_behind_a_token(
     assert person.any() and not person[:12].any() and not person[-12:].any()
     np.testing.assert_allclose(action[~person], [[0.4, 0.0]] * int((~person).sum()))
     assert action[person, 1].max() > 0.2  # the person steered right
+
+    # Behaviour cloning trains on the corrections as recorded.
+    settings = [f"dataset.root={root}", f"output_dir={tmp_path / 'bc'}", "train.steps=2"]
+    small = ["policy.image_size=[32,48]", "train.batch_size=8", "eval.episodes=0"]
+    result = BCTrainer(load_config("bc", [*settings, *small, "progress=false"])).run()
+    assert math.isfinite(result.final_loss)

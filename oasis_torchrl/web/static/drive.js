@@ -68,6 +68,7 @@ function onJson(message) {
   } else if (message.type === "done") say(`${message.request}: done`);
   else if (message.type === "replay_done") {
     replaying = false;
+    pendingKeys = []; // keys pressed during a replay had no live frame to reach
     say(`replayed episode ${message.episode} (${message.frames} frames)`);
   }
 }
@@ -229,6 +230,7 @@ function replay() {
   const episode = parseInt($("replay-episode").value, 10);
   replaying = true;
   frameQueue = [];
+  pendingKeys = [];
   say(`replaying episode ${episode}`);
   send({ type: "replay", episode });
 }
