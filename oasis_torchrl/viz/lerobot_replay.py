@@ -19,7 +19,7 @@ import numpy as np
 import rerun as rr
 
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
-from oasis_torchrl.data.video_frames import frames_at
+from oasis_torchrl.data.video_frames import episode_frames
 from oasis_torchrl.viz.blueprint import default_blueprint
 from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
@@ -173,7 +173,4 @@ class DatasetReplay:
         if key not in self.meta.video_keys:  # stored as images: decoded with the table
             yield from (np.asarray(image, dtype=np.uint8) for image in rows[key])
             return
-        start = float(self.meta.episodes[episode][f"videos/{key}/from_timestamp"])
-        path = self.root / self.meta.get_video_file_path(episode, key)
-        times = start + np.arange(count) / self.meta.fps
-        yield from frames_at(path, times, tolerance_s=0.5 / self.meta.fps)
+        yield from episode_frames(self.meta, episode, key, count)
