@@ -21,7 +21,12 @@ import rerun as rr
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
 from oasis_torchrl.data.video_frames import frames_at
 from oasis_torchrl.viz.blueprint import default_blueprint
-from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
+from oasis_torchrl.viz.images import (
+    DEFAULT_DISPLAY_WIDTH,
+    DEFAULT_JPEG_QUALITY,
+    check_frame,
+    image_archetype,
+)
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.series import send_series
 
@@ -165,7 +170,10 @@ class DatasetReplay:
         images = self._images(episode, key, rows, len(frames))
         for frame, image in zip(frames, images, strict=False):
             self._at(frame)
-            self.recording.log(entity, image_archetype(check_frame(image, key), self.jpeg_quality))
+            self.recording.log(
+                entity,
+                image_archetype(check_frame(image, key), self.jpeg_quality, DEFAULT_DISPLAY_WIDTH),
+            )
 
     def _images(
         self, episode: int, key: str, rows: dict[str, np.ndarray], count: int
