@@ -38,6 +38,7 @@ from oasis_torchrl.train.driving import drive
 
 if TYPE_CHECKING:
     from oasis_torchrl.viz import RolloutLogger
+    from oasis_torchrl.viz.side_by_side import SideBySide
 
 logger = logging.getLogger(__name__)
 
@@ -375,7 +376,8 @@ class Evaluator:
         expert: run the embedded server's expert (for a policy that drives with it, see
             :attr:`~oasis_torchrl.drivers.Driver.needs_expert`).
         progress: show a progress bar per evaluation.
-        rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s.
+        rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s (a
+            policy's logger of a side-by-side recording).
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
@@ -420,6 +422,11 @@ class Evaluator:
             eval_cfg.get("lerobot"),
             scenes=self.env.scene_source(),
         )
+        if rerun_logger is not None and self.frames_only:
+            logger.warning(
+                "policies side by side on a frames-only endpoint: it ignores seeds, so each "
+                "policy drives other scenes (recorded all the same)"
+            )
 
     @classmethod
     def for_driver(
@@ -507,6 +514,28 @@ class Evaluator:
         self.close()
 
 
+def side_by_side_for(eval_cfg: DictConfig, policies: Mapping[str, str]) -> SideBySide | None:
+    """The side-by-side recording (``eval.rerun``) of an evaluation of named policy specs: the
+    last policy's and those whose spec is in ``eval.compare``, each under the first name of its
+    spec; None when ``eval.rerun`` is unset or that is one policy (recorded alone, as usual).
+
+    Example:
+        >>> from oasis_torchrl.config import load_config
+        >>> cfg = load_config("eval", ["compare=[autopilot]"])
+        >>> side_by_side_for(cfg, {"autopilot": "autopilot", "bc": "out/bc"}) is None  # no rerun
+        True
+    """
+    from oasis_torchrl.viz.side_by_side import SideBySide
+
+    specs = list(policies.values())
+    wanted = {str(spec) for spec in eval_cfg.get("compare", [])} | set(specs[-1:])
+    firsts = {spec: name for name, spec in reversed(list(policies.items()))}
+    names = [name for spec, name in firsts.items() if spec in wanted][::-1]
+    if not eval_cfg.get("rerun") or len(names) < 2:
+        return None
+    return SideBySide(eval_cfg.rerun, names, threshold=eval_cfg.divergence)
+
+
 def evaluate_side_by_side(
     env_cfg: DictConfig,
     eval_cfg: DictConfig,
@@ -532,20 +561,19 @@ def evaluate_side_by_side(
     """
     from oasis_torchrl.viz.side_by_side import SideBySide
 
-    plain = OmegaConf.merge(eval_cfg, {"rerun": None})
+    # The others are compared, not evaluated for their own records (no LeRobot episodes).
+    plain = OmegaConf.merge(eval_cfg, {"rerun": None, "lerobot": None})
     recording = SideBySide(eval_cfg.rerun, list(drivers), threshold=eval_cfg.divergence)
     reports = {}
     try:
-        for name, driver in drivers.items():
+        for index, (name, driver) in enumerate(drivers.items()):
             with Evaluator.for_driver(
-                env_cfg, plain, driver, progress=progress, rerun_logger=recording.logger(name)
+                env_cfg,
+                plain if index else eval_cfg,
+                driver,
+                progress=progress,
+                rerun_logger=recording.logger(name),
             ) as evaluator:
-                if evaluator.frames_only:
-                    logger.warning(
-                        "side by side on a frames-only endpoint: it ignores seeds, so %s drives "
-                        "other scenes than the other policies (recorded all the same)",
-                        name,
-                    )
                 reports[name] = evaluator.evaluate(driver)
     finally:
         recording.close()

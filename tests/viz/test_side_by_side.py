@@ -95,3 +95,16 @@ def test_eval_records_policies_side_by_side_on_the_same_seeds(
         f"step 1: {roots[1]} diverges from {roots[0]} (by 0.50)"
     ]
     assert main(["eval", *settings[:-1]]) == 2  # side by side needs a recording
+
+
+def test_the_main_job_records_the_final_policy_beside_the_compared_ones(tmp_path: Path) -> None:
+    from oasis_torchrl.config import load_config
+    from oasis_torchrl.train.evaluate import side_by_side_for
+
+    cfg = load_config("eval", [f"rerun={tmp_path / 'eval.rrd'}", "compare=[autopilot]"])
+    policies = {"autopilot": "autopilot", "constant": "constant", "bc": "out", "bc+ppo": "out"}
+    recording = side_by_side_for(cfg, policies)
+    assert list(recording.roots) == ["autopilot", "bc"]  # a spec's first name: evaluated once
+    recording.close()
+    alone = {"constant": "constant", "bc": "out"}
+    assert side_by_side_for(cfg, alone) is None  # the final policy alone: recorded as before
