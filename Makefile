@@ -15,7 +15,7 @@ endif
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-EXTRAS := dev,lerobot,rerun,depth,ray
+EXTRAS := dev,docs,lerobot,rerun,depth,ray
 # The LeRobot plugins, each a small distribution LeRobot finds by name (lerobot_policy_oasis,
 # lerobot_robot_oasis, lerobot_teleoperator_oasis, lerobot_env_oasis).
 PLUGINS := policies robots teleoperators envs
@@ -31,7 +31,7 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
+.PHONY: demo test docs lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
 
 venv-python:
 	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
@@ -59,6 +59,10 @@ demo: venv-python $(STAMP)
 test: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider
+
+# The docs site (mkdocs.yml) into site/, strict: a broken link or reference fails it.
+docs: venv-python $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
 
 lint: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -88,7 +88,7 @@ class NetworkArchitectureConfig:
     encoder_strides: list[int] = option(
         default_factory=lambda: [4, 2, 1],
         help="strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] keeps "
-        "twice the resolution in the first two layers for about 1.4x the time of a step",
+        "twice the resolution in the first two layers, at a higher cost per step",
     )
     pool_grid: list[int] = option(
         default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
@@ -120,10 +120,10 @@ class NetworkConfig(NetworkArchitectureConfig):
         help="a fresh mixture's components spread this far around init_action (keep, left, "
         "right), the middle one most likely",
     )
-    # Steering explores as widely as throttle from scratch: with 0.1 PPO found its first lane
-    # changes late (0.81-0.90x the best constant within 102,400 env steps over four runs), with
-    # 0.5 early (1.07x and 1.16x, two seeds), and the learned scale shrank it to 0.29
-    # (BENCHMARKS.md, "PPO from scratch"). A warm start keeps its own (`warm_start_scale`).
+    # Steering explores as widely as throttle from scratch: with a smaller scale PPO found its
+    # first lane changes later, and the learned scale shrinks it anyway
+    # (docs/experiments/2026-11-28-ppo-from-scratch.md). A warm start keeps its own
+    # (`warm_start_scale`).
     init_scale: list[float] = option(
         default_factory=lambda: [0.5, 0.5],
         help="initial scale (before the tanh) of [throttle, steering] of a fresh network",
@@ -440,8 +440,8 @@ class BCPolicyConfig(NetworkArchitectureConfig):
     )
     action_loss_weights: list[float] = option(
         default_factory=lambda: [1.0, 5.0],
-        help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
-        "normalised)",
+        help="[throttle, steering] weights of l1 and mse: steering varies less than throttle "
+        "(not normalised)",
     )
     manoeuvre_weight: float = option(
         0.0,

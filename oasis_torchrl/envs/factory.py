@@ -77,8 +77,10 @@ def make_env(
 
     Args:
         cfg: the ``env`` section.
-        num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
-            uses one row per episode, fixed per-row prompts and the policy's image size).
+        num_envs: replaces the section's value (evaluation uses one row per episode).
+        prompts: replaces the section's value (evaluation fixes the prompt of each row).
+        max_steps: replaces the section's value.
+        image_size: replaces the section's value (evaluation uses the policy's image size).
         all_frames: all 4 frames of each chunk (one dataset row per frame), or the last.
         frame_stack: depth of the policies' frame stack (the network's ``frames``); None:
             no stack (append a :class:`ChunkFrameStack` later, e.g. once the network is known).

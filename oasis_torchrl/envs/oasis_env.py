@@ -353,6 +353,68 @@ class OasisWrapper(_EnvWrapper):
 class OasisEnv(OasisWrapper):
     """The batched TorchRL env over ``num_envs`` concurrent Oasis (A2V) sessions of an endpoint.
 
+    ## Description
+
+    Each of the N rows is one world-model session: a prompt sets a driving scene, every step
+    sends a chunk of 4 ``[throttle, steering]`` actions and returns what the three cameras
+    (``left_forward``, ``front``, ``right_forward``) saw. Gymnasium: ``oasis_torchrl/Oasis-v0``
+    (``gymnasium.make`` one session, ``gymnasium.make_vec`` N).
+
+    ## Action space
+
+    | key | spec | shape | dtype |
+    |---|---|---|---|
+    | `"action"` | `Bounded(-1, 1)` | `[N, 4, 2]` | `float32` |
+
+    Per row 4 actions in time order, each ``[throttle, steering]``: throttle + is forward, - is
+    brake then reverse; steering - is left, + is right. ``chunk_actions=False`` takes ``[N, 2]``,
+    repeated 4 times.
+
+    ## Observation space
+
+    | key | spec | shape | dtype |
+    |---|---|---|---|
+    | `("pixels", camera)` | `Bounded(0, 255)` | `[N, H, W, 3]` | `uint8` |
+    | `"state"` | `Bounded(-1, 1)` | `[N, 2]` | `float32` |
+    | `"episode_seed"` | `Unbounded` | `[N, 1]` | `int64` |
+    | `("info", "session_restarts")` | `Unbounded` | `[N, 1]` | `int64` |
+    | `("truth", field)` | `Unbounded` | `[N, 4]` | `float32` |
+    | `("reward_terms", term)` | `Unbounded` | `[N, 1]` | `float32` |
+
+    ``camera`` is each of the three cameras and ``H x W`` the decoded size (the hosted model's
+    512x768 unless ``frame_size`` or the embedded server's size says otherwise); the pixels are
+    the last frame of the chunk, all four (``[N, 4, H, W, 3]``) with ``all_frames=True``.
+    ``"state"`` is the previous action (zeros after a reset); ``"prompt"`` (text) is the row's
+    prompt. ``("truth", field)`` (the embedded server only: each frame's position, speed,
+    progress, lane and obstacle distances, collisions) and ``"expert_action"`` (``expert=True``)
+    are there where the server sends them.
+
+    ## Rewards
+
+    With ground truth (the embedded server) the default reward is
+    :class:`~oasis_torchrl.rewards.GroundTruthReward`, per row and step:
+    ``0.1 * progress_gained - 2 * collision - 0.01 * lane_offset`` (metres gained along the road,
+    1 on the first collided step, mean metres from the lane's centre). On frames alone it is 0
+    unless ``reward=`` is given; the reference reward is
+    :class:`~oasis_torchrl.rewards.DepthCollisionReward`:
+    ``expm1(3 * mean(max(throttle, 0))) / expm1(3)`` minus a straightness penalty.
+
+    ## Starting state
+
+    A reset of a row re-prompts its session with the row's next prompt and seed and sends one
+    all-zero chunk: the first observation is the world after standing still for 4 frames.
+
+    ## Episode end
+
+    - Termination: a frame of the chunk collided (ground truth: an obstacle hit or the road
+      left), or the reward module says so (the depth reward: collision risk reached 1).
+    - Truncation: ``max_steps`` steps (chunks; 512 by default), or the row's session was lost and
+      re-opened mid-episode (counted in ``("info", "session_restarts")``).
+
+    ## Version history
+
+    - v0: the first version.
+
     Args:
         endpoint: ``"local"`` (the embedded simulator server, started on a free loopback port
             by the process that steps the env and stopped on close), or any A2V endpoint such
@@ -391,6 +453,10 @@ class OasisEnv(OasisWrapper):
         >>> td = env.rollout(3)
         >>> td["next", "pixels", "front"].shape
         torch.Size([2, 3, 64, 96, 3])
+        >>> env.action_spec.shape, env.action_spec.space.low.min().item()
+        (torch.Size([2, 4, 2]), -1.0)
+        >>> env.observation_spec["state"].shape, env.observation_spec["truth", "speed"].shape
+        (torch.Size([2, 2]), torch.Size([2, 4]))
         >>> env.close()
     """
 

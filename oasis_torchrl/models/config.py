@@ -44,15 +44,15 @@ class DrivingNetConfig:
             4x4 patch convolution, 1 and 2 are 3x3 convolutions. The default ``(4, 2, 1)``
             reads 64x96 frames on a 16x24 then 8x12 grid; ``(2, 2, 2)`` keeps twice the
             resolution in the first two layers (an obstacle 60 m ahead is about a pixel tall
-            at 64x96) for about 1.4x the time of a behaviour-cloning step.
+            at 64x96), at a higher cost per behaviour-cloning step.
         pool_grid: ``(rows, cols)`` the last feature map is average-pooled to; keeping a grid
             (not a global pool) keeps where things are, which steering needs.
         camera_features: features per camera after the projection.
         state_dim: length of ``"state"`` (the previous action).
         use_state: feed the state to the actor and critic. Off for behaviour cloning: actions
             change slowly, so a clone that sees the previous action learns to repeat it (the
-            "copycat" shortcut, Wen et al., 2020); measured here, blanking all three cameras
-            barely changed such a clone's actions.
+            "copycat" shortcut, Wen et al., 2020): such a clone's actions barely depend on its
+            cameras.
         hidden_dim: width of the actor and value MLPs.
         critic_inputs: extra inputs of the value head only, e.g. privileged simulator state
             for an asymmetric actor-critic (0: the critic sees what the actor sees).
@@ -70,7 +70,7 @@ class DrivingNetConfig:
         init_action: the fresh actor's mean action (after the tanh), one value per action
             number in ``[-0.99, 0.99]``, repeated over the chunk. ``(0.5, 0.0)`` starts PPO
             from scratch at half throttle, straight: with the default zero chunk a fresh car
-            stands still and measured runs spent their first ~6000 env steps learning to move.
+            stands still and a run spends its first env steps learning to move.
         init_spread: mixture only: the fresh components' mean actions spread evenly from
             ``init_action - init_spread`` to ``init_action + init_spread`` (one value per action
             number), the outer ones ``e^-2`` as likely as the middle one, which the policy

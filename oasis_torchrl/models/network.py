@@ -161,7 +161,7 @@ class DrivingNet(nn.Module):
         Why bounded: demonstrations hold actions at exactly +-1 (full throttle), which push a
         clone's location far out; float32 ``atanh`` of PPO's samples there saturates near 8.4,
         so the log-probability of a stored action swings by tens of nats per small update and
-        PPO's ratio overflows (measured: 15 of 16 fine-tuning minibatches non-finite).
+        PPO's ratio overflows (non-finite fine-tuning minibatches).
         """
         raw = self.actor(features)
         loc = raw[..., self.logit_outputs :].unflatten(-1, self._chunk_shape)
@@ -358,9 +358,9 @@ class DrivingNet(nn.Module):
         """Multiply the mixture's component logits by ``factor`` (> 1: the most probable
         component more probable still; the deterministic action, its argmax, stays the same).
 
-        Why: a clone fitted by likelihood keeps about a fifth of its weight on the manoeuvres it
-        does not choose, so a PPO warm start that samples its components drives a policy far
-        from the one evaluated (BENCHMARKS.md, "BC then PPO").
+        Why: a clone fitted by likelihood keeps some of its weight on the manoeuvres it does not
+        choose, so a PPO warm start that samples its components drives a policy far from the one
+        evaluated (docs/experiments/2026-11-28-bc-then-ppo.md).
 
         Example:
             >>> net = DrivingNet(DrivingNetConfig())

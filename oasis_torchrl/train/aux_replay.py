@@ -1,12 +1,11 @@
 """A replay of past observations for the auxiliary loss: perception trained beside PPO.
 
 Why: PPO's encoder learns to see only from the batch it is updating on, the last 512 env steps,
-and only as far as the policy gradient and the auxiliary head need it there. Measured, the same
-PPO handed the privileged state passes 1.5x the best constant within 102,400 env steps, while on
-the cameras its auxiliary head reads the obstacle in the car's own lane worse than its mean
-(``benchmarks/state_ppo.py``, ``benchmarks/perception.py``); the clones' encoder, fitted to the
-privileged state alone, reads it at R^2 0.32 from 9,600 rows and 0.66 from 46,568
-(``benchmarks/perception_data.py``). So the encoder needs more frames than one batch.
+and only as far as the policy gradient and the auxiliary head need it there. The same PPO
+handed the privileged state learns to drive, while on the cameras its auxiliary head barely
+reads the obstacle in the car's own lane, and an encoder fitted to the privileged state reads
+it better the more rows it sees (docs/experiments/: the state_ppo, perception and
+perception_data pages). So the encoder needs more frames than one batch.
 
 How: every batch PPO collects also goes into a ring of ``capacity`` rows (the observations the
 encoder reads and their ``"critic_inputs"``, the frames kept as uint8), and after each PPO
@@ -15,14 +14,9 @@ loss alone, on minibatches drawn uniformly from the ring. Only the simulator's p
 is a label, so this uses no demonstrations: every row is an env step PPO counted. The ring is
 not checkpointed (a resumed run refills it).
 
-Measured (BENCHMARKS.md, "PPO from scratch"): with 32,768 rows, PPO from scratch drove 1.29x the
-best constant within 102,400 env steps on one seed (ahead of that seed without the replay on
-every scene set, by 1.3-1.8 standard errors) and 1.16x on a second (level with it), for about
-1.4x the training time; mirroring half of each replayed minibatch did worse. So
-``aux_replay.capacity`` defaults to 0 (off). Shifting each replayed row's frames by up to 4 pixels
-(``shift_pad``, with the warm-up's) moved the best constant's multiple on the targets' seed from
-1.41x (the constant's warm-up with this replay) to 1.50-1.52x on two seeds but left the unseen
-scenes level or behind, so it is off too.
+``aux_replay.capacity`` defaults to 0 (off): alone it did not pay for its training time, and
+the PPO-from-scratch recipe turns it on with the constant's warm-up; mirroring and shifting the
+replayed frames are off too (docs/experiments/2026-11-28-ppo-from-scratch.md has the runs).
 """
 
 from __future__ import annotations

@@ -12,10 +12,9 @@ the policy's mixture at its observation, and its stored log-probability is that 
 PPO's ratio reads; as in generalised state-dependent exploration (gSDE, Raffin et al.), the
 noise is correlated across steps while the log-probability is per step.
 
-Measured (BENCHMARKS.md, "PPO from scratch"): held for 5 chunks, PPO from scratch shrank its
-steering scale to 0.06 within 90,000 env steps and drove 0.85x the best constant, against 1.13x
-with fresh noise, so ``exploration.hold_chunks`` defaults to 1 (off); the same PPO handed the
-privileged state learns lane changes with fresh noise (``benchmarks/state_ppo.py``).
+``exploration.hold_chunks`` defaults to 1 (off): held noise made PPO from scratch shrink its
+steering scale and drive worse than fresh noise, and the same PPO handed the privileged state
+learns lane changes with fresh noise (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations

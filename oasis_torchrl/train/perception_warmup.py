@@ -1,12 +1,9 @@
 """Perception before PPO: the encoder fitted to the privileged state of the run's first env steps.
 
 Why: PPO from scratch on the cameras learns to see and to act at once, and its encoders never
-learn to read the obstacle in the car's own lane (R^2 -0.01 to 0.25 on their own drives,
-``benchmarks/perception.py --own-drives``), the one number a lane change hangs on; handed the
-privileged state, the same PPO passes 1.5x the best constant within 102,400 env steps
-(``benchmarks/state_ppo.py``). Started from an encoder fitted first to the autopilot's drives
-(``benchmarks/perception_data.py --ppo-checkpoint``, env steps no budget counts), camera PPO drove
-1.59x within 61,440 (BENCHMARKS.md, "PPO from scratch").
+learn to read the obstacle in the car's own lane, the one number a lane change hangs on; handed
+the privileged state, or started from an encoder fitted first to the autopilot's drives, the
+same PPO drives much farther (docs/experiments/2026-11-28-ppo-from-scratch.md).
 
 How: the first ``warmup.frames`` env steps are driven, by the initial policy or by a named driver
 that needs no expert (``warmup.driver``), and counted in ``collector.total_frames``; their
@@ -17,12 +14,10 @@ starts, its actor and critic fresh on features that already see (its learning ra
 the whole budget, the warm-up's env steps included). No demonstration: only the simulator's
 privileged state is a label.
 
-Measured (20,480 env steps of warm-up; BENCHMARKS.md, "PPO from scratch"): driven by the initial
-policy, whose episodes end after 40-50 m, 1.18x the best constant within 102,400 env steps, like
-runs without it; driven by the best constant action (``constant:throttle=1.0,steering=0.0``:
-blind to obstacles, about 200 m an episode), 1.42x on two seeds, 51-57 m farther than the same
-seeds without it, the first PPO policies from scratch that brake for obstacles, but level with
-them on other urban seeds and prompts. So ``warmup.frames`` defaults to 0 (off).
+``warmup.frames`` defaults to 0 (off): driven by the initial policy the warm-up changed
+nothing, and driven by the best constant action (``constant:throttle=1.0,steering=0.0``) it
+helped on the targets' seed but not on other seeds and prompts; the PPO-from-scratch recipe turns
+it on (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations

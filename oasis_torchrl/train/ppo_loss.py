@@ -6,7 +6,7 @@ shared encoder run once per minibatch, plus the auxiliary loss.
 for the log-probabilities, once for the values), and the encoder is most of an update's cost.
 :class:`DrivingPPOLoss` encodes the minibatch once and hands ClipPPOLoss the two heads, which
 read the fresh ``"features"``; gradients reach the encoder through them, so the result is the
-same loss at about half the cost (``benchmarks/ppo_update.py``).
+same loss with one encoder pass instead of two (``benchmarks/ppo_update.py`` times both).
 
 With ``encoder_grad="aux"`` the heads read the features detached, so the encoder learns from the
 auxiliary loss alone and PPO trains the actor and critic on what it sees (representation learning

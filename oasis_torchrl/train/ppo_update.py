@@ -99,18 +99,17 @@ class PPOUpdate:
         (critic, auxiliary) at ``optim.critic_lr``; the action scale at ``optim.scale_lr``
         (``null``: ``optim.lr``).
 
-        Why the heads: a fresh critic on a warm-started encoder (whose features are small,
-        ~0.08) moves too slowly at the actor's fine-tuning rate: measured on 1536 steps of the
-        cloned policy, a critic fitted for 320 minibatches explains 31% of the returns' variance
-        at 1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+        Why the heads: a fresh critic on a warm-started encoder (whose features are small)
+        moves too slowly at the actor's fine-tuning rate and explains less of the returns'
+        variance; PPO's advantages are only as good as that fit
+        (docs/experiments/2026-11-24-what-shapes-ppo.md).
 
         Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
         the mean did worse), so at the actor's rate Adam moves it by little more than a random
-        walk: measured, PPO's scale stayed at its initial 0.5 through 184k env steps, and the
-        policy drove 260 m deterministically but 224 m with that noise. With the scale pooled
-        per action number (``optim.pool_scale``) and this rate, a clone fine-tuned from a
-        scale of 1.0 cut its steering scale to 0.67 in 20,480 env steps and kept its throttle
-        scale near 0.94 (BENCHMARKS.md, "Exploration that shrinks").
+        walk, and PPO's scale stays near its initial value. With the scale pooled per action
+        number (``optim.pool_scale``) and its own rate, a fine-tuned clone cuts its steering
+        scale and keeps its throttle scale
+        (docs/experiments/2026-11-26-exploration-that-shrinks.md).
         """
         heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
         head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
@@ -191,8 +190,8 @@ class PPOUpdate:
     def kl_exceeded(self, losses: TensorDictBase) -> bool:
         """Whether the minibatch's approximate KL passes ``optim.target_kl`` (``null``: never).
 
-        Why: a clone's near-saturated actions make single updates jump (approximate KL up to
-        2.5 measured while fine-tuning at lr 3e-4); stopping the iteration's remaining
+        Why: a clone's near-saturated actions make single updates jump (a large approximate KL
+        while fine-tuning); stopping the iteration's remaining
         minibatches then, as Stable-Baselines3's ``target_kl`` does, keeps PPO's trust region.
         """
         target = self.cfg.optim.get("target_kl")

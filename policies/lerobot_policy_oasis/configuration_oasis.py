@@ -116,14 +116,14 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             weighted).
         action_loss_weights: weight of the throttle and steering errors of ``"l1"`` and
             ``"mse"``. Actions are not normalised (see above), so with equal weights the loss
-            follows the dimension that varies most: in autopilot demonstrations throttle (std
-            ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
+            follows the dimension that varies most: in autopilot demonstrations throttle drowns
+            steering, whose rare lane changes are what avoids
             obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
         manoeuvre_weight: extra weight of the demonstrations that steer: each sample's action
             loss is weighted ``1 + manoeuvre_weight * s``, ``s`` the mean absolute steering of
             its demonstrated chunk. Lane changes are a few percent of an autopilot's chunks, and
-            unweighted a clone steers in a third as many as the autopilot (measured at 0: 1.2%
-            of chunks against 4.1%) and drives into what it should change lanes for.
+            unweighted a clone steers in fewer of them than the autopilot and drives into what
+            it should change lanes for.
         aux_weight: weight of an auxiliary loss (0: none): the network's auxiliary head
             predicts each frame's privileged state (``privileged_state``: speed, offsets, heading
             error, obstacle distances ahead in the car's path, its lane and the lanes beside it,
