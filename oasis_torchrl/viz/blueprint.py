@@ -20,9 +20,9 @@ BACKGROUND = (30, 34, 30)
 PLOTS_PER_LINE = 3
 
 
-def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical:
+def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical | None:
     """The row's plots that show at least one of ``signals`` (palette keys such as
-    ``truth/speed``; None: every plot), three to a line.
+    ``truth/speed``; None: every plot), three to a line; None if there is none.
 
     Example:
         >>> views = plot_views(RowPaths("env", 0), {"action/throttle", "truth/speed"})
@@ -34,6 +34,8 @@ def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.V
         rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=plot.title)
         for plot in chosen
     ]
+    if not views:
+        return None
     lines = [views[i : i + PLOTS_PER_LINE] for i in range(0, len(views), PLOTS_PER_LINE)]
     return rrb.Vertical(*(rrb.Horizontal(*line) for line in lines))
 
@@ -87,14 +89,16 @@ def row_layout(
     topdown: Window | None = DEFAULT_WINDOW,
     signals: Collection[str] | None = None,
 ) -> rrb.Horizontal:
-    """The layout of one row: cameras over plots, side panel on the right.
+    """The layout of one row: cameras over plots (those with signals), side panel on the right.
 
     Example:
         >>> layout = row_layout(RowPaths("env", 0), ["left_forward", "front", "right_forward"])
         >>> type(layout).__name__
         'Horizontal'
     """
-    main = rrb.Vertical(camera_views(paths, cameras), plot_views(paths, signals), row_shares=[3, 2])
+    plots = plot_views(paths, signals)
+    cameras_row = camera_views(paths, cameras)
+    main = cameras_row if plots is None else rrb.Vertical(cameras_row, plots, row_shares=[3, 2])
     return rrb.Horizontal(
         main,
         _side_panel(paths, depth_cameras, topdown),
@@ -186,11 +190,6 @@ class RowsLayout:
     topdown: Window | None
     signals: frozenset[str]
     summary: bool
-
-    def row_layout(self, row: int) -> rrb.Horizontal:
-        """The layout of one of the rows."""
-        paths = RowPaths(self.root, row)
-        return row_layout(paths, self.cameras, self.depth_cameras, self.topdown, self.signals)
 
     def blueprint(self, fps: float | None = None) -> rrb.Blueprint:
         """The default blueprint of these rows."""

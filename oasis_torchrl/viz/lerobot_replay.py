@@ -106,7 +106,9 @@ class DatasetReplay:
 
         chosen = self.check_episodes(episodes)
         self.recording.send_blueprint(
-            default_blueprint(chosen, self.cameras, root=EPISODE_ROOT, topdown=None)
+            default_blueprint(
+                chosen, self.cameras, root=EPISODE_ROOT, topdown=None, signals=self._signals()
+            )
         )
         dataset = LeRobotDataset(
             self.repo_id, root=self.root, episodes=chosen, video_backend="pyav"
@@ -118,6 +120,16 @@ class DatasetReplay:
             self._log_episode(episode, rows)
             logger.info("replayed episode %d (%d frames)", episode, len(rows["frame_index"]))
         return chosen
+
+    def _signals(self) -> set[str]:
+        """The palette keys of the series a replay logs (which plots the layout shows)."""
+        features = self.meta.features
+        signals = {"reward/total"} if REWARD in features else set()
+        for key, group in ((ACTION, "action"), (STATE, "state")):
+            if key in features:
+                width = int(np.prod(features[key]["shape"]))
+                signals |= {f"{group}/{name}" for name in _names(features[key], width)}
+        return signals
 
     def _log_episode(self, episode: int, rows: dict[str, np.ndarray]) -> None:
         paths = RowPaths(EPISODE_ROOT, episode)

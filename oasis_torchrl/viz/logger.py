@@ -165,6 +165,10 @@ class RolloutLogger:
             rollout: the rollout; a ``[T]`` rollout is taken as one env row.
             new_episodes: every row starts an episode at ``t = 0`` (``env.rollout`` resets
                 first); False continues the episodes of the previous call (collector batches).
+
+        After a row's ``done``, its next root observation starts a new episode (a collector's
+        reset) unless it is still ``done`` (an evaluation stepping a finished row on): then
+        nothing more is logged for the row.
         """
         if rollout.batch_dims == 1:
             rollout = rollout.unsqueeze(0)
@@ -177,7 +181,11 @@ class RolloutLogger:
             self._pending(n)[:] = True
         for t in range(int(rollout.batch_size[1])):
             step = rollout[:, t]
-            starting = np.flatnonzero(self._pending(n)).tolist()
+            pending = self._pending(n)
+            still_done = step.get("done", None)  # a finished row stepped on, not reset
+            if still_done is not None:
+                pending = pending & ~still_done.detach().cpu().reshape(n).numpy()
+            starting = np.flatnonzero(pending).tolist()
             if starting:
                 self.log_reset(step, starting)
             self.log_step(step.get("next"), step.get("action", None))

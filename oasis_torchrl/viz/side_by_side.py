@@ -38,7 +38,7 @@ from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.recording import open_recording
-from oasis_torchrl.viz.summary import SUMMARY_ROOT, EpisodeSummary
+from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW
 from oasis_torchrl.viz.writer import ACTION_NAMES
 
@@ -219,15 +219,16 @@ def align_recordings(
     fps: float | None = None,
 ) -> dict[str, str]:
     """Copy saved recordings (``env/<row>`` each) into one, each under a root named after its
-    file, laid out side by side on their shared ``frame`` timeline, with the divergences of
-    their actions marked; returns file -> root.
+    file, laid out side by side on their shared ``frame`` timeline, with the first frame of each
+    row where their actions diverge marked and their summary tables one under the other;
+    returns file -> root.
 
     Example:
         >>> align_recordings(["a.rrd", "b.rrd"], "pair.rrd")  # doctest: +SKIP
         {'a.rrd': 'a', 'b.rrd': 'b'}
     """
     try:
-        from rerun.experimental import RrdReader
+        from rerun.experimental import RrdReader, send_chunks
     except ImportError:
         raise ValueError(
             f"aligning recordings needs rerun-sdk 0.32 or newer (installed: {rr.__version__})"
@@ -238,11 +239,16 @@ def align_recordings(
     recording = open_recording(target)
     layouts, actions = [], {}
     try:
+        tables = []
         for name, root in roots.items():
             chunks = list(RrdReader(name).stream())
-            recording.send_chunks([_rerooted(chunk, root) for chunk in chunks if _kept(chunk)])
+            kept = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
+            send_chunks(kept, recording=recording)
             layouts.append(_layout_of(root, [chunk.entity_path for chunk in chunks]))
             actions[root] = _actions_by_frame(chunks)
+            tables.append(f"## {root} ({name})\n\n{_table_of(chunks)}")
+        document = rr.TextDocument("\n\n".join(tables), media_type="text/markdown")
+        recording.log(TABLE, document, static=True)
         recording.send_blueprint(side_by_side_blueprint(layouts, fps))
         _log_frame_divergences(recording, actions, threshold, fps)
     finally:
@@ -253,7 +259,19 @@ def align_recordings(
 
 def _kept(chunk: object) -> bool:
     path = chunk.entity_path
-    return path.startswith(f"/{ENV_ROOT}/") or path.startswith(f"/{SUMMARY_ROOT}/{ENV_ROOT}")
+    return path.startswith(f"/{ENV_ROOT}/") or path == f"/{chart_path(ENV_ROOT)}"
+
+
+def _table_of(chunks: Sequence[object]) -> str:
+    """The summary table a recording holds (empty if none of its episodes ended)."""
+    texts = [
+        value[0]
+        for chunk in chunks
+        if chunk.entity_path == f"/{TABLE}"
+        for value in chunk.to_record_batch().column("TextDocument:text").to_pylist()
+        if value
+    ]
+    return texts[-1] if texts else "(no episode ended)"
 
 
 def _rerooted(chunk: object, root: str) -> object:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
 from tensordict import TensorDict
 
@@ -48,12 +49,31 @@ def _record(path: Path, truth: bool = True, **options: object) -> Readback:
     return Readback(path)
 
 
+def _saved_evaluation() -> TensorDict:
+    """The same drive as a rollout ``[N, T]`` (what ``rollout_episodes`` returns): a finished
+    row's root observation is its last one, still ``done``."""
+    root = observation(0, [0] * len(ENDS), reset=True)
+    root["done"] = torch.zeros(len(ENDS), 1, dtype=torch.bool)
+    steps = []
+    for t in range(STEPS):
+        nxt, action = _step(t, truth=True)
+        steps.append(root.clone().update({"action": action, "next": nxt}))
+        root = nxt.exclude("reward", "terminated", "truncated")
+    return torch.stack(steps, dim=1)
+
+
 def _last_frame(end: int) -> int:
     return 4 * (end + 1) + 3  # tick 0 is the reset; step t is tick t + 1
 
 
-def test_nothing_is_logged_for_a_row_after_its_episode_ends(tmp_path: Path) -> None:
-    readback = _record(tmp_path / "eval.rrd")
+@pytest.mark.parametrize("way_in", ["steps", "saved rollout"])
+def test_nothing_is_logged_for_a_row_after_its_episode_ends(tmp_path: Path, way_in: str) -> None:
+    if way_in == "steps":  # an evaluation's recorder
+        readback = _record(tmp_path / "eval.rrd")
+    else:  # oasis-torchrl view of a saved evaluation
+        with RolloutLogger(tmp_path / "eval.rrd") as rerun_logger:
+            rerun_logger.log_rollout(_saved_evaluation())
+        readback = Readback(tmp_path / "eval.rrd")
 
     expected = {
         0: ("ERROR", 10, "collision (hit an obstacle) after 2 steps, 5.0 m, return 2.000"),
