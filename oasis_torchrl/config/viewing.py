@@ -72,6 +72,11 @@ class ViewConfig:
     def __post_init__(self) -> None:
         if self.save is not None and self.connect is not None:
             raise ValueError("--save and --connect exclude each other: give one")
+        if self.beside is not None and "=" in self.beside and not self.beside.endswith(".rrd"):
+            raise ValueError(
+                f"{self.beside!r} stands where a second .rrd goes: give view's settings as flags "
+                "(--rows 0,5), not KEY=VALUE"
+            )
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be in 1-100, got {self.jpeg_quality}")
 

@@ -98,7 +98,8 @@ def row_layout(
     """
     plots = plot_views(paths, signals)
     cameras_row = camera_views(paths, cameras)
-    main = cameras_row if plots is None else rrb.Vertical(cameras_row, plots, row_shares=[3, 2])
+    # 2 to 3: three 3:2 cameras across fill their panels on a wide screen, without black bars.
+    main = cameras_row if plots is None else rrb.Vertical(cameras_row, plots, row_shares=[2, 3])
     return rrb.Horizontal(
         main,
         _side_panel(paths, depth_cameras, topdown),

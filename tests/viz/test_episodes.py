@@ -54,6 +54,7 @@ def _saved_evaluation() -> TensorDict:
     row's root observation is its last one, still ``done``."""
     root = observation(0, [0] * len(ENDS), reset=True)
     root["done"] = torch.zeros(len(ENDS), 1, dtype=torch.bool)
+    root["truth", "distance"] = torch.zeros(len(ENDS), 4)
     steps = []
     for t in range(STEPS):
         nxt, action = _step(t, truth=True)
