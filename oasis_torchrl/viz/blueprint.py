@@ -1,10 +1,11 @@
 """The default rerun layout: a summary tab, then one tab per row: the cameras side by side, the
 plots below them (one unit each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view,
 depth maps and the event log beside them. The time panel opens at the start of the ``frame``
-timeline and plays."""
+timeline."""
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
@@ -124,14 +125,20 @@ def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
 
 
 def time_panel(fps: float | None = None) -> rrb.TimePanel:
-    """The time panel: the ``frame`` timeline, playing from its start (the viewer's default
-    follows the end of the data).
+    """The time panel: the ``frame`` timeline from its start (the viewer's default follows the
+    end of the data).
 
     Example:
         >>> type(time_panel()).__name__
         'TimePanel'
     """
-    return rrb.TimePanel(timeline=FRAME_TIMELINE, play_state="playing", fps=fps)
+    # rerun-sdk 0.26's time panel takes a cursor; newer ones have none, but a panel set to
+    # "playing" starts from the beginning.
+    if "play_state" in inspect.signature(rrb.TimePanel).parameters:
+        start: dict = {"play_state": "playing"}
+    else:
+        start = {"sequence_cursor": 0}
+    return rrb.TimePanel(timeline=FRAME_TIMELINE, fps=fps, **start)
 
 
 def default_blueprint(
