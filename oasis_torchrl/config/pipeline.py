@@ -80,11 +80,6 @@ class DaggerConfig:
     rounds: int = option(0, help="DAgger rounds after the first clone")
     episodes: int = option(16, help="episodes the clone drives per round")
     steps: int = option(500, help="fine-tuning steps per round")
-    from_scratch: bool = option(
-        False,
-        help="each round trains a fresh clone on everything recorded for bc.train.steps (Ross "
-        "et al.'s DAgger) instead of fine-tuning the last one for dagger.steps",
-    )
     noise: NoiseConfig = option(
         default_factory=lambda: NoiseConfig(throttle=0.05), help="executed-action noise"
     )

@@ -382,7 +382,7 @@ class OasisEnv(OasisWrapper):
     | `("reward_terms", term)` | `Unbounded` | `[N, 1]` | `float32` |
 
     ``camera`` is each of the three cameras and ``H x W`` the decoded size (the hosted model's
-    512x768 unless ``frame_size`` or the embedded server's size says otherwise); the pixels are
+    512 x 768 unless ``frame_size`` or the embedded server's size says otherwise); the pixels are
     the last frame of the chunk, all four (``[N, 4, H, W, 3]``) with ``all_frames=True``.
     ``"state"`` is the previous action (zeros after a reset); ``"prompt"`` (text) is the row's
     prompt. ``("truth", field)`` (the embedded server only: each frame's position, speed,

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from oasis_torchrl.config.training import NetworkArchitectureConfig
 from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
@@ -21,6 +22,8 @@ TANH_NORMAL = "tanh_normal"
 MIXTURE = "mixture"
 HEADS = (TANH_NORMAL, MIXTURE)
 """Action heads: one tanh-normal over the chunk, or a mixture of them (one per manoeuvre)."""
+_SHAPE = NetworkArchitectureConfig()
+"""The shape settings of PPO's and BC's commands: their defaults are the network's."""
 
 
 @dataclass(frozen=True)
@@ -91,20 +94,20 @@ class DrivingNetConfig:
     cameras: tuple[str, ...] = CAMERAS
     image_size: tuple[int, int] = POLICY_IMAGE_SIZE
     frames: int = POLICY_FRAMES
-    shared_encoder: bool = True
-    encoder_channels: tuple[int, int, int] = (24, 48, 64)
-    encoder_strides: tuple[int, int, int] = (4, 2, 1)
-    pool_grid: tuple[int, int] = (4, 6)
-    camera_features: int = 128
+    shared_encoder: bool = _SHAPE.shared_encoder
+    encoder_channels: tuple[int, int, int] = tuple(_SHAPE.encoder_channels)
+    encoder_strides: tuple[int, int, int] = tuple(_SHAPE.encoder_strides)
+    pool_grid: tuple[int, int] = tuple(_SHAPE.pool_grid)
+    camera_features: int = _SHAPE.camera_features
     state_dim: int = 2
     use_state: bool = True
-    hidden_dim: int = 256
+    hidden_dim: int = _SHAPE.hidden_dim
     critic_inputs: int = 0
     aux_outputs: int = 0
     chunk: int = CHUNK
     action_dim: int = ACTION_DIM
-    head: str = MIXTURE
-    components: int = 3
+    head: str = _SHAPE.head
+    components: int = _SHAPE.components
     init_action: tuple[float, ...] = (0.0, 0.0)
     init_spread: tuple[float, ...] = (0.0, 0.3)
     init_scale: tuple[float, ...] = (0.5, 0.1)

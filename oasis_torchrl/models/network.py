@@ -354,31 +354,6 @@ class DrivingNet(nn.Module):
         )
 
     @torch.no_grad()
-    def sharpen_components(self, factor: float) -> None:
-        """Multiply the mixture's component logits by ``factor`` (> 1: the most probable
-        component more probable still; the deterministic action, its argmax, stays the same).
-
-        Why: a clone fitted by likelihood keeps some of its weight on the manoeuvres it does not
-        choose, so a PPO warm start that samples its components drives a policy far from the one
-        evaluated (docs/experiments/2026-11-28-bc-then-ppo.md).
-
-        Example:
-            >>> net = DrivingNet(DrivingNetConfig())
-            >>> features = torch.randn(1, net.config.features_dim)
-            >>> before = net.action_params(features)["logits"].softmax(-1).max().item()
-            >>> net.sharpen_components(3.0)
-            >>> net.action_params(features)["logits"].softmax(-1).max().item() > before
-            True
-        """
-        if self.config.head != MIXTURE:
-            raise ValueError(f"only the {MIXTURE} head has components, not {self.config.head}")
-        if not factor > 0:
-            raise ValueError(f"the logits' factor must be positive, got {factor}")
-        last = self.actor[-1]
-        last.weight[: self.logit_outputs].mul_(factor)
-        last.bias[: self.logit_outputs].mul_(factor)
-
-    @torch.no_grad()
     def set_scale(self, scale: float | Sequence[float]) -> None:
         """Reset the action distribution's scale (e.g. before PPO fine-tuning of a BC policy):
         one value, or one per action number.

@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import torch
@@ -26,8 +28,21 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
+OFFLINE_ALTERNATIVE = "env.reward.depth_model=small"
+"""The setting that needs no download: the small depth network shipped with the package."""
 DepthFn = Callable[[torch.Tensor], torch.Tensor]
 InputSize = int | tuple[int, int]
+
+
+class DepthModelError(ValueError):
+    """A depth model cannot be loaded; the message names the model, the cause and the
+    alternative.
+
+    >>> raise DepthModelError("depth model 'x' cannot be loaded: ...")
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.rewards.depth_sources.DepthModelError: depth model 'x' cannot be loaded: ...
+    """
 
 
 @runtime_checkable
@@ -252,8 +267,17 @@ class MonocularDepth:
             from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
             logger.info("loading depth model %s", self.source)
-            self._model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
-            processor = AutoImageProcessor.from_pretrained(self.source)
+            try:
+                model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
+                processor = AutoImageProcessor.from_pretrained(self.source)
+            except (OSError, ValueError) as error:  # not cached offline, no such model, bad files
+                raise DepthModelError(
+                    f"depth model {str(self.source)!r} cannot be loaded: "
+                    f"{_why_not_loaded(self.source, error)}; "
+                    f"offline, use the small network shipped with the package: "
+                    f"{OFFLINE_ALTERNATIVE}"
+                ) from None
+            self._model = model
             self._preprocess = DepthPreprocess.from_processor(processor, self.input_size)
         return self._model, self._preprocess
 
@@ -276,3 +300,29 @@ class MonocularDepth:
             align_corners=False,
         ).squeeze(1)
         return nearness.to(rgb.device)
+
+
+def error_cause(error: BaseException) -> str:
+    """An error's type and the first line of its message, for one-line reports (web addresses
+    replaced by "the hub").
+
+    >>> error_cause(OSError("cannot reach 'https://example.org/x'\\nlong advice"))
+    'OSError: cannot reach the hub'
+    """
+    lines = str(error).strip().splitlines()
+    first = re.sub(r"'?https?://[^\s']+'?", "the hub", lines[0]) if lines else "no message"
+    return f"{type(error).__name__}: {first}"
+
+
+def _why_not_loaded(source: str | os.PathLike[str], error: BaseException) -> str:
+    """Why ``from_pretrained(source)`` failed, in words a user can act on."""
+    from huggingface_hub import constants
+
+    text = str(source)
+    if Path(text).expanduser().is_dir():
+        return f"the folder holds no depth model ({error_cause(error)})"
+    if isinstance(source, os.PathLike) or text.startswith(("/", ".", "~")):
+        return "no such folder"
+    if constants.HF_HUB_OFFLINE:
+        return "it is not in the local cache, and downloads are off (HF_HUB_OFFLINE)"
+    return error_cause(error)

@@ -12,12 +12,8 @@ observations and privileged state go into a ring
 take ``warmup.steps`` minibatches of the auxiliary loss alone, with an Adam of their own. Then PPO
 starts, its actor and critic fresh on features that already see (its learning rates anneal over
 the whole budget, the warm-up's env steps included). No demonstration: only the simulator's
-privileged state is a label.
-
-``warmup.frames`` defaults to 0 (off): driven by the initial policy the warm-up changed
-nothing, and driven by the best constant action (``constant:throttle=1.0,steering=0.0``) it
-helped on the targets' seed but not on other seeds and prompts; the PPO-from-scratch recipe turns
-it on (docs/experiments/2026-11-28-ppo-from-scratch.md).
+privileged state is a label. Off by default; the ``ppo_scratch`` preset turns it on, driven by
+the best constant action (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations
@@ -40,7 +36,6 @@ class PerceptionWarmup:
         capacity: rows kept (the oldest are overwritten): the warm-up's env steps.
         mini_batch_size: rows per minibatch.
         lr: Adam's learning rate for the warm-up.
-        shift_pad: each minibatch row's frames shifted by up to this many pixels (0: none).
 
     Example:
         >>> from tensordict import TensorDict
@@ -57,14 +52,9 @@ class PerceptionWarmup:
     """
 
     def __init__(
-        self,
-        loss: DrivingPPOLoss,
-        capacity: int,
-        mini_batch_size: int,
-        lr: float,
-        shift_pad: int = 0,
+        self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int, lr: float
     ) -> None:
-        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size, shift_pad=shift_pad)
+        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size)
         net = loss.net
         parameters = [*net.encoder.parameters(), *net.aux.parameters()]
         self.optimizer = torch.optim.Adam(parameters, lr=lr)

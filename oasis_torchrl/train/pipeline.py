@@ -5,8 +5,7 @@
 2. ``bc``: behaviour cloning on it (the ``bc`` stage settings,
    :class:`~oasis_torchrl.config.BCSettings`),
    then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
-   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all
-   (or, with ``dagger.from_scratch``, a fresh clone is trained on it all);
+   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
    :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
@@ -151,16 +150,12 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
 
 def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     """The BC config of clone round ``round_`` (0: from scratch; k: DAgger round k, which
-    fine-tunes the previous clone unless ``dagger.from_scratch``).
+    fine-tunes the previous clone).
 
     Example:
         >>> bc = bc_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/x"), 1)
         >>> bc.output_dir, bc.init_from, bc.dataset.root, bc.train.steps
         ('/tmp/d/bc/round_1', '/tmp/d/bc/round_0/policy', '/tmp/d/x', 500)
-        >>> fresh = load_config("demo", ["output_dir=/tmp/d", "dagger.from_scratch=true"])
-        >>> bc = bc_config(fresh, Path("/tmp/d/x"), 1)
-        >>> bc.output_dir, bc.init_from, bc.train.steps
-        ('/tmp/d/bc/round_1', None, 1000)
     """
     values: dict[str, Any] = {
         "seed": cfg.seed + round_,
@@ -170,7 +165,7 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
         "eval": {"episodes": 0},
         "policy": {"image_size": list(cfg.env.image_size)},
     }
-    if round_ and not cfg.dagger.from_scratch:
+    if round_:
         values["init_from"] = str(previous_clone(cfg, round_))
         values["train"] = {"steps": cfg.dagger.steps}
     return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)

@@ -1,8 +1,7 @@
 """PPO on :class:`~oasis_torchrl.envs.OasisEnv`, the TorchRL recipe.
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
-distribution over the 4-action chunk, its noise drawn afresh every chunk or held over several:
-:mod:`oasis_torchrl.train.exploration`); :class:`~oasis_torchrl.train.ppo_update.PPOUpdate`
+distribution over the 4-action chunk); :class:`~oasis_torchrl.train.ppo_update.PPOUpdate`
 turns each batch into new weights (GAE advantages with the critic, then
 :class:`~torchrl.objectives.ClipPPOLoss` on both heads, the shared encoder run once per
 minibatch, for a few epochs of minibatches; optionally an auxiliary replay). Around that:
@@ -46,7 +45,6 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
-from oasis_torchrl.train.exploration import HeldNoisePolicy
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
 
@@ -71,8 +69,7 @@ class PPOResult:
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with its scale reset
-    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's)
-    and its mixture's component logits multiplied by ``cfg.warm_start_sharpen``;
+    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's);
     with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
@@ -87,14 +84,7 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         net = load_net(cfg.init_from)
         if cfg.warm_start_scale is not None:
             net.set_scale(OmegaConf.to_object(cfg.warm_start_scale))
-        if cfg.warm_start_sharpen != 1:
-            net.sharpen_components(cfg.warm_start_sharpen)
-        logger.info(
-            "warm start from %s (scale %s, component logits x%g)",
-            cfg.init_from,
-            cfg.warm_start_scale,
-            cfg.warm_start_sharpen,
-        )
+        logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
         config = {"cameras": cameras, "image_size": image_size, **network}
@@ -195,10 +185,6 @@ class PPOTrainer:
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.env.append_transform(ChunkFrameStack(cameras, depth=self.net.config.frames))
         self.modules = make_actor_critic(self.net)
-        hold = cfg.exploration.hold_chunks
-        self.collecting_policy = (
-            HeldNoisePolicy(self.modules.policy, hold) if hold > 1 else self.modules.policy
-        )
         anneal_frames = cfg.optim.anneal_frames or cfg.collector.total_frames
         self.update = PPOUpdate(self.modules, cfg, anneal_frames)
         if resumed:
@@ -257,9 +243,7 @@ class PPOTrainer:
         steps, and the encoder and the auxiliary head are fitted to their privileged state
         (:mod:`~oasis_torchrl.train.perception_warmup`); PPO's first update follows."""
         cfg = self.cfg.warmup
-        warmup = PerceptionWarmup(
-            self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr, cfg.shift_pad
-        )
+        warmup = PerceptionWarmup(self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr)
         driver = DriverSpec(cfg.driver) if cfg.driver else None
         if driver is not None and driver().needs_expert:
             raise ValueError(
@@ -327,7 +311,7 @@ class PPOTrainer:
                 bar.update(batch.numel())
                 bar.set_postfix(_postfix(metrics))
                 if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
-                    collector.update_policy_weights_(self.collecting_policy)
+                    collector.update_policy_weights_(self.modules.policy)
                 waiting = time.perf_counter()
 
     @contextmanager
@@ -365,7 +349,7 @@ class PPOTrainer:
                     frame_stack=self.net.config.frames,
                     privileged=uses_ground_truth(cfg),
                 ),
-                None if driver else self.collecting_policy,
+                None if driver else self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
                 auto_register_policy_transforms=False,
@@ -373,7 +357,7 @@ class PPOTrainer:
             )
         return Collector(
             self.env,
-            driver() if driver else self.collecting_policy,
+            driver() if driver else self.modules.policy,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
             auto_register_policy_transforms=False,

@@ -2,11 +2,10 @@
 
 :class:`PPOUpdate` owns what turns a batch of env steps into new weights: GAE advantages,
 :class:`~oasis_torchrl.train.ppo_loss.DrivingPPOLoss` over shuffled minibatches for a few epochs,
-Adam with three learning-rate groups annealed over the run, gradient clipping, the KL stop, the
-skipping of non-finite steps, and the auxiliary replay
-(:mod:`~oasis_torchrl.train.aux_replay`). It knows nothing of envs, evaluation or files, so the
-camera trainer (:class:`~oasis_torchrl.train.ppo.PPOTrainer`) and any other collection loop
-(``benchmarks/state_ppo.py``, on the privileged state) update alike.
+Adam with three learning-rate groups annealed over the run, gradient clipping, the skipping of
+non-finite steps, and the auxiliary replay (:mod:`~oasis_torchrl.train.aux_replay`). It knows
+nothing of envs, evaluation or files, so the camera trainer
+(:class:`~oasis_torchrl.train.ppo.PPOTrainer`) and any other collection loop update alike.
 """
 
 from __future__ import annotations
@@ -68,7 +67,6 @@ class PPOUpdate:
         self.loss = DrivingPPOLoss(
             modules,
             aux_coeff=cfg.loss.aux_coeff,
-            encoder_grad=cfg.loss.encoder_grad,
             clip_epsilon=cfg.loss.clip_epsilon,
             entropy_coeff=cfg.loss.entropy_coeff,
             critic_coeff=cfg.loss.critic_coeff,
@@ -87,9 +85,7 @@ class PPOUpdate:
         self._anneal(0)
         replay = cfg.aux_replay
         self.aux_replay = (
-            AuxiliaryReplay(
-                self.loss, replay.capacity, replay.mini_batch_size, replay.mirror, replay.shift_pad
-            )
+            AuxiliaryReplay(self.loss, replay.capacity, replay.mini_batch_size)
             if replay.capacity
             else None
         )
@@ -132,8 +128,7 @@ class PPOUpdate:
         self, batch: TensorDictBase, frames: int, critic_only: bool = False
     ) -> dict[str, float]:
         """Update on ``batch`` (``[rows, time]`` as collected) after ``frames`` env steps of the
-        run: advantages, then ``optim.epochs`` passes of minibatch PPO steps (fewer when the
-        approximate KL to the collecting policy passes ``optim.target_kl``; only the critic's
+        run: advantages, then ``optim.epochs`` passes of minibatch PPO steps (only the critic's
         loss with ``critic_only``), then the auxiliary replay's steps. The mean losses and
         diagnostics."""
         factor = self._anneal(frames)
@@ -144,8 +139,6 @@ class PPOUpdate:
         updates = skipped = 0
         for minibatch in self._minibatches(flat):
             losses = self.loss(minibatch)
-            if not critic_only and self.kl_exceeded(losses):
-                break
             terms = ("loss_critic",) if critic_only else self.loss.terms
             grad_norm = self._step(sum(losses[key] for key in terms), critic_only)
             if grad_norm is None:
@@ -186,16 +179,6 @@ class PPOUpdate:
         for _ in range(self.cfg.optim.epochs):
             for index in torch.randperm(flat.numel()).split(self.cfg.optim.mini_batch_size):
                 yield flat[index]
-
-    def kl_exceeded(self, losses: TensorDictBase) -> bool:
-        """Whether the minibatch's approximate KL passes ``optim.target_kl`` (``null``: never).
-
-        Why: a clone's near-saturated actions make single updates jump (a large approximate KL
-        while fine-tuning); stopping the iteration's remaining
-        minibatches then, as Stable-Baselines3's ``target_kl`` does, keeps PPO's trust region.
-        """
-        target = self.cfg.optim.get("target_kl")
-        return target is not None and float(losses["kl_approx"].mean()) > target
 
     def _step(self, total: torch.Tensor, critic_only: bool = False) -> float | None:
         """One optimizer step on the summed loss; the gradient norm, or ``None`` when the loss or

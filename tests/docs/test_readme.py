@@ -124,3 +124,20 @@ def test_env_card_matches_the_specs(small_env: OasisEnv) -> None:
                 assert spec.space.high.max().item() == float(bounded["high"]), key
             else:
                 assert row["spec"] == "Unbounded" and "Unbounded" in type(spec).__name__, key
+
+
+def section(text: str, heading: str) -> str:
+    start = text.index(f"## {heading}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start : end if end >= 0 else None]
+
+
+def test_readme_and_docs_home_say_the_same_about_where_features_work() -> None:
+    home = (ROOT / "docs" / "index.md").read_text()
+    table = [
+        line for line in section(README, "Where each feature works").splitlines() if "|" in line
+    ]
+    assert table
+    assert table == [
+        line for line in section(home, "Where each feature works").splitlines() if "|" in line
+    ]
