@@ -51,6 +51,19 @@ class RayCollectionConfig:
         "server: all envs share it",
     )
     cpus_per_collector: float = option(1.0, help="Ray CPUs reserved per actor")
+    memory_per_collector: int | None = option(
+        None, help="bytes of Ray memory reserved per actor (null: none reserved)"
+    )
+    resources_per_collector: dict[str, float] = option(
+        default_factory=dict,
+        help="custom Ray resources reserved per actor, e.g. {gpu_box: 1} (nodes started with "
+        "ray start --resources)",
+    )
+    startup_timeout_s: float = option(
+        120.0,
+        help="seconds to reach the cluster and place every actor before the run stops, naming "
+        "what was asked and what the cluster has",
+    )
     num_cpus: int | None = option(None, help="local runtime only: CPUs Ray may use (null: all)")
     object_store_memory: int | None = option(
         None, help="local runtime only: bytes of object store (null: Ray's default)"
@@ -78,6 +91,8 @@ class RayCollectionConfig:
             )
         if self.part_batches < 0:
             raise ValueError(f"ray.part_batches must be >= 0, got {self.part_batches}")
+        if self.startup_timeout_s <= 0:
+            raise ValueError(f"ray.startup_timeout_s must be > 0, got {self.startup_timeout_s}")
         if self.shard_root is not None and self.envs_per_collector != 1:
             # The hook would run in each env's subprocess, all writing the same shard.
             raise ValueError(
@@ -112,10 +127,30 @@ class RayCollectionConfig:
         return kwargs
 
     def remote_config(self) -> dict[str, Any]:
-        """Ray resources of one collector actor.
+        """Ray resources of one collector actor (``ray.remote`` options).
 
         Example:
             >>> RayCollectionConfig(cpus_per_collector=0.5).remote_config()
             {'num_cpus': 0.5, 'num_gpus': 0}
+            >>> RayCollectionConfig(memory_per_collector=2**30, resources_per_collector={"box": 1}
+            ...                     ).remote_config()
+            {'num_cpus': 1.0, 'num_gpus': 0, 'memory': 1073741824, 'resources': {'box': 1}}
         """
-        return {"num_cpus": self.cpus_per_collector, "num_gpus": 0}
+        options: dict[str, Any] = {"num_cpus": self.cpus_per_collector, "num_gpus": 0}
+        if self.memory_per_collector is not None:
+            options["memory"] = self.memory_per_collector
+        if self.resources_per_collector:
+            options["resources"] = dict(self.resources_per_collector)
+        return options
+
+    def bundle(self) -> dict[str, float]:
+        """The resources of one collector as a Ray placement-group bundle.
+
+        Example:
+            >>> RayCollectionConfig(memory_per_collector=100, resources_per_collector={"box": 1}
+            ...                     ).bundle()
+            {'CPU': 1.0, 'memory': 100, 'box': 1}
+        """
+        bundle = {"CPU": self.cpus_per_collector, "memory": self.memory_per_collector}
+        bundle.update(self.resources_per_collector)
+        return {name: amount for name, amount in bundle.items() if amount}

@@ -13,6 +13,7 @@ worker dies is not yielded (the survivors' part of it is still recorded in their
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import warnings
@@ -26,6 +27,7 @@ import numpy as np
 import ray
 from omegaconf import DictConfig, OmegaConf
 from ray.exceptions import RayActorError
+from ray.util.placement_group import remove_placement_group
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torch import nn
@@ -33,15 +35,24 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
-from oasis_torchrl.compat import drop_ray_collectors
+from oasis_torchrl.compat import drop_ray_collectors, ray_weight_sync_scheme
 from oasis_torchrl.config.env import EnvConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
+from oasis_torchrl.distributed.placement import (
+    ClusterStartupError,
+    check_reachable,
+    collector_nodes,
+    collector_options,
+    reserve_collectors,
+)
 from oasis_torchrl.distributed.sharded_recording import ShardRecorder
 
 logger = logging.getLogger(__name__)
 
 PING_TIMEOUT_S = 60.0
 """How long a live worker may take to answer the liveness probe after a failure."""
+CLOSE_TIMEOUT_S = 60.0
+"""How long the live workers may take to close their envs (finishing every session)."""
 
 
 class WorkerLostError(RuntimeError):
@@ -173,13 +184,17 @@ class RayCollection:
         self._recorded = dict.fromkeys(range(config.num_collectors), 0)
         self._owns_ray = not ray.is_initialized() and config.is_local
         if not ray.is_initialized():
+            check_reachable(config.address, config.startup_timeout_s)
             ray.init(**config.init_kwargs())
         create_envs = [
             SeededEnvFactory(create_env, worker_seed)
             for worker_seed in worker_seeds(seed, config.num_collectors)
         ]
+        self._group = None
+        self.collector: RayCollector | None = None
         try:
             self._check_local_cpus()
+            self._group = reserve_collectors(config)
             with warnings.catch_warnings():
                 # Built in the workers, a factory's policy has no central weights to sync.
                 warnings.filterwarnings("ignore", "The policy is not an nn.Module")
@@ -197,13 +212,21 @@ class RayCollection:
                     ),
                     num_workers_per_collector=config.envs_per_collector,
                     num_collectors=config.num_collectors,
-                    remote_configs=config.remote_config(),
+                    remote_configs=collector_options(config, self._group),
                     sync=config.sync,
-                    **({"weight_sync_schemes": {}} if policy is None else {}),
+                    weight_sync_schemes={}
+                    if policy is None
+                    else {"policy": ray_weight_sync_scheme()},
                 )
+            self.nodes = collector_nodes(self.collector.remote_collectors, config.startup_timeout_s)
+        except RayActorError as error:  # raised by TorchRL's set-up calls to the actors
+            self._release()
+            raise ClusterStartupError(
+                f"a collector was lost before it started (its node died?): "
+                f"{str(error).splitlines()[0]}"
+            ) from None
         except BaseException:
-            if self._owns_ray:
-                ray.shutdown()
+            self._release()
             raise
         self._workers = list(range(config.num_collectors))
         self._closed = False
@@ -340,7 +363,8 @@ class RayCollection:
     # -- closing -------------------------------------------------------------------------
 
     def close(self) -> dict[int, int]:
-        """Finalize the live workers' shards, stop the actors (and a Ray runtime started here).
+        """Finalize the live workers' shards, close their envs (every session finished), stop
+        the actors (and a Ray runtime started here).
 
         Returns the episodes each live worker recorded (empty without recording).
         """
@@ -352,10 +376,31 @@ class RayCollection:
                 episodes = self.collector.map_fn("post_collect_hook.close")
                 self.shard_episodes = dict(zip(self._workers, episodes, strict=True))
         finally:
-            self.collector.shutdown(shutdown_ray=False)
+            self._close_envs()
+            self._release()
+        return self.shard_episodes
+
+    def _close_envs(self) -> None:
+        """Shut the live workers' collectors down (closing their envs), waiting a bounded time:
+        Ray kills actors without closing anything."""
+        closing = [actor.shutdown.remote() for actor in self.collector.remote_collectors]
+        done, late = ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
+        for ref in done:
+            with contextlib.suppress(RayActorError):  # lost since the last batch: nothing to close
+                ray.get(ref)
+        if late:
+            logger.warning("%d workers did not close within %gs", len(late), CLOSE_TIMEOUT_S)
+
+    def _release(self) -> None:
+        """Stop the actors, free their reservation, stop a Ray runtime started here."""
+        try:
+            if self.collector is not None:
+                self.collector.shutdown(shutdown_ray=False)
+            if self._group is not None:
+                remove_placement_group(self._group)
+        finally:
             if self._owns_ray:
                 ray.shutdown()
-        return self.shard_episodes
 
     def __enter__(self) -> RayCollection:
         return self

@@ -18,6 +18,8 @@ from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
 from oasis_torchrl.distributed import RayCollectionConfig, env_factory, record_on_ray
 from oasis_torchrl.drivers import DriverSpec, PolicyDriver
 
+pytestmark = pytest.mark.usefixtures("ray_runtime")
+
 EPISODES, SESSIONS, STEPS = 5, 2, 2
 SMALL = ["--width", "96", "--height", "64", "--max-steps", str(STEPS)]
 
