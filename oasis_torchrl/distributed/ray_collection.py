@@ -3,12 +3,16 @@
 Every Ray actor runs a TorchRL collector over its own env(s); each ``OasisEnv`` opens its own
 channel in the actor (and, for ``endpoint="local"``, its own embedded server, or all share the
 ``server_address`` of one ``oasis-torchrl serve``). Every actor's env is seeded differently (from
-one run seed), so workers never drive the same worlds. Weights travel as TorchRL sends them
-(``RayWeightSyncScheme``). :class:`RayCollection` adds what a run needs around it: per-worker
-LeRobot shards (optionally up to an episode count split over the workers), and a lost worker
-reported and then either dropped (``on_failure="continue"``) or the run stopped cleanly
-(``"stop"``), with every surviving shard finalized either way. In sync mode the round in which a
-worker dies is not yielded (the survivors' part of it is still recorded in their shards).
+one run seed), so workers never drive the same worlds. Weights travel as TorchRL sends them (its Ray
+weight sync, met at each node's cluster address rather than its hostname's:
+:func:`~oasis_torchrl.compat.ray_weight_sync_scheme`). :class:`RayCollection` adds what a run needs
+around it: per-worker LeRobot shards (optionally up to an episode count split over the workers), and
+a lost worker reported and then either dropped (``on_failure="continue"``) or the run stopped
+cleanly (``"stop"``), with every surviving shard finalized either way. In sync mode the round in
+which a worker dies is not yielded (the survivors' part of it is still recorded in their shards).
+The collectors are reserved together before any starts, and a cluster that cannot be reached or
+cannot place them stops the run within ``ray.startup_timeout_s`` (:mod:`.placement`); closing shuts
+the live collectors down (their envs closed, every session finished) before Ray kills them.
 """
 
 from __future__ import annotations
@@ -149,6 +153,9 @@ class RayCollection:
         batch_keys: keys of the batches the workers send back once recorded (recording only;
             default everything; ``()`` keeps the frames on the workers for a record-only run).
         **collector_kwargs: further arguments of each remote TorchRL collector.
+
+    Attributes:
+        nodes: the cluster address of the node each collector runs on, as Ray placed them.
 
     Example:
         >>> config = RayCollectionConfig(num_collectors=2, sessions_per_env=2, num_cpus=2)
@@ -384,6 +391,8 @@ class RayCollection:
         """Shut the live workers' collectors down (closing their envs), waiting a bounded time:
         Ray kills actors without closing anything."""
         closing = [actor.shutdown.remote() for actor in self.collector.remote_collectors]
+        if not closing:
+            return
         done, late = ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
         for ref in done:
             with contextlib.suppress(RayActorError):  # lost since the last batch: nothing to close
