@@ -226,6 +226,8 @@ class RayCollection:
                     else {"policy": ray_weight_sync_scheme()},
                 )
             self.nodes = collector_nodes(self.collector.remote_collectors, config.startup_timeout_s)
+            if isinstance(policy, nn.Module):
+                self.collector.update_policy_weights_(policy)
         except RayActorError as error:  # raised by TorchRL's set-up calls to the actors
             self._release()
             raise ClusterStartupError(
@@ -237,8 +239,6 @@ class RayCollection:
             raise
         self._workers = list(range(config.num_collectors))
         self._closed = False
-        if isinstance(policy, nn.Module):
-            self.collector.update_policy_weights_(policy)
 
     def _check_recording_options(
         self, max_episodes: int | None, batch_keys: Sequence[NestedKey] | None
