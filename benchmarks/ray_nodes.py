@@ -6,7 +6,7 @@ network namespaces on this machine (:mod:`oasis_torchrl.distributed.namespace_cl
   driver's placement line to its last line (start-up excluded).
 - PPO: seconds per collected batch (the trainer's ``time/collect_s``, first batch excluded)
   with two remote collectors on the two-node cluster against one collector in the driver's
-  process over the same number of sessions.
+  process (no Ray) over the same number of sessions.
 
 Prints JSON with both ratios. Every driver runs inside the head's namespace.
 
@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 from datetime import datetime
@@ -85,12 +86,17 @@ def ppo_collect_seconds(remote: bool, args: argparse.Namespace, work: Path) -> d
     if remote:
         settings += ["ray.enabled=true", "ray.num_collectors=2"]
         settings += [f"ray.sessions_per_env={args.sessions}"]
+        with NamespaceCluster(f"rp{os.getpid()}") as cluster:
+            settings.append(f"ray.address={cluster.address}")
+            run = cluster.run(oasis("train", "ppo", *settings), timeout=RUN_TIMEOUT_S)
     else:
         settings += [f"env.num_envs={2 * args.sessions}"]
-    with NamespaceCluster(f"rp{os.getpid()}", node_cpus=(1, 1) if remote else (2,)) as cluster:
-        if remote:
-            settings.append(f"ray.address={cluster.address}")
-        run = cluster.run(oasis("train", "ppo", *settings), timeout=RUN_TIMEOUT_S)
+        run = subprocess.run(
+            oasis("train", "ppo", *settings),
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT_S,
+        )
     if run.returncode != 0:
         raise RuntimeError(f"PPO ({'remote' if remote else 'local'}) failed: {run.stdout[-3000:]}")
     (table,) = output.rglob("collect_s.csv")
@@ -120,11 +126,16 @@ def main() -> None:
         raise SystemExit(f"cannot build the clusters: {reason}")
     with tempfile.TemporaryDirectory(prefix="ray-nodes-") as folder:
         work = Path(folder)
-        two, one = recording_rate((1, 1), args, work), recording_rate((2,), args, work)
-        remote, local = (
-            ppo_collect_seconds(True, args, work),
-            ppo_collect_seconds(False, args, work),
-        )
+        measured = []
+        for measure in (
+            lambda: recording_rate((1, 1), args, work),
+            lambda: recording_rate((2,), args, work),
+            lambda: ppo_collect_seconds(True, args, work),
+            lambda: ppo_collect_seconds(False, args, work),
+        ):
+            measured.append(measure())
+            logger.info("measured %s", json.dumps(measured[-1]))  # kept if a later one fails
+        two, one, remote, local = measured
     result: dict[str, Any] = {
         "recording_two_nodes": two,
         "recording_one_node": one,

@@ -50,9 +50,10 @@ FAST_FAILURE_DETECTION = {
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        ["ip", *args], capture_output=True, text=True, timeout=COMMAND_TIMEOUT_S, check=check
-    )
+    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=COMMAND_TIMEOUT_S)
+    if check and done.returncode != 0:
+        raise RuntimeError(f"ip {' '.join(args)} failed: {done.stderr.strip()}")
+    return done
 
 
 def unavailable_reason() -> str | None:
@@ -80,7 +81,8 @@ class NamespaceCluster:
     Args:
         tag: unique among concurrent clusters (e.g. with the process id): names the
             namespaces, the veth ends and the Ray temp folder.
-        node_cpus: CPUs of each node: one entry (a head alone) or two (head and worker).
+        node_cpus: CPUs of each node: one entry (a head alone, the worker's namespace empty)
+            or two (head and worker).
         object_store_memory: bytes of each node's object store.
         env: extra environment of the nodes and the commands run inside.
 
@@ -103,8 +105,9 @@ class NamespaceCluster:
         self.tag = tag
         self.node_cpus = list(node_cpus)
         self.object_store_memory = object_store_memory
-        self.namespaces = [f"{tag}-head", f"{tag}-work"][: len(node_cpus)]
-        self.addresses = [HEAD_ADDRESS, WORKER_ADDRESS][: len(node_cpus)]
+        # Both namespaces and the link are made either way (a lone veth end has no carrier).
+        self.namespaces = [f"{tag}-head", f"{tag}-work"]
+        self.addresses = [HEAD_ADDRESS, WORKER_ADDRESS]
         token = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
         self.env = {**os.environ, **FAST_FAILURE_DETECTION, **token, **(env or {})}
         self.temp_dir = Path(tempfile.mkdtemp(prefix=f"ray-{tag}-", dir="/tmp"))  # short: sockets
@@ -120,7 +123,7 @@ class NamespaceCluster:
         """Make the namespaces and the link, then start the head and the worker node."""
         try:
             self._make_network()
-            for node in range(len(self.namespaces)):
+            for node in range(len(self.node_cpus)):
                 self._start_node(node)
         except BaseException:
             self.close()
@@ -136,10 +139,6 @@ class NamespaceCluster:
             folder.mkdir(parents=True, exist_ok=True)
             (folder / "hosts").write_text(hosts)
             _ip("-n", namespace, "link", "set", "lo", "up")
-        if len(self.namespaces) == 1:
-            _ip("-n", self.namespaces[0], "link", "add", "veth0", "type", "dummy")
-            self._address("veth0", 0)
-            return
         _ip("link", "add", f"{self.tag}-h", "type", "veth", "peer", "name", f"{self.tag}-w")
         for node, end in enumerate((f"{self.tag}-h", f"{self.tag}-w")):
             _ip("link", "set", end, "netns", self.namespaces[node])
