@@ -36,6 +36,9 @@ PREFIX_LENGTH = 24
 RAY_PORT = 6379
 COMMAND_TIMEOUT_S = 180.0
 """Bound of every set-up command (``ip``, ``ray start``)."""
+START_ATTEMPTS = 3
+"""Starts of a node before giving up: Ray's own start-up deadlines can pass on a loaded machine
+("The current node timed out during startup"), and a later start succeeds."""
 STOP_GRACE_S = 10.0
 """How long the processes of a namespace get to exit on SIGTERM before SIGKILL."""
 FAST_FAILURE_DETECTION = {
@@ -165,12 +168,17 @@ class NamespaceCluster:
             f"--temp-dir={self.temp_dir}",
             "--disable-usage-stats",
         ]
-        started = self.run(command, node=node, timeout=COMMAND_TIMEOUT_S)
-        if started.returncode != 0:
-            raise RuntimeError(
-                f"ray start in {self.namespaces[node]} failed ({started.returncode}): "
-                f"{started.stdout[-2000:]}"
-            )
+        for attempt in range(1, START_ATTEMPTS + 1):
+            started = self.run(command, node=node, timeout=COMMAND_TIMEOUT_S)
+            if started.returncode == 0:
+                break
+            self._stop_processes(node)  # what the failed start left behind
+            if attempt == START_ATTEMPTS:
+                raise RuntimeError(
+                    f"ray start in {self.namespaces[node]} failed {attempt} times "
+                    f"({started.returncode}): {started.stdout[-2000:]}"
+                )
+            logger.warning("ray start in %s failed; starting again", self.namespaces[node])
         logger.info("Ray node %s up in namespace %s", self.addresses[node], self.namespaces[node])
 
     def command(self, args: Sequence[str], *, node: int = 0) -> list[str]:
