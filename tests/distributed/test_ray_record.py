@@ -107,6 +107,7 @@ def _kill_a_collector_process() -> None:
 
 
 @pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="finds workers in /proc")
+@pytest.mark.timeout(600)  # two Ray workers start, record, lose one and close: 260 s seen loaded
 def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
