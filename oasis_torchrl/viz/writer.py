@@ -5,9 +5,11 @@ Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 *
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
 frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
 at most a second late). Each row keeps a little state (episode number, step count, return,
-collided flag, its road map and a fixed-size path buffer), never frames. The top-down view is
-drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the road comes from
-``scenes(prompt, seed)`` once per episode.
+collision, its road map, a fixed-size path buffer and the episode's actions), never frames. The
+top-down view is drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the
+road comes from ``scenes(prompt, seed)`` once per episode. An episode's end is one event with
+its cause and final figures, and an :class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the
+summary tab.
 """
 
 from __future__ import annotations
