@@ -139,6 +139,12 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
     wait_until(lambda: "replayed episode 0" in browser.find_element("id", "message").text, "replay")
     assert page_state(browser)["replayed"] == dataset.num_frames
 
+    if REGENERATE:
+        press(browser, "w")
+        chunks_later(browser, 3)
+        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+        browser.save_screenshot(str(SCREENSHOT))
+
     # A gamepad (the browser's Gamepad API, here a stand-in): analog trigger and stick drive,
     # buttons command.
     browser.execute_script(FAKE_GAMEPAD, 0.7, -0.5, [])
@@ -147,12 +153,6 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
     browser.execute_script(FAKE_GAMEPAD, 0.0, 0.0, [3])  # Y: take over (there is no policy)
     wait_until(lambda: "no_policy" in page_state(browser)["errors"], "the takeover refused")
     browser.execute_script(FAKE_GAMEPAD, 0.0, 0.0, [])
-
-    if REGENERATE:
-        press(browser, "w")
-        chunks_later(browser, 3)
-        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-        browser.save_screenshot(str(SCREENSHOT))
 
 
 @pytest.mark.timeout(900)
