@@ -52,8 +52,16 @@ def reaction_range(reaction: Sequence[float], name: str = "reaction") -> tuple[f
 
 @dataclass
 class DemonstrationsConfig:
-    """The autopilot demonstrations (frame rows, a LeRobot dataset)."""
+    """The demonstrations (frame rows, a LeRobot dataset): the autopilot's where the endpoint
+    sends ground truth, else a policy's or a person's."""
 
+    source: str = option(
+        "auto",
+        help="who demonstrates: auto (the autopilot where the endpoint sends ground truth) | "
+        "autopilot | a policy (a saved policy folder or checkpoint, grpc://host:port, or a "
+        "driver spec) | a LeRobot dataset folder of frame rows (a person's drives recorded "
+        "with lerobot-record and the keyboard teleoperators, or an earlier recording)",
+    )
     episodes: int = option(16, help="episodes to record")
     seed: int = option(1, help="seed of their episodes and noise")
     noise: NoiseConfig = option(default_factory=NoiseConfig, help="executed-action noise")
@@ -78,6 +86,12 @@ class DaggerConfig:
     """Rounds of: the clone drives, the autopilot labels, the clone is fine-tuned on it all."""
 
     rounds: int = option(0, help="DAgger rounds after the first clone")
+    labeller: str = option(
+        "auto",
+        help="who labels the clone's drives: auto (the autopilot where the endpoint sends ground "
+        "truth, else the demonstrating policy; no rounds when a dataset demonstrated) | "
+        "autopilot | a policy (saved or grpc://host:port)",
+    )
     episodes: int = option(16, help="episodes the clone drives per round")
     steps: int = option(500, help="fine-tuning steps per round")
     noise: NoiseConfig = option(
@@ -166,8 +180,9 @@ class DemoConfig:
     )
     eval: PipelineEvaluationConfig = option(
         default_factory=lambda: PipelineEvaluationConfig(
-            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd"
+            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd", compare=["autopilot"]
         ),
-        help="the final comparison (the final policy's episodes are recorded)",
+        help="the final comparison (the final policy's episodes are recorded, side by side with "
+        "the autopilot's)",
     )
     progress: bool = option(True, help="tqdm progress bars")

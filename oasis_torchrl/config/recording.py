@@ -96,7 +96,11 @@ class RecordConfig(DatasetOutputConfig):
     }
 
     episodes: int = option(10, help="episodes to record (with --ray, env.num_envs is unused)")
-    driver: str = option("autopilot", help="who drives: autopilot | scripted | policy")
+    driver: str = option(
+        "auto",
+        help="who drives: auto (the autopilot where the endpoint sends ground truth, else the "
+        "script) | autopilot | scripted | policy",
+    )
     script: str = option("throttle=0.5", help="scripted driver spec (throttle=...,steering=...)")
     policy: str | None = option(
         None,

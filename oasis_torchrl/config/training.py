@@ -96,6 +96,10 @@ class CollectorConfig:
     total_frames: int = option(20480, help="env steps in the whole run")
 
 
+AUX_COEFF = 1.0
+"""``loss.aux_coeff`` where the endpoint sends ground truth and the setting is null."""
+
+
 @dataclass
 class LossConfig:
     """ClipPPOLoss and GAE, plus the auxiliary ground-truth head."""
@@ -109,10 +113,11 @@ class LossConfig:
     critic_warmup_iters: int = option(
         0, help="first iterations train the critic only (use after a warm start)"
     )
-    aux_coeff: float = option(
-        1.0,
+    aux_coeff: float | None = option(
+        None,
         help="the camera features also learn to predict the privileged state (MSE, a "
-        "training-only head; embedded server only; 0: off)",
+        f"training-only head; needs ground truth; 0: off; null: {AUX_COEFF} where the endpoint "
+        "sends ground truth, else 0)",
     )
 
 
@@ -266,8 +271,8 @@ class PPOSettings:
     """A PPO training stage: network, warm start, collection, loss, optimiser, evaluations."""
 
     network: NetworkConfig = option(default_factory=NetworkConfig, help="the fresh network")
-    privileged_critic: bool = option(
-        True, help="the critic also reads ground truth (embedded server only)"
+    privileged_critic: bool | None = option(
+        None, help="the critic also reads ground truth (null: where the endpoint sends it)"
     )
     warm_start_scale: list[float] | None = option(
         default_factory=lambda: [0.2, 0.05],
@@ -297,7 +302,7 @@ class PPOSettings:
             ("aux_replay.capacity", self.aux_replay.capacity),
             ("warmup.frames", self.warmup.frames),
         ):
-            if on and not self.loss.aux_coeff:
+            if on and self.loss.aux_coeff == 0:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
         if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(
@@ -415,3 +420,120 @@ class BCConfig(BCSettings):
         default_factory=EnvConfig, help="the evaluation env (the policy's image size is used)"
     )
     progress: bool = option(True, help="tqdm progress bars")
+
+
+# -- the small depth network -------------------------------------------------------------------
+
+DEPTH_TRAINING_PROMPTS = (
+    "urban street",
+    "city street at night",
+    "urban street at sunset in the rain",
+    "city street in the snow",
+    "foggy urban street at night",
+    "rainy city street",
+    "highway",
+    "highway at sunset",
+    "highway at night in the rain",
+    "snowy highway",
+    "foggy highway at sunset",
+    "rural road",
+    "rural road at night",
+    "rural road at sunset in the fog",
+    "rainy rural road",
+    "snowy rural road at night",
+)
+"""The scenes ``train depth`` draws from: every layout, lighting and weather, in combinations
+that :data:`DEPTH_HELD_OUT_PROMPTS` does not use."""
+
+DEPTH_HELD_OUT_PROMPTS = (
+    "snowy city avenue at sunset",
+    "foggy downtown city street",
+    "highway in the fog at night",
+    "rainy highway in daylight",
+    "rural lane in the snow at sunset",
+    "foggy rural road",
+)
+"""Scenes no ``train depth`` run sees by default (new wording and keyword combinations): the
+agreement benchmark's."""
+
+
+@dataclass
+class DepthTrainConfig:
+    """``oasis-torchrl train depth``: the small depth network (oasis_torchrl.models.depth) on
+    the embedded world's front frames, with the simulator's metric depth as the target."""
+
+    image_size: list[int] = option(
+        default_factory=lambda: [64, 96], help="[height, width] of the frames it is trained at"
+    )
+    render_scale: int = option(
+        2,
+        help="the world is rendered at this multiple of image_size; frames are decoded down to "
+        "it and the target's nearness averaged down to it",
+    )
+    frame_format: str = option(
+        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+    )
+    channels: list[int] = option(
+        default_factory=lambda: [12, 24, 48, 96], help="widths of the network's levels"
+    )
+    prompts: list[str] = option(
+        default_factory=lambda: list(DEPTH_TRAINING_PROMPTS), help="scenes, one drawn per episode"
+    )
+    drivers: list[str] = option(
+        default_factory=lambda: [
+            "autopilot",
+            "constant:throttle=0.8,steering=0.0",
+            "scripted:throttle=sine:0.4:120:0.5,steering=sine:0.5:50",
+            "scripted:throttle=1.0,steering=weave:0.088:20:100",
+        ],
+        help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
+        "in turn",
+    )
+    num_envs: int = option(4, help="episodes driven at once (one round)")
+    episodes: int = option(32, help="episodes driven (a multiple of num_envs)")
+    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)")
+    epochs: int = option(15, help="passes over the frames")
+    batch_size: int = option(32, help="frames per step")
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
+    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    near_weight: float = option(
+        0.0,
+        help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
+        "normalised nearness (0: every pixel alike)",
+    )
+    validation: float = option(
+        0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
+    )
+    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    frames_file: str | None = option(
+        None,
+        help="keep the driven frames and their nearness here: read when the file exists (no "
+        "driving), else written after driving (null: not kept)",
+    )
+    output: str = option("outputs/depth/depth_small.pt", help="the weights file written")
+    progress: bool = option(True, help="tqdm progress bars")
+
+    def __post_init__(self) -> None:
+        if len(self.image_size) != 2 or min(self.image_size) <= 0:
+            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
+        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
+            raise ValueError(
+                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
+                f"({self.num_envs})"
+            )
+        positive = {
+            "render_scale": self.render_scale,
+            "steps": self.steps,
+            "epochs": self.epochs,
+            "batch_size": self.batch_size,
+            "lr": self.lr,
+        }
+        for name, value in positive.items():
+            if not value > 0:
+                raise ValueError(f"{name} must be positive, got {value}")
+        if self.near_weight < 0:
+            raise ValueError(f"near_weight must be >= 0, got {self.near_weight}")
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
+        if not self.drivers or not self.prompts:
+            raise ValueError("drivers and prompts must each name at least one")

@@ -51,7 +51,13 @@ from oasis_torchrl.envs.specs import (
     build_reward_spec,
 )
 from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, HOSTED_FRAME_SIZE
-from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
+from oasis_torchrl.rewards import (
+    DepthCollisionReward,
+    GroundTruthReward,
+    NamedDepth,
+    RewardModule,
+    as_reward_module,
+)
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
@@ -105,9 +111,9 @@ class OasisWrapper(_EnvWrapper):
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
-            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
-            elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
-            reference depth reward).
+            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, the
+            reference's :class:`~oasis_torchrl.rewards.DepthCollisionReward` on frames alone
+            (its depth from the shipped small network).
         ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``; a
             server that sends none yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
@@ -218,6 +224,11 @@ class OasisWrapper(_EnvWrapper):
                 pool.close()
                 raise
         return pool
+
+    @property
+    def reward_module(self) -> RewardModule:
+        """The module that scores every step (the ``reward`` given, or the default)."""
+        return self._reward
 
     def scene_source(self) -> SceneSource:
         """The layouts of this env's scenes, asked of its server through the protocol
@@ -435,8 +446,9 @@ class OasisEnv(OasisWrapper):
             machine), ``"vp9"`` (what the hosted model sends: train on its compression
             artefacts) or ``"jpeg"``; default: raw on this machine, else VP9.
         all_frames: return all 4 frames of each chunk instead of the last one.
-        ground_truth: see :class:`OasisWrapper`; default: only for ``endpoint="local"`` (set it
-            for an ``oasis-torchrl serve`` server started elsewhere).
+        ground_truth: see :class:`OasisWrapper`; default: for ``endpoint="local"`` unless its
+            server is hosted-like (set it for an ``oasis-torchrl serve`` server started
+            elsewhere, or let :func:`~oasis_torchrl.envs.make_env` find it).
         expert: run the embedded server's expert beside every episode and expose its next
             chunk as ``"expert_action"`` (what :class:`~oasis_torchrl.drivers.Autopilot` drives
             with, and demonstrations label with); off, the server spends nothing on it.
@@ -489,6 +501,11 @@ class OasisEnv(OasisWrapper):
         if local:
             config = server if server is not None else ServerConfig()
             streams = StreamLayout(CAMERAS, frame_size or (config.height, config.width))
+            if expert and config.hosted:
+                raise ValueError(
+                    "the expert needs ground truth, which a hosted-like server does not send: "
+                    "drive with a person, recordings or a policy"
+                )
         formats = {} if frame_format is None else {"accepted_formats": [FORMAT_NAMES[frame_format]]}
         pool = SessionPool(
             embedded_server(config, num_envs) if local else endpoint,
@@ -506,7 +523,7 @@ class OasisEnv(OasisWrapper):
             pool,
             streams=streams,
             prompts=prompts,
-            ground_truth=local if ground_truth is None else ground_truth,
+            ground_truth=(local and not config.hosted) if ground_truth is None else ground_truth,
             fps=config.fps if local else FPS,
             **kwargs,
         )
@@ -574,11 +591,7 @@ def _flags(
 
 def _resolve_reward(reward: Any, ground_truth: bool) -> RewardModule:
     if reward is None:
-        return GroundTruthReward() if ground_truth else as_reward_module(_zero_reward)
+        return GroundTruthReward() if ground_truth else DepthCollisionReward(NamedDepth())
     if hasattr(reward, "reset"):
         return reward
     return as_reward_module(reward)
-
-
-def _zero_reward(td: TensorDictBase) -> torch.Tensor:
-    return torch.zeros(td.batch_size[0], 1)

@@ -15,6 +15,7 @@ and the kept policy exported as a LeRobot policy folder. Config:
 
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from collections.abc import Iterator, Sequence
@@ -32,8 +33,10 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.config.training import AUX_COEFF
 from oasis_torchrl.drivers import DriverSpec
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
+from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
@@ -101,6 +104,27 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     return net
 
 
+def with_capabilities(cfg: DictConfig) -> DictConfig:
+    """A copy of ``cfg`` whose null ``privileged_critic`` and ``loss.aux_coeff`` are set from
+    what its endpoint sends (:mod:`~oasis_torchrl.envs.capabilities`): on with ground truth, off
+    on frames alone (explicit values are kept; on a frames-only endpoint
+    :func:`~oasis_torchrl.envs.make_env` refuses them).
+
+    Example:
+        >>> from oasis_torchrl.config import load_config
+        >>> resolved = with_capabilities(load_config("ppo", ["env.server.hosted=true"]))
+        >>> resolved.privileged_critic, resolved.loss.aux_coeff
+        (False, 0.0)
+    """
+    found = env_capabilities(cfg.env)
+    cfg = copy.deepcopy(cfg)
+    if cfg.privileged_critic is None:
+        cfg.privileged_critic = found.ground_truth
+    if cfg.loss.aux_coeff is None:
+        cfg.loss.aux_coeff = AUX_COEFF if found.ground_truth else 0.0
+    return cfg
+
+
 def uses_ground_truth(cfg: DictConfig) -> bool:
     """Whether the run reads the simulator's privileged state (critic inputs or auxiliary
     targets), which only the embedded server sends.
@@ -152,7 +176,7 @@ class PPOTrainer:
     """
 
     def __init__(self, cfg: DictConfig) -> None:
-        self.cfg = cfg
+        self.cfg = cfg = with_capabilities(cfg)
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
         torch.manual_seed(cfg.seed)
@@ -367,8 +391,11 @@ class PPOTrainer:
 
     @property
     def best_selection(self) -> float | None:
-        """Mean distance of the kept policy on the selection seeds (None: none chosen yet)."""
-        return None if self.kept_selection is None else self.kept_selection["mean_distance"]
+        """Mean distance of the kept policy on the selection seeds, or on frames alone its mean
+        return (None: none chosen yet)."""
+        if self.kept_selection is None:
+            return None
+        return self.kept_selection[_selection_key(self.kept_selection)]
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
@@ -413,8 +440,9 @@ class PPOTrainer:
         path = self.checkpoint_dir / BEST
         state = load_checkpoint(path)
         logger.info(
-            "keeping the policy of %d env steps (mean distance %.1f on the selection seeds)",
+            "keeping the policy of %d env steps (%s %.2f on the selection seeds)",
             state["frames"],
+            _selection_key(self.kept_selection),
             self.best_selection,
         )
         return net_from_checkpoint(state), path, state["frames"]
@@ -523,6 +551,11 @@ def evaluated_checkpoint_name(frames: int) -> str:
         'frames_10240.pt'
     """
     return f"frames_{frames}.pt"
+
+
+def _selection_key(evaluation: dict[str, Any]) -> str:
+    """What selection compares: the mean distance, or on frames alone the mean return."""
+    return "mean_distance" if evaluation.get("ground_truth", True) else "mean_return"
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
