@@ -15,7 +15,7 @@ endif
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-EXTRAS := dev,lerobot,rerun,depth,ray
+EXTRAS := dev,docs,lerobot,rerun,depth,ray
 # The LeRobot plugins, each a small distribution LeRobot finds by name (lerobot_policy_oasis,
 # lerobot_robot_oasis, lerobot_teleoperator_oasis, lerobot_env_oasis).
 PLUGINS := policies robots teleoperators envs
@@ -31,7 +31,7 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
+.PHONY: demo test docs lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
 
 venv-python:
 	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
@@ -60,13 +60,19 @@ test: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider
 
+# The docs site (mkdocs.yml) into site/, strict: a broken link or reference fails it.
+docs: venv-python $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
+
 lint: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
+# The sources stand in protos/ and are imported as oasis_torchrl/proto/<name>.proto, so the
+# generated modules land in the package with the package's import paths.
 protos: venv-python $(STAMP)
-	$(PY) -m grpc_tools.protoc -I. --python_out=. --grpc_python_out=. --pyi_out=. \
-		oasis_torchrl/proto/*.proto
+	$(PY) -m grpc_tools.protoc -Ioasis_torchrl/proto=protos --python_out=. --grpc_python_out=. \
+		--pyi_out=. protos/*.proto
 
 # The whole installed set, pinned (the project's own editable installs left out), under the
 # header comment of constraints.txt.
@@ -75,19 +81,15 @@ lock: venv-python $(STAMP)
 		$(PY) -m pip freeze --exclude-editable; } > constraints.tmp
 	mv constraints.tmp constraints.txt
 
-# The quick benchmarks (each a few minutes at most); the learning benchmark trains policies for
-# hours and has its own target.
-LEARNING_BENCH := benchmarks/learning.py benchmarks/state_clone.py benchmarks/perception.py \
-	benchmarks/perception_data.py
-# Run by hand: diagnostics of a trained policy named on the command line, and PPO on the
-# privileged state (hours; BENCHMARKS.md, "state_ppo.py").
-BY_HAND := benchmarks/crashes.py benchmarks/sampled_policy.py benchmarks/state_ppo.py
+# The quick benchmarks (each a few minutes at most; benchmarks/_*.py are their helpers); the
+# learning benchmark trains policies for hours and has its own target.
+LEARNING_BENCH := benchmarks/learning.py
 bench: venv-python $(STAMP)
-	set -e; for script in $(filter-out $(LEARNING_BENCH) $(BY_HAND),$(wildcard benchmarks/*.py)); do \
+	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/[!_]*.py)); do \
 		$(PY) $$script; done
 
 bench-learning: venv-python $(STAMP)
-	set -e; for script in $(LEARNING_BENCH); do $(PY) $$script; done
+	$(PY) $(LEARNING_BENCH)
 
 # LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
 # the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).

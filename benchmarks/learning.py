@@ -2,17 +2,17 @@
 
 On the embedded server, with the demo's training scenes (``DemoConfig.env.prompts``) and
 resolution (96x64 frames, 64x96 policy images), evaluated on the "urban" prompt on fixed seeds,
-one episode per env row of up to ``--max-steps`` chunks:
+one episode per env row of up to ``eval.max_steps`` chunks:
 
 1. references: the autopilot (privileged expert) and constant actions (straight ahead, a sweep
    of throttles; the best one is "the best constant action");
 2. behaviour cloning on autopilot demonstrations (recorded with noise injected into the
    executed actions): without DAgger, target at least 80% of the autopilot's mean distance
-   before collision; then ``--dagger-rounds`` DAgger rounds, target at least 90%;
-3. PPO from scratch for ``--ppo-frames`` env steps, with a perception warm-up and replay
-   (``SCRATCH_RECIPE``); targets: at least 1.5x the best constant action's mean distance with
-   the policy chosen within the first ``--ppo-early-frames``, and 1.9x with the one chosen
-   within the whole budget;
+   before collision; then ``dagger.rounds`` DAgger rounds, target at least 90%;
+3. PPO from scratch for ``--ppo-frames`` env steps, with a perception warm-up and replay (the
+   ``ppo_scratch`` preset, ``configs/ppo_scratch.yaml``); targets: at least 1.5x the best
+   constant action's mean distance with the policy chosen within the first
+   ``--ppo-early-frames``, and 1.9x with the one chosen within the whole budget;
 4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning by more than 2
    standard errors of the paired per-episode difference (the same scenes, episode by episode);
 5. held-out scenes: the references and every trained policy on prompts no stage trained on
@@ -21,13 +21,19 @@ one episode per env row of up to ``--max-steps`` chunks:
 Each PPO stage keeps the policy its periodic evaluations on ``--selection-seeds`` rate best
 (early stopping), then evaluates that one on the evaluation seeds, which no choice has seen.
 
+What runs is the main job's config (:class:`~oasis_torchrl.config.DemoConfig`) with the
+``clone_256`` preset (``configs/clone_256.yaml``: demonstrations, BC steps, DAgger rounds; or
+another ``--config``) and the benchmark's evaluation protocol (:data:`PROTOCOL`); the main job's
+own flags (``--eval.episodes 16``, ``--record.episodes 64``) and ``KEY=VALUE`` overrides change
+it, as on ``oasis-torchrl demo``.
+
 Prints JSON (every evaluation with its episodes, the targets and whether they are met, the
 exact settings and wall times) and writes it with a PNG (learning curves and the action scale
-of the PPO stages) to ``--results``. Stages cache their outputs under ``--work`` (a rerun reuses
-finished stages). Budgets are stated in env steps: one env step is one chunk of 4 world-model
-frames (so frames = 4 x steps).
+of the PPO stages) to ``--results``. Stages cache their outputs under ``--output-dir`` (a rerun
+reuses finished stages). Budgets are stated in env steps: one env step is one chunk of 4
+world-model frames (so frames = 4 x steps).
 
-Usage: ``python benchmarks/learning.py [--work outputs/learning] [--ppo-frames 204800]``
+Usage: ``python benchmarks/learning.py [--output-dir outputs/learning] [--ppo-frames 204800]``
 (several hours on 2 CPU cores). ``--stages`` runs some stages only, e.g. PPO from scratch in
 one process (``--stages ppo_scratch``) and the rest in another; a last run with every stage then
 assembles the report from the cache. A partial run writes what it ran, with the targets its
@@ -50,7 +56,9 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.allocator import keep_batches_in_heap
-from oasis_torchrl.config import load_config
+from oasis_torchrl.config import DemoConfig, load_config
+from oasis_torchrl.config.arguments import add_config_arguments, flag_values, split_overrides
+from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.train.evaluate import paired_difference
 from oasis_torchrl.train.pipeline import (
     bc_config,
@@ -77,17 +85,22 @@ HELD_OUT_SEED = 7919
 # PPO iterations between evaluations: 20 x 512 env steps (an evaluation of 32 episodes of up to
 # 150 chunks costs about as many env steps as 10 iterations).
 EVAL_EVERY = 20
-SCRATCH_RECIPE = (
-    "warmup.frames=20480",
-    "warmup.driver=constant:throttle=1.0,steering=0.0",
-    "aux_replay.capacity=32768",
-)
-"""PPO from scratch's perception steps, over the ``PPOConfig`` defaults: the best constant action
-drives the first 20,480 env steps (counted) and the encoder is fitted to their privileged state
-before PPO starts, then goes on fitting to the last 32,768 env steps of PPO's own drives. Paired
-against the warm-up alone, two seeds each, on the same episodes: +61.8 and +58.1 m on seed 1000,
-+48.5 and +42.6 m on the unseen scenes (BENCHMARKS.md, "PPO from scratch"). Off with
-``--ppo-overrides warmup.frames=0 aux_replay.capacity=0``."""
+CLONE_PRESET = "clone_256"
+"""The preset of the clones' budgets (demonstrations, BC steps, DAgger rounds)."""
+SCRATCH_PRESET = "ppo_scratch"
+"""PPO from scratch's recipe over the ``PPOConfig`` defaults (its perception warm-up and
+auxiliary replay; off with ``--ppo-overrides warmup.frames=0 aux_replay.capacity=0``)."""
+PROTOCOL = {
+    "output_dir": "outputs/learning",
+    "env.max_steps": 150,
+    "eval.max_steps": 150,
+    "eval.episodes": 32,
+    "eval.seeds": [1000],
+    "eval.reference": [],
+    "progress": False,
+}
+"""The benchmark's episodes and evaluation, over the main job's defaults and the clone preset
+(flags and ``KEY=VALUE`` overrides come after it)."""
 STAGES = ("references", "bc", "bc_dagger", "bc_ppo", "ppo_scratch", "held_out")
 CLONE_STAGES = {"bc", "bc_dagger", "bc_ppo", "held_out"}
 COLORS = {
@@ -155,29 +168,13 @@ class StageCache:
         self.path.write_text(json.dumps(saved, indent=2))
 
 
-def benchmark_config(args: argparse.Namespace) -> DictConfig:
-    """The pipeline config of the benchmark: the demo's (:class:`~oasis_torchrl.config.DemoConfig`:
-    its resolution, reward and settings) with the benchmark's budgets, episode length and
-    evaluation seeds."""
-    seeds = ",".join(str(seed) for seed in args.eval_seeds)
-    return load_config(
-        "demo",
-        [
-            f"output_dir={args.work}",
-            f"env.max_steps={args.max_steps}",
-            f"record.episodes={args.demo_episodes}",
-            f"bc.train.steps={args.bc_steps}",
-            f"dagger.rounds={args.dagger_rounds}",
-            f"dagger.episodes={args.dagger_episodes}",
-            f"dagger.steps={args.dagger_steps}",
-            f"eval.max_steps={args.max_steps}",
-            f"eval.episodes={args.eval_episodes}",
-            f"eval.seeds=[{seeds}]",
-            "eval.reference=[]",
-            "progress=false",
-            *args.overrides,
-        ],
-    )
+def benchmark_config(args: argparse.Namespace, overrides: list[str]) -> DictConfig:
+    """The pipeline config of the benchmark: the main job's
+    (:class:`~oasis_torchrl.config.DemoConfig`: its resolution, reward and settings) with
+    ``--config`` (default the ``clone_256`` preset), :data:`PROTOCOL`, the main job's flags,
+    then ``overrides``."""
+    values = [*PROTOCOL.items(), *flag_values(args, DemoConfig)]
+    return load_config("demo", overrides, file=args.config or CLONE_PRESET, values=values)
 
 
 def held_out_config(cfg: DictConfig, episodes_per_prompt: int) -> DictConfig:
@@ -200,11 +197,11 @@ def ppo_stage(
     """A PPO stage of the benchmark: its own folder, budget and evaluations on the selection
     seeds every ``EVAL_EVERY`` batches, each evaluated policy kept (to choose within a smaller
     budget); fine-tuning (``init_from`` set) takes the demo's ``ppo`` overrides, PPO from
-    scratch the :class:`~oasis_torchrl.config.PPOConfig` defaults and ``SCRATCH_RECIPE``;
+    scratch the :class:`~oasis_torchrl.config.PPOConfig` defaults and the ``ppo_scratch`` preset;
     ``args.ppo_overrides`` (``KEY=VALUE``) last."""
     fine_tune = init_from is not None
     stage = ppo_config(cfg, init_from, name, fine_tune=fine_tune)
-    recipe = OmegaConf.from_dotlist([] if fine_tune else list(SCRATCH_RECIPE))
+    recipe = {} if fine_tune else scratch_recipe()
     evaluations = {
         "every": EVAL_EVERY,
         "episodes": cfg.eval.episodes,
@@ -216,6 +213,11 @@ def ppo_stage(
         "checkpoint": {"keep_evaluated": True},
     }
     return OmegaConf.merge(stage, recipe, budget, OmegaConf.from_dotlist(args.ppo_overrides))
+
+
+def scratch_recipe() -> DictConfig:
+    """The ``ppo_scratch`` preset's settings (its budget is the stage's own)."""
+    return OmegaConf.load(preset_file(SCRATCH_PRESET))
 
 
 def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, Any]:
@@ -231,11 +233,7 @@ def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, A
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", type=Path, default=Path("outputs/learning"))
     parser.add_argument("--results", type=Path, default=Path("benchmarks/results"))
-    parser.add_argument("--max-steps", type=int, default=150, help="chunks per episode")
-    parser.add_argument("--eval-episodes", type=int, default=32)
-    parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000])
     parser.add_argument(
         "--selection-seeds",
         type=int,
@@ -244,13 +242,6 @@ def main() -> None:
         help="seeds of PPO's periodic evaluations, which pick the policy each PPO stage keeps",
     )
     parser.add_argument("--held-out-episodes", type=int, default=8, help="per held-out prompt")
-    # 256 late-reaction demonstrations: a clone of 64 drove like a constant action
-    # (BENCHMARKS.md, "BC without DAgger").
-    parser.add_argument("--demo-episodes", type=int, default=256)
-    parser.add_argument("--bc-steps", type=int, default=16000)
-    parser.add_argument("--dagger-rounds", type=int, default=3)
-    parser.add_argument("--dagger-episodes", type=int, default=32)
-    parser.add_argument("--dagger-steps", type=int, default=1000)
     parser.add_argument(
         "--ppo-frames", type=int, default=204800, help="PPO from scratch, env steps"
     )
@@ -265,7 +256,7 @@ def main() -> None:
         nargs="+",
         choices=STAGES,
         default=list(STAGES),
-        help="run only these stages (each caches under --work; the report needs all of them)",
+        help="run only these stages (each caches under --output-dir; the report needs all)",
     )
     parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
     parser.add_argument(
@@ -274,30 +265,33 @@ def main() -> None:
         default=[],
         metavar="KEY=VALUE",
         help="PPO settings of both PPO stages, e.g. ray.enabled=true (collection on two Ray "
-        "workers, each with its own embedded server: 1.3x the env steps per second here)",
+        "workers, each with its own embedded server)",
     )
-    parser.add_argument(
-        "--overrides",
-        nargs="*",
-        default=[],
-        metavar="KEY=VALUE",
-        help="settings of the main job's config (oasis-torchrl demo --help) to measure instead "
-        "of its defaults, e.g. bc.policy.pool_grid=[8,12]; applied after the budgets above",
-    )
-    args = parser.parse_args()
+    add_config_arguments(parser, DemoConfig)  # the main job's settings: --config, flags
+    args, extra = parser.parse_known_args()
+    overrides, unknown = split_overrides(extra)
+    if unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     # force: LeRobot's import checks log first, which gives the root logger a WARNING handler.
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", force=True)
     keep_batches_in_heap()  # as the oasis-torchrl command does
 
-    cfg = benchmark_config(args)
-    cache = StageCache(args.work / "stages.json")
+    cfg = benchmark_config(args, overrides)
+    work = Path(cfg.output_dir)
+    cache = StageCache(work / "stages.json")
     results = run_stages(args, cfg, cache)
     settings = {
         "settings": {
-            **vars(args),
-            "work": str(args.work),
             "results": str(args.results),
-            "scratch_recipe": list(SCRATCH_RECIPE),
+            "selection_seeds": args.selection_seeds,
+            "held_out_episodes": args.held_out_episodes,
+            "ppo_frames": args.ppo_frames,
+            "ppo_early_frames": args.ppo_early_frames,
+            "stages": args.stages,
+            "finetune_frames": args.finetune_frames,
+            "ppo_overrides": args.ppo_overrides,
+            "overrides": overrides,
+            "scratch_recipe": OmegaConf.to_container(scratch_recipe()),
         },
         "config": OmegaConf.to_container(cfg),
     }
@@ -306,7 +300,7 @@ def main() -> None:
     name = "learning" if ran == list(STAGES) else f"learning_{'_'.join(ran)}"
     report = {**settings, **summarise(results), "seconds": cache.seconds}
     write_json(args.results / f"{name}.json", report)
-    plot_report(report, scale_curves(args.work, results), args.results / f"{name}.png")
+    plot_report(report, scale_curves(work, results), args.results / f"{name}.png")
     if name != "learning":
         logger.info("ran %s; the full report needs every stage", ran)
 

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from process_cpu import CpuMeter
+from _process_cpu import CpuMeter
 
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig

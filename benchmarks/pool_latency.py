@@ -17,7 +17,7 @@ import os
 import time
 
 import numpy as np
-from process_cpu import CpuMeter
+from _process_cpu import CpuMeter
 
 from oasis_torchrl.client import SessionPool
 from oasis_torchrl.sim.launcher import ServerProcess

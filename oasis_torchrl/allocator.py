@@ -8,11 +8,10 @@ and its normalised copy, padding and activations as much again) page-faults ever
 in again, zero-filled by the kernel, on every step. Fixing the threshold at glibc's maximum
 (32 MiB on 64-bit) keeps those blocks in the heap for the next step.
 
-Measured (``benchmarks/allocator.py``, BENCHMARKS.md): 7x fewer page faults over timed BC
-steps and PPO updates, BC steps about 1.1x faster, PPO updates unchanged. ``oasis-torchrl``
-calls :func:`keep_batches_in_heap` before any command; other entry points (``lerobot-train``,
-your own script) get the same with ``MALLOC_MMAP_THRESHOLD_=33554432`` in the environment, or
-by calling it first.
+docs/experiments/2026-11-27-allocator.md has the page faults and step times with and without
+it. ``oasis-torchrl`` calls :func:`keep_batches_in_heap` before any command; other entry points
+(``lerobot-train``, your own script) get the same with ``MALLOC_MMAP_THRESHOLD_=33554432`` in the
+environment, or by calling it first.
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ def _range_text(package: str) -> str:
 
 @functools.cache
 def _installed(package: str) -> str:
-    # Looked up once per process: a lookup scans the installed distributions (about 4 ms), and
+    # Looked up once per process: a lookup scans the installed distributions, and
     # the dataset writer checks before every frame it streams.
     return importlib.metadata.version(package)
 

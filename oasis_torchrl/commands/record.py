@@ -1,6 +1,7 @@
 """``oasis-torchrl record``: drive N envs and record the episodes as a LeRobot dataset.
 
-Drivers: the ground-truth ``autopilot`` (embedded server only), a ``scripted`` open-loop drive
+Drivers: ``auto`` (the default: the autopilot where the endpoint sends ground truth, else the
+script), the ground-truth ``autopilot`` (embedded server only), a ``scripted`` open-loop drive
 (``--script "throttle=0.5,steering=sine:0.3:40"``) or a ``policy``, saved (``--policy
 file.pt``) or served (``--policy grpc://host:port``, the key in ``OASIS_POLICY_API_KEY``).
 Episodes still running when the requested number is reached are dropped. A remote endpoint
@@ -26,6 +27,7 @@ from omegaconf import DictConfig
 
 from oasis_torchrl.commands._signals import sigterm_as_interrupt
 from oasis_torchrl.config import to_object
+from oasis_torchrl.config.env import AUTO
 from oasis_torchrl.config.recording import RecordConfig
 
 if TYPE_CHECKING:
@@ -56,7 +58,14 @@ def driver_spec(cfg: RecordConfig) -> DriverSpec:
     in_keys = None
     if cfg.policy_in_keys:
         in_keys = tuple(tuple(key.split(".")) for key in cfg.policy_in_keys.split(","))
-    return DriverSpec(cfg.driver_spec, in_keys=in_keys)
+    spec = cfg.driver_spec
+    if cfg.driver == AUTO:
+        from oasis_torchrl.envs.capabilities import env_capabilities
+
+        expert = env_capabilities(cfg.env).ground_truth
+        spec = "autopilot" if expert else f"scripted:{cfg.script}"
+        logger.info("driver auto: %s", spec)
+    return DriverSpec(spec, in_keys=in_keys)
 
 
 def _recorder_kwargs(cfg: RecordConfig) -> dict[str, Any]:

@@ -1,7 +1,9 @@
-"""``oasis-torchrl train {ppo,bc}``: train a driving policy.
+"""``oasis-torchrl train {ppo,bc,depth}``: train a driving policy, or the small depth network.
 
 ``train ppo`` runs TorchRL PPO in the world model (:class:`~oasis_torchrl.config.PPOConfig`);
-``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`).
+``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`);
+``train depth`` fits the frames-only reward's depth network to the embedded world's depth
+(:class:`~oasis_torchrl.config.training.DepthTrainConfig`).
 Any setting can be given as ``key=value``, e.g.
 ``oasis-torchrl train ppo env.num_envs=4 collector.total_frames=20000 logger.backend=tensorboard``.
 """
@@ -12,13 +14,16 @@ import logging
 
 from omegaconf import DictConfig
 
-from oasis_torchrl.config.training import BCConfig, PPOConfig
+from oasis_torchrl.config.training import BCConfig, DepthTrainConfig, PPOConfig
 
 logger = logging.getLogger(__name__)
 
 NAME = "train"
-HELP = "train a driving policy: ppo (TorchRL, in the world model) or bc (LeRobot dataset)"
-CONFIG = {"ppo": PPOConfig, "bc": BCConfig}
+HELP = (
+    "train a driving policy: ppo (TorchRL, in the world model) or bc (LeRobot dataset); or "
+    "depth (the frames-only reward's depth network)"
+)
+CONFIG = {"ppo": PPOConfig, "bc": BCConfig, "depth": DepthTrainConfig}
 
 
 def run(cfg: DictConfig, algorithm: str) -> int:
@@ -36,6 +41,11 @@ def run(cfg: DictConfig, algorithm: str) -> int:
 
             result = train_ppo(cfg)
             logger.info("PPO done: checkpoint %s, policy %s", result.checkpoint, result.policy_dir)
+        elif algorithm == "depth":
+            from oasis_torchrl.train.depth import train_depth
+
+            logger.info("depth network done: %s", train_depth(cfg).path)
+            return 0
         else:
             from oasis_torchrl.train.bc import train_bc
 

@@ -1,10 +1,11 @@
 """Command-line arguments generated from a config dataclass.
 
-Every setting gets a flag (``--num-envs``, ``--env.max-steps``: the dotted key with hyphens, or
-the spelling its field declares) and can also be given as ``key=value`` anywhere after the
-command; ``--config FILE.yaml`` loads a file of settings first. Flags are applied after the
-file, ``key=value`` overrides last, so the same setting is never set two ways by two systems:
-both are the config's own keys. ``--help`` lists every setting with its help and default.
+Every setting gets one flag (``--env.max-steps``: the dotted key with hyphens, or the alias its
+schema declares instead, e.g. ``--num-envs``) and can also be given as ``key=value`` anywhere
+after the command; ``--config NAME`` (a preset) or ``--config FILE.yaml`` loads settings first.
+Flags are applied after the file, ``key=value`` overrides last, so the same setting is never set
+two ways by two systems: both are the config's own keys. ``--help`` lists every setting with its
+help and default (or "required").
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config.loading import load_config
+from oasis_torchrl.config.presets import preset_names
 from oasis_torchrl.options import ALIASES, Alias, Leaf, Section, walk
 
 _DEST = "setting:"
@@ -40,18 +42,21 @@ def add_config_arguments(parser: argparse.ArgumentParser, schema: type) -> None:
     parser.add_argument(
         "--config",
         type=Path,
-        metavar="FILE.yaml",
-        help="a YAML file of settings, applied before the flags and KEY=VALUE overrides",
+        metavar="NAME|FILE.yaml",
+        help="a named preset (" + ", ".join(preset_names()) + ") or a YAML file of settings, "
+        "applied before the flags and KEY=VALUE overrides",
     )
     leaves = {item.key: item for item in walk(schema) if isinstance(item, Leaf)}
-    for flag, alias in getattr(schema, ALIASES, {}).items():
+    aliases = getattr(schema, ALIASES, {})
+    for flag, alias in aliases.items():
         _add_alias(parser, flag, alias, leaves[alias.key])
+    aliased = {alias.key for alias in aliases.values()}  # their alias is their one flag
     group: Any = parser
     for item in walk(schema):
         if isinstance(item, Section):
             group = parser.add_argument_group(item.key, item.title or None)
-            continue
-        _add_leaf(group, item)
+        elif item.key not in aliased:
+            _add_leaf(group, item)
     parser.set_defaults(**{OVERRIDES: []})
     parser.epilog = (
         "Any setting can also be given as KEY=VALUE (dotted keys, YAML values), e.g. "
@@ -60,8 +65,8 @@ def add_config_arguments(parser: argparse.ArgumentParser, schema: type) -> None:
 
 
 def _help(leaf: Leaf) -> str:
-    text = f"{leaf.help} (default: {_shown(leaf.default)})"
-    return text.replace("%", "%%")  # argparse formats help with %
+    default = "required" if leaf.required else f"default: {_shown(leaf.default)}"
+    return f"{leaf.help} ({default})".replace("%", "%%")  # argparse formats help with %
 
 
 def _add_leaf(group: Any, leaf: Leaf) -> None:
@@ -125,6 +130,20 @@ def load_from_args(args: argparse.Namespace, schema: type) -> DictConfig:
         ValueError: an unknown key or a bad value, named (see
             :func:`~oasis_torchrl.config.loading.load_config`).
     """
+    overrides = getattr(args, OVERRIDES, [])
+    return load_config(schema, overrides, file=args.config, values=flag_values(args, schema))
+
+
+def flag_values(args: argparse.Namespace, schema: type) -> list[tuple[str, Any]]:
+    """The ``(key, value)`` pairs of the settings the parsed flags set, in the order given.
+
+    Example:
+        >>> from oasis_torchrl.config.env import EnvConfig
+        >>> parser = argparse.ArgumentParser()
+        >>> add_config_arguments(parser, EnvConfig)
+        >>> flag_values(parser.parse_args(["--num-envs", "4"]), EnvConfig)
+        [('num_envs', 4)]
+    """
     leaves = {item.key: item for item in walk(schema) if isinstance(item, Leaf)}
     aliases = getattr(schema, ALIASES, {})
     values = []
@@ -135,7 +154,7 @@ def load_from_args(args: argparse.Namespace, schema: type) -> DictConfig:
         elif dest.startswith(_DEST):
             key = dest.removeprefix(_DEST)
             values.append((key, _value(leaves[key], raw)))
-    return load_config(schema, getattr(args, OVERRIDES, []), file=args.config, values=values)
+    return values
 
 
 def _value(leaf: Leaf, raw: Any) -> Any:

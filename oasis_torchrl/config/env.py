@@ -9,7 +9,9 @@ from oasis_torchrl.protocol import FPS
 
 LOCAL = "local"
 """``env.endpoint`` of an embedded server started for the env."""
-REWARD_KINDS = ("ground_truth", "depth")
+AUTO = "auto"
+"""A setting found from the endpoint (:mod:`oasis_torchrl.envs.capabilities`)."""
+REWARD_KINDS = (AUTO, "ground_truth", "depth")
 
 
 @dataclass
@@ -19,15 +21,27 @@ class EmbeddedServerConfig:
     width: int = option(96, help="frame width of the embedded server")
     height: int = option(64, help="frame height of the embedded server")
     fps: float = option(FPS, help="frame rate of the embedded world (its time step is 1/fps)")
+    hosted: bool = option(
+        False,
+        help="hosted-like: the server sends only what the hosted service sends (VP9 frames; no "
+        "ground truth, expert or depth; seeds ignored), at the size above",
+    )
 
 
 @dataclass
 class RewardConfig:
-    """The reward: ground truth of the embedded server, or the depth-collision reward."""
+    """The reward: ground truth where the endpoint sends it, else the reference's
+    depth-collision reward on the front frame."""
 
     kind: str = option(
-        "ground_truth",
-        help="ground_truth (embedded server) | depth (monocular depth, for remote endpoints)",
+        AUTO,
+        help="auto (ground_truth where the endpoint sends it, else depth) | ground_truth "
+        "(embedded server) | depth (the depth-collision reward on frames alone)",
+    )
+    depth_model: str = option(
+        "small",
+        help="depth model of the depth reward: small (the shipped network, offline) or a "
+        "transformers model id, e.g. depth-anything/Depth-Anything-V2-Small-hf (the reference's)",
     )
     progress_scale: float = option(0.1, help="reward per metre along the road")
     collision_penalty: float = option(

@@ -3,7 +3,7 @@ configs, as TorchRL's recipes use them).
 
 A command's settings are a dataclass (the schema: types, defaults, help, checks in
 ``__post_init__``). :func:`load_config` builds an OmegaConf ``DictConfig`` from it, merges a
-YAML preset (a named one shipped in the package, such as ``"demo"``, or any file), then values
+YAML preset (a named one, :mod:`oasis_torchrl.config.presets`, or any file), then values
 set by flags and ``key=value`` overrides (``optim.lr=1e-4``, ``env.prompts=[urban,rural]``). The
 result is in struct mode and typed: a key the schema lacks, or a value of the wrong type, is an
 error naming it; the dataclass's own checks run before the config is returned.
@@ -20,6 +20,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
+from oasis_torchrl.config.presets import preset_file
+
 
 def _named() -> dict[str, type]:
     from oasis_torchrl.config.evaluation import EvalConfig
@@ -29,6 +31,7 @@ def _named() -> dict[str, type]:
     from oasis_torchrl.config.serving import ServeConfig
     from oasis_torchrl.config.training import BCConfig, PPOConfig
     from oasis_torchrl.config.viewing import DriveConfig, ViewConfig
+    from oasis_torchrl.config.web import PlayConfig
 
     return {
         "bc": BCConfig,
@@ -36,6 +39,7 @@ def _named() -> dict[str, type]:
         "drive": DriveConfig,
         "eval": EvalConfig,
         "import-recordings": ImportConfig,
+        "play": PlayConfig,
         "ppo": PPOConfig,
         "record": RecordConfig,
         "serve": ServeConfig,
@@ -81,11 +85,12 @@ def load_config(
     Args:
         config: a config dataclass, or the name of one (:func:`config_names`).
         overrides: ``key=value`` strings (dotted keys, YAML values).
-        file: a YAML file whose keys override the defaults.
+        file: a YAML file whose keys override the defaults, or a preset's name.
         values: ``(key, value)`` pairs already parsed (from command-line flags).
 
     Raises:
-        ValueError: an unknown key, a value of the wrong type, or a failed check, named.
+        ValueError: an unknown key, a value of the wrong type, a failed check, or an unknown
+            preset, named.
         FileNotFoundError: ``file`` does not exist.
 
     Example:
@@ -101,7 +106,7 @@ def load_config(
     _make_writable(cfg)
     OmegaConf.set_struct(cfg, True)
     if file is not None:
-        path = Path(file)
+        path = preset_file(file)
         if not path.is_file():
             raise FileNotFoundError(f"config file {str(path)!r} not found")
         cfg = _merged(cfg, OmegaConf.load(path), path.name)

@@ -52,15 +52,23 @@ def reaction_range(reaction: Sequence[float], name: str = "reaction") -> tuple[f
 
 @dataclass
 class DemonstrationsConfig:
-    """The autopilot demonstrations (frame rows, a LeRobot dataset)."""
+    """The demonstrations (frame rows, a LeRobot dataset): the autopilot's where the endpoint
+    sends ground truth, else a policy's or a person's."""
 
+    source: str = option(
+        "auto",
+        help="who demonstrates: auto (the autopilot where the endpoint sends ground truth) | "
+        "autopilot | a policy (a saved policy folder or checkpoint, grpc://host:port, or a "
+        "driver spec) | a LeRobot dataset folder of frame rows (a person's drives recorded "
+        "with lerobot-record and the keyboard teleoperators, or an earlier recording)",
+    )
     episodes: int = option(16, help="episodes to record")
     seed: int = option(1, help="seed of their episodes and noise")
     noise: NoiseConfig = option(default_factory=NoiseConfig, help="executed-action noise")
     # Late reactions record the states a clone reaches when it misses the early cue (the
     # autopilot's own drives change lanes 30-45 m ahead and hold none of them); with the
     # manoeuvre loss and enough demonstrations they are what makes a clone avoid obstacles
-    # (BENCHMARKS.md, "BC without DAgger": 256 of them drive 227.0 m, 256 plain ones 193.9 m).
+    # (docs/experiments/2026-11-28-bc-without-dagger.md).
     late_reaction: list[float] | None = option(
         default_factory=lambda: [8.0, 40.0],
         help="[near, far] metres: the executed car keeps its lane until the obstacle in it is "
@@ -78,13 +86,14 @@ class DaggerConfig:
     """Rounds of: the clone drives, the autopilot labels, the clone is fine-tuned on it all."""
 
     rounds: int = option(0, help="DAgger rounds after the first clone")
+    labeller: str = option(
+        "auto",
+        help="who labels the clone's drives: auto (the autopilot where the endpoint sends ground "
+        "truth, else the demonstrating policy; no rounds when a dataset demonstrated) | "
+        "autopilot | a policy (saved or grpc://host:port)",
+    )
     episodes: int = option(16, help="episodes the clone drives per round")
     steps: int = option(500, help="fine-tuning steps per round")
-    from_scratch: bool = option(
-        False,
-        help="each round trains a fresh clone on everything recorded for bc.train.steps (Ross "
-        "et al.'s DAgger) instead of fine-tuning the last one for dagger.steps",
-    )
     noise: NoiseConfig = option(
         default_factory=lambda: NoiseConfig(throttle=0.05), help="executed-action noise"
     )
@@ -102,9 +111,10 @@ class PipelineEvaluationConfig(EvaluationConfig):
 
 def _demo_bc() -> BCSettings:
     # The auxiliary loss on the demonstrations' privileged state teaches the encoder obstacles
-    # and free lanes from every frame, not only from the rare lane changes (BENCHMARKS.md, "The
-    # main job"). The previous action stays out: it helped on one seed and not on others. The
-    # manoeuvre loss trains the choice of side, which the late-reaction demonstrations show.
+    # and free lanes from every frame, not only from the rare lane changes
+    # (docs/experiments/2026-11-28-main-job.md). The previous action stays out: it helped on one
+    # seed and not on others. The manoeuvre loss trains the choice of side, which the
+    # late-reaction demonstrations show.
     # 1000 steps, not more: longer training memorised the demonstrations, and the time buys
     # DAgger episodes instead.
     return BCSettings(
@@ -120,7 +130,7 @@ def _demo_ppo() -> PPOSettings:
         # The fine-tuned policy replaces the clone only if it drives farther on seeds that
         # neither training nor the final comparison uses, by more than 2 standard errors of the
         # paired difference: gains within that noise replaced the clone with a worse policy
-        # (BENCHMARKS.md, "The main job" and "BC then PPO").
+        # (docs/experiments/2026-11-28-main-job.md and 2026-11-28-bc-then-ppo.md).
         eval=PPOEvaluationConfig(
             every=4, episodes=16, selection_seeds=[2000], selection_margin=2.0
         ),
@@ -136,9 +146,8 @@ TRAINING_PROMPTS = (
 )
 """The scenes the main job learns on: every layout, two lightings, three weathers, and none of the
 held-out scenes the learning benchmark judges on (night, rain, a plain highway or rural road).
-Measured (BENCHMARKS.md, "The main job"): clones of urban demonstrations alone drove 27-91 m on
-those scenes, under half of full throttle's 182.5 m; clones of these five drove 126-189 m (two
-runs), at the cost of the urban scene (181-206 m against 214-242 m on seed 1000)."""
+Clones of urban demonstrations alone drive poorly on the other layouts
+(docs/experiments/2026-11-28-main-job.md compares the two sets)."""
 
 
 @dataclass
@@ -161,7 +170,7 @@ class DemoConfig:
     bc: BCSettings = option(default_factory=_demo_bc, help="behaviour cloning")
     dagger: DaggerConfig = option(
         # 32 episodes a round: the states the clone reaches, labelled, are what teach it to avoid
-        # obstacles (BENCHMARKS.md, "The main job").
+        # obstacles (docs/experiments/2026-11-28-main-job.md).
         default_factory=lambda: DaggerConfig(rounds=2, episodes=32),
         help="DAgger rounds",
     )
@@ -171,8 +180,9 @@ class DemoConfig:
     )
     eval: PipelineEvaluationConfig = option(
         default_factory=lambda: PipelineEvaluationConfig(
-            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd"
+            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd", compare=["autopilot"]
         ),
-        help="the final comparison (the final policy's episodes are recorded)",
+        help="the final comparison (the final policy's episodes are recorded, side by side with "
+        "the autopilot's)",
     )
     progress: bool = option(True, help="tqdm progress bars")

@@ -15,15 +15,13 @@ from oasis_torchrl.protocol import FPS
 _SIZE = re.compile(r"^(\d+)x(\d+)$")
 ROWS = ("frame", "chunk")
 DEFAULT_VCODEC = "h264"
-"""libx264 through PyAV: faster than LeRobot's default libsvtav1 at LeRobot's settings, at a
-somewhat lower quality, and decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
-measures both; BENCHMARKS.md has the figures)."""
+"""libx264 through PyAV, decoded by both pyav and torchcodec (``benchmarks/export_speed.py``
+compares it with LeRobot's default libsvtav1; BENCHMARKS.md, "LeRobot export")."""
 DEFAULT_CRF = 18
 """Quality of the stored video (lower is better and larger; LeRobot's default is 30). A policy
 trains on the stored frames and acts on the frames the world streams, so the two must look
-alike. At the policy's 96x64, 30 smeared the obstacles on the horizon (a few pixels each): 25 dB
-PSNR against the streamed frames, where 18 keeps 28 dB (4:2:0 colour alone caps it near 30) for
-about twice the bytes (BENCHMARKS.md, "Stored video quality")."""
+alike. At the policy's 96x64, 30 smears the obstacles on the horizon (a few pixels each); 18
+keeps them, for more bytes (docs/experiments/2026-11-25-stored-video-quality.md)."""
 
 
 def parse_size(text: str) -> list[int]:
@@ -98,7 +96,11 @@ class RecordConfig(DatasetOutputConfig):
     }
 
     episodes: int = option(10, help="episodes to record (with --ray, env.num_envs is unused)")
-    driver: str = option("autopilot", help="who drives: autopilot | scripted | policy")
+    driver: str = option(
+        "auto",
+        help="who drives: auto (the autopilot where the endpoint sends ground truth, else the "
+        "script) | autopilot | scripted | policy",
+    )
     script: str = option("throttle=0.5", help="scripted driver spec (throttle=...,steering=...)")
     policy: str | None = option(
         None,

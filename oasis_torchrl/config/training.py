@@ -31,55 +31,13 @@ class LoggerConfig:
             raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
-def mirror_option(rows: str) -> float:
-    """The option of the share of ``rows`` reflected left to right
-    (:class:`oasis_torchrl.train.mirror.Mirror`)."""
-    return option(
-        0.0,
-        help=f"share of {rows} reflected left to right (cameras flipped and swapped, steering "
-        "and the privileged state's sides mirrored; 0: off)",
-    )
-
-
-def shift_option(rows: str, default: int = 0) -> int:
-    """The option of the random shift of ``rows``' frames, in pixels
-    (:func:`oasis_torchrl.train.shift.random_shift`)."""
-    return option(default, help=f"random-shift augmentation of {rows}' frames, in pixels (0: off)")
-
-
-def check_shift(name: str, pad: int) -> None:
-    """Refuse a negative shift, naming the option.
-
-    Example:
-        >>> check_shift("train.shift_pad", -1)
-        Traceback (most recent call last):
-        ...
-        ValueError: train.shift_pad is a shift in pixels, >= 0, got -1
-    """
-    if pad < 0:
-        raise ValueError(f"{name} is a shift in pixels, >= 0, got {pad}")
-
-
-def check_share(name: str, value: float) -> None:
-    """Refuse a share outside [0, 1], naming the option.
-
-    Example:
-        >>> check_share("train.mirror", 1.5)
-        Traceback (most recent call last):
-        ...
-        ValueError: train.mirror is a share in [0, 1], got 1.5
-    """
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f"{name} is a share in [0, 1], got {value}")
-
-
 # -- the driving network -----------------------------------------------------------------------
 
 
 @dataclass
 class NetworkArchitectureConfig:
-    """The driving network's shape (oasis_torchrl.models.DrivingNetConfig fields), shared by
-    PPO's fresh network and BC's policy."""
+    """The driving network's shape, shared by PPO's fresh network and BC's policy: the one
+    definition of these defaults, which oasis_torchrl.models.DrivingNetConfig takes too."""
 
     shared_encoder: bool = option(True, help="one encoder for every camera")
     encoder_channels: list[int] = option(
@@ -88,7 +46,7 @@ class NetworkArchitectureConfig:
     encoder_strides: list[int] = option(
         default_factory=lambda: [4, 2, 1],
         help="strides of the three convolutions (4: a 4x4 patch, 1 or 2: 3x3); [2, 2, 2] keeps "
-        "twice the resolution in the first two layers for about 1.4x the time of a step",
+        "twice the resolution in the first two layers, at a higher cost per step",
     )
     pool_grid: list[int] = option(
         default_factory=lambda: [4, 6], help="[rows, cols] the last feature map is pooled to"
@@ -120,10 +78,10 @@ class NetworkConfig(NetworkArchitectureConfig):
         help="a fresh mixture's components spread this far around init_action (keep, left, "
         "right), the middle one most likely",
     )
-    # Steering explores as widely as throttle from scratch: with 0.1 PPO found its first lane
-    # changes late (0.81-0.90x the best constant within 102,400 env steps over four runs), with
-    # 0.5 early (1.07x and 1.16x, two seeds), and the learned scale shrank it to 0.29
-    # (BENCHMARKS.md, "PPO from scratch"). A warm start keeps its own (`warm_start_scale`).
+    # Steering explores as widely as throttle from scratch: with a smaller scale PPO found its
+    # first lane changes later, and the learned scale shrinks it anyway
+    # (docs/experiments/2026-11-28-ppo-from-scratch.md). A warm start keeps its own
+    # (`warm_start_scale`).
     init_scale: list[float] = option(
         default_factory=lambda: [0.5, 0.5],
         help="initial scale (before the tanh) of [throttle, steering] of a fresh network",
@@ -138,25 +96,8 @@ class CollectorConfig:
     total_frames: int = option(20480, help="env steps in the whole run")
 
 
-@dataclass
-class ExplorationConfig:
-    """How the collecting policy draws its noise (oasis_torchrl.train.exploration)."""
-
-    hold_chunks: float = option(
-        1.0,
-        help="mean chunks a row keeps its exploration noise (the mixture component and the "
-        "normal deviations; redrawn with probability 1/hold_chunks per chunk): 1 draws it "
-        "afresh every chunk; 5 holds a manoeuvre about a second",
-    )
-
-    def __post_init__(self) -> None:
-        if not self.hold_chunks >= 1:
-            raise ValueError(f"exploration.hold_chunks must be >= 1, got {self.hold_chunks}")
-
-
-ENCODER_GRADS = ("all", "aux")
-"""What may train PPO's camera encoder (``loss.encoder_grad``): every loss, or the auxiliary
-loss alone."""
+AUX_COEFF = 1.0
+"""``loss.aux_coeff`` where the endpoint sends ground truth and the setting is null."""
 
 
 @dataclass
@@ -172,15 +113,11 @@ class LossConfig:
     critic_warmup_iters: int = option(
         0, help="first iterations train the critic only (use after a warm start)"
     )
-    aux_coeff: float = option(
-        1.0,
+    aux_coeff: float | None = option(
+        None,
         help="the camera features also learn to predict the privileged state (MSE, a "
-        "training-only head; embedded server only; 0: off)",
-    )
-    encoder_grad: str = option(
-        "all",
-        help="what trains the camera encoder: 'all' (the PPO and auxiliary losses) or 'aux' "
-        "(the auxiliary loss alone; the actor and critic learn on its detached features)",
+        f"training-only head; needs ground truth; 0: off; null: {AUX_COEFF} where the endpoint "
+        "sends ground truth, else 0)",
     )
 
 
@@ -214,12 +151,8 @@ class AuxReplayConfig:
     )
     steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
-    mirror: float = mirror_option("replayed rows")
-    shift_pad: int = shift_option("replayed rows")
 
     def __post_init__(self) -> None:
-        check_share("aux_replay.mirror", self.mirror)
-        check_shift("aux_replay.shift_pad", self.shift_pad)
         if self.capacity < 0 or self.steps < 0:
             raise ValueError(
                 f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
@@ -246,10 +179,8 @@ class PerceptionWarmupConfig:
     steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
     mini_batch_size: int = option(64, help="rows per minibatch")
     lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up")
-    shift_pad: int = shift_option("the minibatch rows")
 
     def __post_init__(self) -> None:
-        check_shift("warmup.shift_pad", self.shift_pad)
         if self.frames < 0 or self.steps < 0 or not self.lr > 0:
             raise ValueError(
                 f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
@@ -277,9 +208,6 @@ class OptimConfig:
     )
     max_grad_norm: float = option(0.5, help="gradient clipping")
     epochs: int = option(4, help="passes over each batch")
-    target_kl: float | None = option(
-        None, help="stop an iteration's updates once the approximate KL passes it"
-    )
     mini_batch_size: int = option(128, help="env steps per minibatch")
     anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
     # A schedule longer than the run makes a shorter run the exact start of a longer one (the
@@ -292,8 +220,6 @@ class OptimConfig:
     )
 
     def __post_init__(self) -> None:
-        if self.target_kl is not None and not self.target_kl > 0:
-            raise ValueError(f"optim.target_kl must be positive or null, got {self.target_kl}")
         if self.anneal_frames is not None and self.anneal_frames <= 0:
             raise ValueError(
                 f"optim.anneal_frames must be positive or null, got {self.anneal_frames}"
@@ -345,22 +271,14 @@ class PPOSettings:
     """A PPO training stage: network, warm start, collection, loss, optimiser, evaluations."""
 
     network: NetworkConfig = option(default_factory=NetworkConfig, help="the fresh network")
-    privileged_critic: bool = option(
-        True, help="the critic also reads ground truth (embedded server only)"
+    privileged_critic: bool | None = option(
+        None, help="the critic also reads ground truth (null: where the endpoint sends it)"
     )
     warm_start_scale: list[float] | None = option(
         default_factory=lambda: [0.2, 0.05],
         help="[throttle, steering] action scale after a warm start (null: the source's)",
     )
-    warm_start_sharpen: float = option(
-        1.0,
-        help="a mixture warm start's component logits multiplied by this (> 1: PPO samples "
-        "the clone's most probable manoeuvre more often; 1 keeps them)",
-    )
     collector: CollectorConfig = option(default_factory=CollectorConfig, help="experience")
-    exploration: ExplorationConfig = option(
-        default_factory=ExplorationConfig, help="the collecting policy's noise"
-    )
     loss: LossConfig = option(default_factory=LossConfig, help="the PPO loss")
     aux_replay: AuxReplayConfig = option(
         default_factory=AuxReplayConfig, help="past observations replayed for the auxiliary loss"
@@ -383,16 +301,9 @@ class PPOSettings:
         for name, on in (
             ("aux_replay.capacity", self.aux_replay.capacity),
             ("warmup.frames", self.warmup.frames),
-            ("loss.encoder_grad=aux", self.loss.encoder_grad == "aux"),
         ):
-            if on and not self.loss.aux_coeff:
+            if on and self.loss.aux_coeff == 0:
                 raise ValueError(f"{name} trains the auxiliary loss: set loss.aux_coeff > 0 too")
-        if not self.warm_start_sharpen > 0:
-            raise ValueError(f"warm_start_sharpen must be positive, got {self.warm_start_sharpen}")
-        if self.loss.encoder_grad not in ENCODER_GRADS:
-            raise ValueError(
-                f"loss.encoder_grad must be one of {ENCODER_GRADS}, got {self.loss.encoder_grad!r}"
-            )
         if self.warmup.frames and self.warmup.frames >= self.collector.total_frames:
             raise ValueError(
                 f"warmup.frames ({self.warmup.frames}) must leave PPO some of "
@@ -427,7 +338,9 @@ class PPOConfig(PPOSettings):
 
 @dataclass
 class BCPolicyConfig(NetworkArchitectureConfig):
-    """The cloned policy (lerobot_policy_oasis.OasisConfig fields)."""
+    """The cloned policy: the one definition of its settings' defaults, which the LeRobot
+    plugin's config (lerobot_policy_oasis.OasisConfig, ``lerobot-train --policy.type=oasis``)
+    takes as its own."""
 
     image_size: list[int] = option(default_factory=lambda: [64, 96], help="[height, width]")
     use_state: bool = option(
@@ -436,17 +349,7 @@ class BCPolicyConfig(NetworkArchitectureConfig):
     loss: str = option(
         "nll",
         help="nll (likelihood of the demonstrated chunk) | manoeuvre (likelihood jointly with "
-        "its manoeuvre: components left, keep, right) | l1 | mse (regression of the chunk)",
-    )
-    action_loss_weights: list[float] = option(
-        default_factory=lambda: [1.0, 5.0],
-        help="[throttle, steering] weights of l1 and mse: steering varies ~5x less (not "
-        "normalised)",
-    )
-    manoeuvre_weight: float = option(
-        0.0,
-        help="extra weight of steering demonstrations: a sample's action loss times "
-        "1 + manoeuvre_weight * its chunk's mean |steering| (lane changes are rare)",
+        "its manoeuvre: components left, keep, right)",
     )
     aux_weight: float = option(
         0.0,
@@ -456,10 +359,6 @@ class BCPolicyConfig(NetworkArchitectureConfig):
     optimizer_lr: float = option(1.0e-3, help="learning rate")
     optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
     optimizer_grad_clip_norm: float = option(10.0, help="gradient clipping")
-    scheduler_name: str | None = option(
-        None, help="learning-rate schedule: null (constant) or cosine (annealed to 0 at the end)"
-    )
-    scheduler_warmup_steps: int = option(0, help="linear warm-up steps of the cosine schedule")
 
 
 @dataclass
@@ -469,16 +368,17 @@ class BCTrainConfig:
     steps: int = option(3000, help="gradient steps")
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
-    shift_pad: int = shift_option("the samples", default=4)
-    mirror: float = mirror_option("the samples")
+    shift_pad: int = option(
+        4, help="random-shift augmentation of the samples' frames, in pixels (0: off)"
+    )
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
         1000, help="also save the policy folder every N steps (0: only at the end)"
     )
 
     def __post_init__(self) -> None:
-        check_share("train.mirror", self.mirror)
-        check_shift("train.shift_pad", self.shift_pad)
+        if self.shift_pad < 0:
+            raise ValueError(f"train.shift_pad is a shift in pixels, >= 0, got {self.shift_pad}")
 
 
 @dataclass
@@ -520,3 +420,120 @@ class BCConfig(BCSettings):
         default_factory=EnvConfig, help="the evaluation env (the policy's image size is used)"
     )
     progress: bool = option(True, help="tqdm progress bars")
+
+
+# -- the small depth network -------------------------------------------------------------------
+
+DEPTH_TRAINING_PROMPTS = (
+    "urban street",
+    "city street at night",
+    "urban street at sunset in the rain",
+    "city street in the snow",
+    "foggy urban street at night",
+    "rainy city street",
+    "highway",
+    "highway at sunset",
+    "highway at night in the rain",
+    "snowy highway",
+    "foggy highway at sunset",
+    "rural road",
+    "rural road at night",
+    "rural road at sunset in the fog",
+    "rainy rural road",
+    "snowy rural road at night",
+)
+"""The scenes ``train depth`` draws from: every layout, lighting and weather, in combinations
+that :data:`DEPTH_HELD_OUT_PROMPTS` does not use."""
+
+DEPTH_HELD_OUT_PROMPTS = (
+    "snowy city avenue at sunset",
+    "foggy downtown city street",
+    "highway in the fog at night",
+    "rainy highway in daylight",
+    "rural lane in the snow at sunset",
+    "foggy rural road",
+)
+"""Scenes no ``train depth`` run sees by default (new wording and keyword combinations): the
+agreement benchmark's."""
+
+
+@dataclass
+class DepthTrainConfig:
+    """``oasis-torchrl train depth``: the small depth network (oasis_torchrl.models.depth) on
+    the embedded world's front frames, with the simulator's metric depth as the target."""
+
+    image_size: list[int] = option(
+        default_factory=lambda: [64, 96], help="[height, width] of the frames it is trained at"
+    )
+    render_scale: int = option(
+        2,
+        help="the world is rendered at this multiple of image_size; frames are decoded down to "
+        "it and the target's nearness averaged down to it",
+    )
+    frame_format: str = option(
+        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+    )
+    channels: list[int] = option(
+        default_factory=lambda: [12, 24, 48, 96], help="widths of the network's levels"
+    )
+    prompts: list[str] = option(
+        default_factory=lambda: list(DEPTH_TRAINING_PROMPTS), help="scenes, one drawn per episode"
+    )
+    drivers: list[str] = option(
+        default_factory=lambda: [
+            "autopilot",
+            "constant:throttle=0.8,steering=0.0",
+            "scripted:throttle=sine:0.4:120:0.5,steering=sine:0.5:50",
+            "scripted:throttle=1.0,steering=weave:0.088:20:100",
+        ],
+        help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
+        "in turn",
+    )
+    num_envs: int = option(4, help="episodes driven at once (one round)")
+    episodes: int = option(32, help="episodes driven (a multiple of num_envs)")
+    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)")
+    epochs: int = option(15, help="passes over the frames")
+    batch_size: int = option(32, help="frames per step")
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
+    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    near_weight: float = option(
+        0.0,
+        help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
+        "normalised nearness (0: every pixel alike)",
+    )
+    validation: float = option(
+        0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
+    )
+    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    frames_file: str | None = option(
+        None,
+        help="keep the driven frames and their nearness here: read when the file exists (no "
+        "driving), else written after driving (null: not kept)",
+    )
+    output: str = option("outputs/depth/depth_small.pt", help="the weights file written")
+    progress: bool = option(True, help="tqdm progress bars")
+
+    def __post_init__(self) -> None:
+        if len(self.image_size) != 2 or min(self.image_size) <= 0:
+            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
+        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
+            raise ValueError(
+                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
+                f"({self.num_envs})"
+            )
+        positive = {
+            "render_scale": self.render_scale,
+            "steps": self.steps,
+            "epochs": self.epochs,
+            "batch_size": self.batch_size,
+            "lr": self.lr,
+        }
+        for name, value in positive.items():
+            if not value > 0:
+                raise ValueError(f"{name} must be positive, got {value}")
+        if self.near_weight < 0:
+            raise ValueError(f"near_weight must be >= 0, got {self.near_weight}")
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
+        if not self.drivers or not self.prompts:
+            raise ValueError("drivers and prompts must each name at least one")

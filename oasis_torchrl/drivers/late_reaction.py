@@ -3,9 +3,9 @@
 The autopilot changes lanes 30-45 m before an obstacle, where the obstacle is a couple of pixels
 in the policy's 96x64 frames. Its demonstrations therefore hold almost no frame with an obstacle
 close ahead in the car's own lane, and a clone that misses the early cue drives into states it
-has never seen: measured on the learning benchmark, a clone of such demonstrations hit the same
-obstacle as a constant full-throttle drive in 26 of 32 episodes, with its mixture head's
-lane-change component below 3% all the way in. Executing this driver while the autopilot labels
+has never seen, and keeps its lane into the obstacle as a constant full-throttle drive does
+(docs/experiments/2026-11-26-mixture-clone-drives-like-a-constant.md). Executing this driver
+while the autopilot labels
 every frame (DART-style noise injection, shaped like that mistake) records exactly those states:
 the car keeps its lane into a blocked stretch, and each frame says what the autopilot would do
 there. It is the :func:`~oasis_torchrl.train.demonstrations.record_demonstrations` ``learner`` of

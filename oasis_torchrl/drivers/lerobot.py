@@ -92,7 +92,8 @@ class LeRobotDriver(Driver):
 
     Args:
         policy: the policy (``PreTrainedPolicy``), in eval mode.
-        preprocessor, postprocessor: its processor pipelines (normalisation, device, ...).
+        preprocessor: its input processor pipeline (normalisation, device, ...).
+        postprocessor: its output processor pipeline (unnormalisation, ...).
         chunk_actions: see :class:`~oasis_torchrl.drivers.Driver`.
 
     Example:

@@ -12,6 +12,10 @@ convert the frames they use (:mod:`oasis_torchrl.models.actor_critic`), so colle
 stay compact uint8. A reward sum (``"episode_reward"``) and a step count are added, and on
 request :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (``"critic_inputs"``: ground
 truth for an asymmetric critic).
+
+What the endpoint sends beyond frames is found, not configured
+(:mod:`~oasis_torchrl.envs.capabilities`): ground truth reaches the env where the endpoint sends
+it, and ``env.reward.kind: auto`` follows it.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from typing import Any
 from omegaconf import DictConfig
 from torchrl.envs import Compose, RewardSum, StepCounter, TransformedEnv
 
-from oasis_torchrl.config.env import LOCAL, REWARD_KINDS, EnvConfig, RewardConfig
+from oasis_torchrl.config.env import REWARD_KINDS, EnvConfig, RewardConfig
+from oasis_torchrl.envs.capabilities import Capabilities, env_capabilities, resolve_reward_kind
 from oasis_torchrl.envs.episodes import Prompts, episode_prompts
 from oasis_torchrl.envs.oasis_env import OasisEnv
 from oasis_torchrl.envs.transforms import ChunkFrameStack, PrivilegedState
@@ -31,6 +36,7 @@ from oasis_torchrl.rewards import (
     ClearanceShaping,
     DepthCollisionReward,
     GroundTruthReward,
+    NamedDepth,
     RewardModule,
 )
 from oasis_torchrl.sim.config import ServerConfig
@@ -38,19 +44,22 @@ from oasis_torchrl.sim.config import ServerConfig
 Settings = EnvConfig | DictConfig
 
 
-def make_reward(cfg: RewardConfig | DictConfig) -> RewardModule:
-    """The reward module of ``env.reward``.
+def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardModule:
+    """The reward module of ``env.reward`` on an endpoint that sends what ``found`` says
+    (``kind: auto`` is the ground-truth reward where it sends ground truth, else the reference's
+    depth-collision reward with ``depth_model``).
 
     Example:
-        >>> type(make_reward(RewardConfig())).__name__
+        >>> embedded = Capabilities("the embedded server", ground_truth=True)
+        >>> type(make_reward(RewardConfig(), embedded)).__name__
         'GroundTruthReward'
-        >>> type(make_reward(RewardConfig(clearance_weight=0.2))).__name__
+        >>> type(make_reward(RewardConfig(clearance_weight=0.2), embedded)).__name__
         'ClearanceShaping'
     """
-    if cfg.kind == "depth":
-        return DepthCollisionReward()
-    if cfg.kind != "ground_truth":
+    if cfg.kind not in REWARD_KINDS:
         raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {cfg.kind!r}")
+    if resolve_reward_kind(cfg.kind, found) == "depth":
+        return DepthCollisionReward(NamedDepth(cfg.depth_model))
     reward = GroundTruthReward(
         progress_scale=cfg.progress_scale,
         collision_penalty=cfg.collision_penalty,
@@ -77,13 +86,15 @@ def make_env(
 
     Args:
         cfg: the ``env`` section.
-        num_envs, prompts, max_steps, image_size: replace the section's values (evaluation
-            uses one row per episode, fixed per-row prompts and the policy's image size).
+        num_envs: replaces the section's value (evaluation uses one row per episode).
+        prompts: replaces the section's value (evaluation fixes the prompt of each row).
+        max_steps: replaces the section's value.
+        image_size: replaces the section's value (evaluation uses the policy's image size).
         all_frames: all 4 frames of each chunk (one dataset row per frame), or the last.
         frame_stack: depth of the policies' frame stack (the network's ``frames``); None:
             no stack (append a :class:`ChunkFrameStack` later, e.g. once the network is known).
         privileged: add :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (needs ground
-            truth: the embedded server).
+            truth: an error on an endpoint that sends frames only).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -95,24 +106,32 @@ def make_env(
         >>> td["next", "frame_stack", "front"].shape
         torch.Size([2, 3, 2, 64, 96, 3])
     """
-    if privileged and not env_kwargs.get("ground_truth", cfg.endpoint == LOCAL):
-        raise ValueError(
-            "privileged state (privileged_critic, loss.aux_coeff) needs ground truth, which "
-            "only the embedded server sends (endpoint 'local', or its address with "
-            f"ground_truth=True); got endpoint {cfg.endpoint!r}: set privileged_critic=false "
-            "loss.aux_coeff=0"
+    found = env_capabilities(cfg)
+    if privileged:
+        found.require(
+            "privileged state (privileged_critic, loss.aux_coeff)",
+            "leave privileged_critic and loss.aux_coeff unset (found from the endpoint) or set "
+            "privileged_critic=false loss.aux_coeff=0",
+        )
+    if env_kwargs.get("expert"):
+        found.require(
+            "the expert (the autopilot and its labels)",
+            "take demonstrations from a person, a recordings folder or a policy",
         )
     size = image_size if image_size is not None else cfg.image_size
     server = cfg.server
+    env_kwargs.setdefault("ground_truth", found.ground_truth)
     env = OasisEnv(
         cfg.endpoint,
         num_envs or cfg.num_envs,
         prompts if prompts is not None else episode_prompts(cfg.prompts),
-        server=ServerConfig(width=server.width, height=server.height, fps=float(server.fps)),
+        server=ServerConfig(
+            width=server.width, height=server.height, fps=float(server.fps), hosted=server.hosted
+        ),
         frame_size=None if size is None else (int(size[0]), int(size[1])),
         all_frames=all_frames,
         max_steps=max_steps or cfg.max_steps,
-        reward=make_reward(cfg.reward),
+        reward=make_reward(cfg.reward, found),
         **env_kwargs,
     )
     transforms = [RewardSum(), StepCounter()]

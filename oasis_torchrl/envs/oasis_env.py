@@ -51,7 +51,13 @@ from oasis_torchrl.envs.specs import (
     build_reward_spec,
 )
 from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, HOSTED_FRAME_SIZE
-from oasis_torchrl.rewards import GroundTruthReward, RewardModule, as_reward_module
+from oasis_torchrl.rewards import (
+    DepthCollisionReward,
+    GroundTruthReward,
+    NamedDepth,
+    RewardModule,
+    as_reward_module,
+)
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer, ServerProcess
 
@@ -105,9 +111,9 @@ class OasisWrapper(_EnvWrapper):
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
-            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, zero
-            elsewhere (pass :class:`~oasis_torchrl.rewards.DepthCollisionReward` for the
-            reference depth reward).
+            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, the
+            reference's :class:`~oasis_torchrl.rewards.DepthCollisionReward` on frames alone
+            (its depth from the shipped small network).
         ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``; a
             server that sends none yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
@@ -218,6 +224,11 @@ class OasisWrapper(_EnvWrapper):
                 pool.close()
                 raise
         return pool
+
+    @property
+    def reward_module(self) -> RewardModule:
+        """The module that scores every step (the ``reward`` given, or the default)."""
+        return self._reward
 
     def scene_source(self) -> SceneSource:
         """The layouts of this env's scenes, asked of its server through the protocol
@@ -353,6 +364,68 @@ class OasisWrapper(_EnvWrapper):
 class OasisEnv(OasisWrapper):
     """The batched TorchRL env over ``num_envs`` concurrent Oasis (A2V) sessions of an endpoint.
 
+    ## Description
+
+    Each of the N rows is one world-model session: a prompt sets a driving scene, every step
+    sends a chunk of 4 ``[throttle, steering]`` actions and returns what the three cameras
+    (``left_forward``, ``front``, ``right_forward``) saw. Gymnasium: ``oasis_torchrl/Oasis-v0``
+    (``gymnasium.make`` one session, ``gymnasium.make_vec`` N).
+
+    ## Action space
+
+    | key | spec | shape | dtype |
+    |---|---|---|---|
+    | `"action"` | `Bounded(-1, 1)` | `[N, 4, 2]` | `float32` |
+
+    Per row 4 actions in time order, each ``[throttle, steering]``: throttle + is forward, - is
+    brake then reverse; steering - is left, + is right. ``chunk_actions=False`` takes ``[N, 2]``,
+    repeated 4 times.
+
+    ## Observation space
+
+    | key | spec | shape | dtype |
+    |---|---|---|---|
+    | `("pixels", camera)` | `Bounded(0, 255)` | `[N, H, W, 3]` | `uint8` |
+    | `"state"` | `Bounded(-1, 1)` | `[N, 2]` | `float32` |
+    | `"episode_seed"` | `Unbounded` | `[N, 1]` | `int64` |
+    | `("info", "session_restarts")` | `Unbounded` | `[N, 1]` | `int64` |
+    | `("truth", field)` | `Unbounded` | `[N, 4]` | `float32` |
+    | `("reward_terms", term)` | `Unbounded` | `[N, 1]` | `float32` |
+
+    ``camera`` is each of the three cameras and ``H x W`` the decoded size (the hosted model's
+    512 x 768 unless ``frame_size`` or the embedded server's size says otherwise); the pixels are
+    the last frame of the chunk, all four (``[N, 4, H, W, 3]``) with ``all_frames=True``.
+    ``"state"`` is the previous action (zeros after a reset); ``"prompt"`` (text) is the row's
+    prompt. ``("truth", field)`` (the embedded server only: each frame's position, speed,
+    progress, lane and obstacle distances, collisions) and ``"expert_action"`` (``expert=True``)
+    are there where the server sends them.
+
+    ## Rewards
+
+    With ground truth (the embedded server) the default reward is
+    :class:`~oasis_torchrl.rewards.GroundTruthReward`, per row and step:
+    ``0.1 * progress_gained - 2 * collision - 0.01 * lane_offset`` (metres gained along the road,
+    1 on the first collided step, mean metres from the lane's centre). On frames alone it is 0
+    unless ``reward=`` is given; the reference reward is
+    :class:`~oasis_torchrl.rewards.DepthCollisionReward`:
+    ``expm1(3 * mean(max(throttle, 0))) / expm1(3)`` minus a straightness penalty.
+
+    ## Starting state
+
+    A reset of a row re-prompts its session with the row's next prompt and seed and sends one
+    all-zero chunk: the first observation is the world after standing still for 4 frames.
+
+    ## Episode end
+
+    - Termination: a frame of the chunk collided (ground truth: an obstacle hit or the road
+      left), or the reward module says so (the depth reward: collision risk reached 1).
+    - Truncation: ``max_steps`` steps (chunks; 512 by default), or the row's session was lost and
+      re-opened mid-episode (counted in ``("info", "session_restarts")``).
+
+    ## Version history
+
+    - v0: the first version.
+
     Args:
         endpoint: ``"local"`` (the embedded simulator server, started on a free loopback port
             by the process that steps the env and stopped on close), or any A2V endpoint such
@@ -373,8 +446,9 @@ class OasisEnv(OasisWrapper):
             machine), ``"vp9"`` (what the hosted model sends: train on its compression
             artefacts) or ``"jpeg"``; default: raw on this machine, else VP9.
         all_frames: return all 4 frames of each chunk instead of the last one.
-        ground_truth: see :class:`OasisWrapper`; default: only for ``endpoint="local"`` (set it
-            for an ``oasis-torchrl serve`` server started elsewhere).
+        ground_truth: see :class:`OasisWrapper`; default: for ``endpoint="local"`` unless its
+            server is hosted-like (set it for an ``oasis-torchrl serve`` server started
+            elsewhere, or let :func:`~oasis_torchrl.envs.make_env` find it).
         expert: run the embedded server's expert beside every episode and expose its next
             chunk as ``"expert_action"`` (what :class:`~oasis_torchrl.drivers.Autopilot` drives
             with, and demonstrations label with); off, the server spends nothing on it.
@@ -391,6 +465,10 @@ class OasisEnv(OasisWrapper):
         >>> td = env.rollout(3)
         >>> td["next", "pixels", "front"].shape
         torch.Size([2, 3, 64, 96, 3])
+        >>> env.action_spec.shape, env.action_spec.space.low.min().item()
+        (torch.Size([2, 4, 2]), -1.0)
+        >>> env.observation_spec["state"].shape, env.observation_spec["truth", "speed"].shape
+        (torch.Size([2, 2]), torch.Size([2, 4]))
         >>> env.close()
     """
 
@@ -423,6 +501,11 @@ class OasisEnv(OasisWrapper):
         if local:
             config = server if server is not None else ServerConfig()
             streams = StreamLayout(CAMERAS, frame_size or (config.height, config.width))
+            if expert and config.hosted:
+                raise ValueError(
+                    "the expert needs ground truth, which a hosted-like server does not send: "
+                    "drive with a person, recordings or a policy"
+                )
         formats = {} if frame_format is None else {"accepted_formats": [FORMAT_NAMES[frame_format]]}
         pool = SessionPool(
             embedded_server(config, num_envs) if local else endpoint,
@@ -440,7 +523,7 @@ class OasisEnv(OasisWrapper):
             pool,
             streams=streams,
             prompts=prompts,
-            ground_truth=local if ground_truth is None else ground_truth,
+            ground_truth=(local and not config.hosted) if ground_truth is None else ground_truth,
             fps=config.fps if local else FPS,
             **kwargs,
         )
@@ -508,11 +591,7 @@ def _flags(
 
 def _resolve_reward(reward: Any, ground_truth: bool) -> RewardModule:
     if reward is None:
-        return GroundTruthReward() if ground_truth else as_reward_module(_zero_reward)
+        return GroundTruthReward() if ground_truth else DepthCollisionReward(NamedDepth())
     if hasattr(reward, "reset"):
         return reward
     return as_reward_module(reward)
-
-
-def _zero_reward(td: TensorDictBase) -> torch.Tensor:
-    return torch.zeros(td.batch_size[0], 1)

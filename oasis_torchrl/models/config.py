@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from oasis_torchrl.config.training import NetworkArchitectureConfig
 from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
 
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
@@ -21,6 +22,8 @@ TANH_NORMAL = "tanh_normal"
 MIXTURE = "mixture"
 HEADS = (TANH_NORMAL, MIXTURE)
 """Action heads: one tanh-normal over the chunk, or a mixture of them (one per manoeuvre)."""
+_SHAPE = NetworkArchitectureConfig()
+"""The shape settings of PPO's and BC's commands: their defaults are the network's."""
 
 
 @dataclass(frozen=True)
@@ -44,15 +47,15 @@ class DrivingNetConfig:
             4x4 patch convolution, 1 and 2 are 3x3 convolutions. The default ``(4, 2, 1)``
             reads 64x96 frames on a 16x24 then 8x12 grid; ``(2, 2, 2)`` keeps twice the
             resolution in the first two layers (an obstacle 60 m ahead is about a pixel tall
-            at 64x96) for about 1.4x the time of a behaviour-cloning step.
+            at 64x96), at a higher cost per behaviour-cloning step.
         pool_grid: ``(rows, cols)`` the last feature map is average-pooled to; keeping a grid
             (not a global pool) keeps where things are, which steering needs.
         camera_features: features per camera after the projection.
         state_dim: length of ``"state"`` (the previous action).
         use_state: feed the state to the actor and critic. Off for behaviour cloning: actions
             change slowly, so a clone that sees the previous action learns to repeat it (the
-            "copycat" shortcut, Wen et al., 2020); measured here, blanking all three cameras
-            barely changed such a clone's actions.
+            "copycat" shortcut, Wen et al., 2020): such a clone's actions barely depend on its
+            cameras.
         hidden_dim: width of the actor and value MLPs.
         critic_inputs: extra inputs of the value head only, e.g. privileged simulator state
             for an asymmetric actor-critic (0: the critic sees what the actor sees).
@@ -70,7 +73,7 @@ class DrivingNetConfig:
         init_action: the fresh actor's mean action (after the tanh), one value per action
             number in ``[-0.99, 0.99]``, repeated over the chunk. ``(0.5, 0.0)`` starts PPO
             from scratch at half throttle, straight: with the default zero chunk a fresh car
-            stands still and measured runs spent their first ~6000 env steps learning to move.
+            stands still and a run spends its first env steps learning to move.
         init_spread: mixture only: the fresh components' mean actions spread evenly from
             ``init_action - init_spread`` to ``init_action + init_spread`` (one value per action
             number), the outer ones ``e^-2`` as likely as the middle one, which the policy
@@ -91,20 +94,20 @@ class DrivingNetConfig:
     cameras: tuple[str, ...] = CAMERAS
     image_size: tuple[int, int] = POLICY_IMAGE_SIZE
     frames: int = POLICY_FRAMES
-    shared_encoder: bool = True
-    encoder_channels: tuple[int, int, int] = (24, 48, 64)
-    encoder_strides: tuple[int, int, int] = (4, 2, 1)
-    pool_grid: tuple[int, int] = (4, 6)
-    camera_features: int = 128
+    shared_encoder: bool = _SHAPE.shared_encoder
+    encoder_channels: tuple[int, int, int] = tuple(_SHAPE.encoder_channels)
+    encoder_strides: tuple[int, int, int] = tuple(_SHAPE.encoder_strides)
+    pool_grid: tuple[int, int] = tuple(_SHAPE.pool_grid)
+    camera_features: int = _SHAPE.camera_features
     state_dim: int = 2
     use_state: bool = True
-    hidden_dim: int = 256
+    hidden_dim: int = _SHAPE.hidden_dim
     critic_inputs: int = 0
     aux_outputs: int = 0
     chunk: int = CHUNK
     action_dim: int = ACTION_DIM
-    head: str = MIXTURE
-    components: int = 3
+    head: str = _SHAPE.head
+    components: int = _SHAPE.components
     init_action: tuple[float, ...] = (0.0, 0.0)
     init_spread: tuple[float, ...] = (0.0, 0.3)
     init_scale: tuple[float, ...] = (0.5, 0.1)

@@ -179,35 +179,13 @@ class TanhNormalMixture(D.Distribution):
         """Draw a component per sample, then its tanh-normal chunk."""
         shape = torch.Size(sample_shape)
         component = D.Categorical(logits=self.logits).sample(shape)
-        pre_tanh = self._component(self.loc, component) + self._component(
-            self.scale, component
-        ) * torch.randn(shape + self.batch_shape + self.event_shape, device=self.loc.device)
-        return torch.tanh(pre_tanh).clamp(-ACTION_BOUND, ACTION_BOUND)
-
-    def from_noise(self, uniform: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
-        """The action that noise ``uniform`` ``[*B]`` in [0, 1) and ``normal`` ``[*B, *E]``
-        (standard normal) give: the component at ``uniform`` of the weights' cumulative sum,
-        then ``tanh(loc + scale * normal)`` of it. With fresh noise that is :meth:`sample`;
-        noise held over several steps keeps the component and the deviation while the weights
-        and locations stay (e.g. a manoeuvre), each step's action still distributed as the
-        mixture.
-
-        Example:
-            >>> logits = torch.zeros(2, 2)  # two rows of the same two components
-            >>> loc = torch.tensor([[-1.0], [1.0]]).expand(2, 2, 1)
-            >>> dist = TanhNormalMixture(logits, loc, torch.full_like(loc, 0.1), event_dims=1)
-            >>> dist.from_noise(torch.tensor([0.2, 0.7]), torch.zeros(2, 1))  # left, right
-            tensor([[-0.7616],
-                    [ 0.7616]])
-        """
-        cumulative = self.log_weights.exp().cumsum(-1)
-        last = self.logits.shape[-1] - 1
-        component = (cumulative < uniform.unsqueeze(-1)).sum(-1).clamp_max(last)
+        normal = torch.randn(shape + self.batch_shape + self.event_shape, device=self.loc.device)
         return self.component_chunk(component, normal)
 
     def component_chunk(self, component: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
-        """``tanh(loc + scale * normal)`` ``[*B, *E]`` of each row's ``component`` ``[*B]``,
-        with ``normal`` ``[*B, *E]`` standard normal deviations (bounded as every action is).
+        """``tanh(loc + scale * normal)`` ``[*S, *B, *E]`` of each row's ``component``
+        ``[*S, *B]``, with ``normal`` ``[*S, *B, *E]`` standard normal deviations (bounded as every
+        action is).
 
         Example:
             >>> loc = torch.tensor([[[-1.0], [1.0]]])

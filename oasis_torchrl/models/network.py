@@ -161,7 +161,7 @@ class DrivingNet(nn.Module):
         Why bounded: demonstrations hold actions at exactly +-1 (full throttle), which push a
         clone's location far out; float32 ``atanh`` of PPO's samples there saturates near 8.4,
         so the log-probability of a stored action swings by tens of nats per small update and
-        PPO's ratio overflows (measured: 15 of 16 fine-tuning minibatches non-finite).
+        PPO's ratio overflows (non-finite fine-tuning minibatches).
         """
         raw = self.actor(features)
         loc = raw[..., self.logit_outputs :].unflatten(-1, self._chunk_shape)
@@ -352,31 +352,6 @@ class DrivingNet(nn.Module):
         return self.log_scale.register_hook(
             lambda grad: grad.mean(dims, keepdim=True).expand_as(grad)
         )
-
-    @torch.no_grad()
-    def sharpen_components(self, factor: float) -> None:
-        """Multiply the mixture's component logits by ``factor`` (> 1: the most probable
-        component more probable still; the deterministic action, its argmax, stays the same).
-
-        Why: a clone fitted by likelihood keeps about a fifth of its weight on the manoeuvres it
-        does not choose, so a PPO warm start that samples its components drives a policy far
-        from the one evaluated (BENCHMARKS.md, "BC then PPO").
-
-        Example:
-            >>> net = DrivingNet(DrivingNetConfig())
-            >>> features = torch.randn(1, net.config.features_dim)
-            >>> before = net.action_params(features)["logits"].softmax(-1).max().item()
-            >>> net.sharpen_components(3.0)
-            >>> net.action_params(features)["logits"].softmax(-1).max().item() > before
-            True
-        """
-        if self.config.head != MIXTURE:
-            raise ValueError(f"only the {MIXTURE} head has components, not {self.config.head}")
-        if not factor > 0:
-            raise ValueError(f"the logits' factor must be positive, got {factor}")
-        last = self.actor[-1]
-        last.weight[: self.logit_outputs].mul_(factor)
-        last.bias[: self.logit_outputs].mul_(factor)
 
     @torch.no_grad()
     def set_scale(self, scale: float | Sequence[float]) -> None:

@@ -25,8 +25,8 @@ PRIVILEGED_FIELDS = (
 lane and on the road, and the obstacles ahead in its path and in its lane and the lanes beside.
 
 The distances are lane-centred (the car-centred strips ``obstacle_distance_left`` / ``_right``
-are left out): a clone of the autopilot fed these ten numbers drove 96% of the autopilot's
-distance, one fed the car-centred six it had before 64% (``benchmarks/state_clone.py``)."""
+are left out): a clone of the autopilot fed these ten numbers drives much farther than one fed
+the car-centred six it had before (docs/experiments/2026-11-25-state-clone.md)."""
 PRIVILEGED_KEY = "privileged_state"
 """The dataset column that stores it (not an ``observation.*`` key, so no policy reads it as an
 input: LeRobot's policies skip it, the oasis policy learns to predict it)."""

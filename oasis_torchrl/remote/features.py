@@ -66,7 +66,8 @@ class Feature:
         name: the TensorDict key, nested keys joined by ``"."``.
         shape: the shape of one row's value.
         dtype: its element type.
-        low, high: bounds of every element, if declared.
+        low: lower bound of every element, if declared.
+        high: upper bound of every element, if declared.
         names: names of the last dimension's entries, if any.
 
     Example:

@@ -20,6 +20,8 @@ from oasis_torchrl.rewards.depth_collision import (
     normalize_per_image,
     straightness_penalty,
 )
+from oasis_torchrl.rewards.depth_models import NamedDepth
+from oasis_torchrl.rewards.depth_net import SMALL_DEPTH_MODEL
 from oasis_torchrl.rewards.depth_sources import (
     DEFAULT_DEPTH_MODEL,
     CallableDepth,
@@ -33,6 +35,7 @@ from oasis_torchrl.rewards.shaping import ClearanceShaping
 
 __all__ = [
     "DEFAULT_DEPTH_MODEL",
+    "SMALL_DEPTH_MODEL",
     "CallableDepth",
     "CallableReward",
     "ClearanceShaping",
@@ -43,6 +46,7 @@ __all__ = [
     "GroundTruthDepth",
     "GroundTruthReward",
     "MonocularDepth",
+    "NamedDepth",
     "RewardFn",
     "RewardModule",
     "RowState",

@@ -10,14 +10,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import torch
 import torch.nn.functional as F
 from tensordict import TensorDictBase
 
-from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.protocol import CAMERAS, CHUNK
 from oasis_torchrl.rewards.base import get_entry
 
 if TYPE_CHECKING:
@@ -26,8 +28,21 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 DEFAULT_DEPTH_MODEL = "depth-anything/Depth-Anything-V2-Small-hf"
+OFFLINE_ALTERNATIVE = "env.reward.depth_model=small"
+"""The setting that needs no download: the small depth network shipped with the package."""
 DepthFn = Callable[[torch.Tensor], torch.Tensor]
 InputSize = int | tuple[int, int]
+
+
+class DepthModelError(ValueError):
+    """A depth model cannot be loaded; the message names the model, the cause and the
+    alternative.
+
+    >>> raise DepthModelError("depth model 'x' cannot be loaded: ...")
+    Traceback (most recent call last):
+    ...
+    oasis_torchrl.rewards.depth_sources.DepthModelError: depth model 'x' cannot be loaded: ...
+    """
 
 
 @runtime_checkable
@@ -57,14 +72,20 @@ def check_camera(camera: str) -> str:
 
 
 def read_pixels(td: TensorDictBase, camera: str, owner: str) -> torch.Tensor:
-    """The uint8 RGB frames ``[N, H, W, 3]`` of ``camera``, validated.
+    """The uint8 RGB frames ``[N, H, W, 3]`` of ``camera``, validated; of an env that returns
+    every frame of a chunk (``[N, 4, H, W, 3]``), the chunk's last, as the reference scores.
 
     >>> from tensordict import TensorDict
     >>> td = TensorDict({("pixels", "front"): torch.zeros(2, 8, 8, 3, dtype=torch.uint8)}, [2])
     >>> read_pixels(td, "front", "doc").shape
     torch.Size([2, 8, 8, 3])
+    >>> chunks = TensorDict({("pixels", "front"): torch.zeros(2, 4, 8, 8, 3).byte()}, [2])
+    >>> read_pixels(chunks, "front", "doc").shape
+    torch.Size([2, 8, 8, 3])
     """
     rgb = get_entry(td, ("pixels", camera), owner)
+    if rgb.ndim == 5 and rgb.shape[1] == CHUNK:
+        rgb = rgb[:, -1]
     if rgb.dtype != torch.uint8 or rgb.ndim != 4 or rgb.shape[-1] != 3:
         raise ValueError(
             f"{owner} needs td[('pixels', {camera!r})] as uint8 [N, H, W, 3], "
@@ -252,8 +273,17 @@ class MonocularDepth:
             from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
             logger.info("loading depth model %s", self.source)
-            self._model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
-            processor = AutoImageProcessor.from_pretrained(self.source)
+            try:
+                model = AutoModelForDepthEstimation.from_pretrained(self.source).eval()
+                processor = AutoImageProcessor.from_pretrained(self.source)
+            except (OSError, ValueError) as error:  # not cached offline, no such model, bad files
+                raise DepthModelError(
+                    f"depth model {str(self.source)!r} cannot be loaded: "
+                    f"{_why_not_loaded(self.source, error)}; "
+                    f"offline, use the small network shipped with the package: "
+                    f"{OFFLINE_ALTERNATIVE}"
+                ) from None
+            self._model = model
             self._preprocess = DepthPreprocess.from_processor(processor, self.input_size)
         return self._model, self._preprocess
 
@@ -276,3 +306,29 @@ class MonocularDepth:
             align_corners=False,
         ).squeeze(1)
         return nearness.to(rgb.device)
+
+
+def error_cause(error: BaseException) -> str:
+    """An error's type and the first line of its message, for one-line reports (web addresses
+    replaced by "the hub").
+
+    >>> error_cause(OSError("cannot reach 'https://example.org/x'\\nlong advice"))
+    'OSError: cannot reach the hub'
+    """
+    lines = str(error).strip().splitlines()
+    first = re.sub(r"'?https?://[^\s']+'?", "the hub", lines[0]) if lines else "no message"
+    return f"{type(error).__name__}: {first}"
+
+
+def _why_not_loaded(source: str | os.PathLike[str], error: BaseException) -> str:
+    """Why ``from_pretrained(source)`` failed, in words a user can act on."""
+    from huggingface_hub import constants
+
+    text = str(source)
+    if Path(text).expanduser().is_dir():
+        return f"the folder holds no depth model ({error_cause(error)})"
+    if isinstance(source, os.PathLike) or text.startswith(("/", ".", "~")):
+        return "no such folder"
+    if constants.HF_HUB_OFFLINE:
+        return "it is not in the local cache, and downloads are off (HF_HUB_OFFLINE)"
+    return error_cause(error)

@@ -27,7 +27,8 @@ class PolicyHost:
     Args:
         load: builds the policy (e.g. ``lambda: load_served_policy(path)``).
         name: what the policy is called until it has loaded.
-        max_rows, max_wait: the batcher's settings.
+        max_rows: the batcher's largest batch, in rows.
+        max_wait: seconds the first request of a batch waits for others at most.
         on_ready: called once the policy has loaded.
 
     Example:

@@ -9,7 +9,7 @@ vehicle model, so every action is closed-loop on the state it will act on.
 Demonstrations execute its actions with noise (DART), so it must recover from being pushed off
 its line: a short pursuit look-ahead steers back within a second or so, and when the car is
 pushed towards an obstacle while its target lane is clear it slows to a crawl instead of
-stopping (a stopped car cannot steer back; before, 12 of 30 noisy urban drives ended stalled).
+stopping (a stopped car cannot steer back, and noisy drives would end stalled).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import grpc
 
 from oasis_torchrl.options import option
-from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR
+from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR, FrameFormat
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 
 # Keys travel as gRPC metadata (printable ASCII) and in a comma-separated variable.
@@ -164,6 +164,12 @@ class ServerConfig(GrpcServerConfig):
         Traceback (most recent call last):
         ...
         ValueError: width must be an even integer in [16, 4096], got 95
+
+    ``hosted=True`` makes it the stand-in of the hosted service (at 768x512 unless a smaller
+    size is set, e.g. for CPU-bound tests): VP9 only, whatever ``formats`` says.
+
+        >>> ServerConfig(hosted=True, formats=(100,), api_keys=("k",)).formats  # VP9
+        (3,)
     """
 
     width: int = option(768, help="frame width")
@@ -192,10 +198,17 @@ class ServerConfig(GrpcServerConfig):
     vp9_bit_rate: int | None = option(None, help="VP9 bits/s (null: scales with the frame size)")
     vp9_threads: int = option(1, help="libvpx threads per stream")
     jpeg_quality: int = option(90, help="JPEG quality 1-100")
+    hosted: bool = option(
+        False,
+        help="hosted-like: send only what the hosted Oasis service sends (VP9 frames; no "
+        "ground truth, SimService, expert or depth; seeds and the other local extensions "
+        "ignored); formats is then vp9",
+    )
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "formats", tuple(self.formats))
+        formats = (int(FrameFormat.VP9),) if self.hosted else tuple(self.formats)
+        object.__setattr__(self, "formats", formats)
         if self.processes is not None:
             require_int("processes", self.processes, 0, 1024)
         self._validate_video()

@@ -12,11 +12,17 @@ failures are in-band ``error`` fields, transport conditions are gRPC statuses:
 ``SimService`` has no ``error`` field, so its request failures map to statuses:
 INVALID_API_KEY -> UNAUTHENTICATED, INVALID_SESSION -> NOT_FOUND, ALREADY_FINISHED and
 PROMPT_SET -> FAILED_PRECONDITION, anything else -> INVALID_ARGUMENT.
+
+A hosted-like server (``ServerConfig(hosted=True)``) sends what the hosted service sends and
+nothing more: VP9 frames, the error codes and the session-pinning header, but no ground-truth
+metadata and no SimService; it ignores the seed and expert metadata (each Prompt draws a fresh
+random scene, so its episodes cannot be paired) and grants no frame subsets.
 """
 
 from __future__ import annotations
 
 import logging
+import secrets
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -36,6 +42,7 @@ from oasis_torchrl.protocol import (
     EXPERT_ON,
     FRAMES_METADATA,
     LAST_FRAME_ONLY,
+    MAX_SEED,
     SEED_METADATA,
     SESSION_TARGET_METADATA,
     TRUTH_METADATA,
@@ -182,7 +189,8 @@ class A2VServicer:
     def Infer(
         self, request: a2v_pb2.InferRequest, context: grpc.ServicerContext
     ) -> a2v_pb2.InferResponse:
-        """Step the world by 4 actions; 4 frames per stream plus ground-truth trailing metadata."""
+        """Step the world by 4 actions; 4 frames per stream plus ground-truth trailing metadata
+        (none when hosted-like)."""
         return _run_rpc(
             context,
             lambda: self._infer(request, context),
@@ -236,10 +244,17 @@ class A2VServicer:
     ) -> a2v_pb2.PromptResponse:
         with self._gate.use("Prompt", request.session_id, context) as session:
             check_prompt(request.prompt, self._config.max_prompt_chars)
-            seed = parse_seed(_metadata(context, SEED_METADATA))
-            expert = _text_metadata(context, EXPERT_METADATA) == EXPERT_ON
+            seed, expert = self._scene_options(context)
             session.world.prompt(request.prompt, seed, expert=expert)
         return a2v_pb2.PromptResponse()
+
+    def _scene_options(self, context: grpc.ServicerContext) -> tuple[int, bool]:
+        """The Prompt's seed and whether the expert runs: what its metadata asks or, hosted-like,
+        a fresh random seed and no expert (the hosted service ignores both)."""
+        if self._config.hosted:
+            return secrets.randbelow(MAX_SEED + 1), False
+        seed = parse_seed(_metadata(context, SEED_METADATA))
+        return seed, _text_metadata(context, EXPERT_METADATA) == EXPERT_ON
 
     def _infer(
         self, request: a2v_pb2.InferRequest, context: grpc.ServicerContext
@@ -250,7 +265,8 @@ class A2VServicer:
             if self._config.latency_ms:
                 time.sleep(self._config.latency_ms / 1000.0)
             record = session.world.infer(request.sequence_num, actions)
-        context.set_trailing_metadata(((TRUTH_METADATA, record.truth),))
+        if not self._config.hosted:
+            context.set_trailing_metadata(((TRUTH_METADATA, record.truth),))
         return record.response  # serialised already (see _serialise)
 
     def _finish(
@@ -315,6 +331,7 @@ class SimServicer:
 class A2VServer:
     """The embedded A2V server: gRPC server, services, sessions and where their worlds run.
 
+    With ``config.hosted`` it serves A2V alone (no SimService), as the hosted service does.
     With ``config.processes`` worker processes (default: one per core) the sessions' worlds run
     in those workers (:mod:`~oasis_torchrl.sim.worker_pool`), one worker per session for its
     life; with ``processes=0`` they run in this process.
@@ -362,7 +379,10 @@ class A2VServer:
         )
         a2v = A2VServicer(config, self._registry, self._authority)
         add_service(self._server, A2V_SERVICE, a2v)
-        add_service(self._server, SIM_SERVICE, SimServicer(self._registry, self._authority))
+        self._services = (A2V_SERVICE,)
+        if not config.hosted:
+            add_service(self._server, SIM_SERVICE, SimServicer(self._registry, self._authority))
+            self._services = (A2V_SERVICE, SIM_SERVICE)
         health_pb2_grpc.add_HealthServicer_to_server(self._health, self._server)
         self.port: int | None = None
 
@@ -392,9 +412,14 @@ class A2VServer:
         self._worlds.start()
         self._server.start()
         self._registry.start_reaper()
-        for service in ("", A2V_SERVICE.full_name, SIM_SERVICE.full_name):
+        for service in ("", *(service.full_name for service in self._services)):
             self._health.set(service, health_pb2.HealthCheckResponse.SERVING)
-        logger.info("A2V server listening on %s (TLS %s)", self.address, self.config.tls_enabled)
+        logger.info(
+            "A2V server listening on %s (TLS %s%s)",
+            self.address,
+            self.config.tls_enabled,
+            ", hosted-like: frames only" if self.config.hosted else "",
+        )
         return self.port
 
     def stop(self, grace: float | None = 1.0) -> None:

@@ -278,8 +278,8 @@ class World:
 
         Lane-centred, they say what a driver decides on (is my lane blocked, is the next one
         open) the same way whatever the car's position within its lane: a clone of the autopilot
-        fed these (with the lanes on each side and the offset in the lane) drove 96% of its
-        distance, one fed the car-centred strips 64% (``benchmarks/state_clone.py``).
+        fed these (with the lanes on each side and the offset in the lane) drives much farther
+        than one fed the car-centred strips (docs/experiments/2026-11-25-state-clone.md).
         """
         style = self.scene.style
         lanes = np.array([lane, lane + 1, lane - 1])

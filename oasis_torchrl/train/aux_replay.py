@@ -1,28 +1,19 @@
 """A replay of past observations for the auxiliary loss: perception trained beside PPO.
 
 Why: PPO's encoder learns to see only from the batch it is updating on, the last 512 env steps,
-and only as far as the policy gradient and the auxiliary head need it there. Measured, the same
-PPO handed the privileged state passes 1.5x the best constant within 102,400 env steps, while on
-the cameras its auxiliary head reads the obstacle in the car's own lane worse than its mean
-(``benchmarks/state_ppo.py``, ``benchmarks/perception.py``); the clones' encoder, fitted to the
-privileged state alone, reads it at R^2 0.32 from 9,600 rows and 0.66 from 46,568
-(``benchmarks/perception_data.py``). So the encoder needs more frames than one batch.
+and only as far as the policy gradient and the auxiliary head need it there. The same PPO
+handed the privileged state learns to drive, while on the cameras its auxiliary head barely
+reads the obstacle in the car's own lane, and an encoder fitted to the privileged state reads
+it better the more rows it sees (docs/experiments/: the state_ppo, perception and
+perception_data pages). So the encoder needs more frames than one batch.
 
 How: every batch PPO collects also goes into a ring of ``capacity`` rows (the observations the
 encoder reads and their ``"critic_inputs"``, the frames kept as uint8), and after each PPO
 update the encoder and the auxiliary head take ``steps`` extra gradient steps on the auxiliary
 loss alone, on minibatches drawn uniformly from the ring. Only the simulator's privileged state
 is a label, so this uses no demonstrations: every row is an env step PPO counted. The ring is
-not checkpointed (a resumed run refills it).
-
-Measured (BENCHMARKS.md, "PPO from scratch"): with 32,768 rows, PPO from scratch drove 1.29x the
-best constant within 102,400 env steps on one seed (ahead of that seed without the replay on
-every scene set, by 1.3-1.8 standard errors) and 1.16x on a second (level with it), for about
-1.4x the training time; mirroring half of each replayed minibatch did worse. So
-``aux_replay.capacity`` defaults to 0 (off). Shifting each replayed row's frames by up to 4 pixels
-(``shift_pad``, with the warm-up's) moved the best constant's multiple on the targets' seed from
-1.41x (the constant's warm-up with this replay) to 1.50-1.52x on two seeds but left the unseen
-scenes level or behind, so it is off too.
+not checkpointed (a resumed run refills it). Off by default; the ``ppo_scratch`` preset turns it
+on (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations
@@ -32,12 +23,8 @@ from tensordict import TensorDictBase
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 
-from oasis_torchrl.config.training import check_shift
-from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FRAME_STACK, STATE, observation_keys
-from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
-from oasis_torchrl.train.mirror import Mirror
+from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, observation_keys
 from oasis_torchrl.train.ppo_loss import DrivingPPOLoss
-from oasis_torchrl.train.shift import random_shift
 
 
 class AuxiliaryReplay:
@@ -48,15 +35,9 @@ class AuxiliaryReplay:
             head and a positive ``aux_coeff``; the replayed loss has the same weight).
         capacity: rows kept (the oldest are overwritten).
         mini_batch_size: rows per replayed minibatch.
-        mirror: the share of replayed rows reflected left to right
-            (:class:`~oasis_torchrl.train.mirror.Mirror`: cameras flipped and swapped, the
-            previous action's steering and the privileged state's sides mirrored).
-        shift_pad: each replayed row's frames shifted by up to this many pixels
-            (:func:`~oasis_torchrl.train.shift.random_shift`; 0: none).
 
     Raises:
-        ValueError: no auxiliary loss to replay, a capacity below one minibatch, or a negative
-            shift.
+        ValueError: no auxiliary loss to replay, or a capacity below one minibatch.
 
     Example:
         >>> from tensordict import TensorDict
@@ -71,14 +52,7 @@ class AuxiliaryReplay:
         (16, torch.Size([]))
     """
 
-    def __init__(
-        self,
-        loss: DrivingPPOLoss,
-        capacity: int,
-        mini_batch_size: int,
-        mirror: float = 0.0,
-        shift_pad: int = 0,
-    ) -> None:
+    def __init__(self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int) -> None:
         if not loss.aux_coeff:
             raise ValueError(
                 "the auxiliary replay trains the auxiliary loss: set loss.aux_coeff > 0 "
@@ -89,26 +63,12 @@ class AuxiliaryReplay:
                 f"the auxiliary replay's capacity ({capacity}) must hold at least one "
                 f"minibatch ({mini_batch_size} rows, > 0)"
             )
-        check_shift("shift_pad", shift_pad)
         self._loss = loss
-        self.shift_pad = shift_pad
         self.keys = [*observation_keys(loss.net), CRITIC_INPUTS]
         self.buffer = ReplayBuffer(
             storage=LazyTensorStorage(capacity),
             sampler=RandomSampler(),
             batch_size=mini_batch_size,
-        )
-        self.mirror = (
-            Mirror(
-                [(FRAME_STACK, camera) for camera in loss.net.config.cameras],
-                PRIVILEGED_FIELDS,
-                share=mirror,
-                steering_keys=[STATE],
-                privileged_key=CRITIC_INPUTS,
-                width_dim=-2,
-            )
-            if mirror
-            else None
         )
 
     def __len__(self) -> int:
@@ -119,17 +79,10 @@ class AuxiliaryReplay:
         self.buffer.extend(flat.select(*self.keys))
 
     def minibatch(self) -> TensorDictBase:
-        """One minibatch drawn uniformly from the replay, mirrored and shifted as configured."""
+        """One minibatch drawn uniformly from the replay."""
         if not len(self.buffer):
             raise RuntimeError("the auxiliary replay is empty: extend it with a batch first")
-        sample = self.buffer.sample()
-        if self.mirror is not None:
-            sample = self.mirror(sample)
-        if self.shift_pad:
-            for camera in self._loss.net.config.cameras:
-                key = (FRAME_STACK, camera)
-                sample.set(key, random_shift(sample.get(key), self.shift_pad, channels_last=True))
-        return sample
+        return self.buffer.sample()
 
     def loss(self) -> torch.Tensor:
         """The weighted auxiliary loss on one :meth:`minibatch` (with gradients to the encoder

@@ -4,12 +4,11 @@ The same pieces as ``lerobot-train --policy.type=oasis``: LeRobot's ``make_polic
 from the dataset), the plugin's processors (resize and normalisation), ``policy.forward`` as
 the loss and the policy's AdamW preset. What differs: the dataset is decoded once into memory
 (:class:`~oasis_torchrl.train.bc_data.InMemoryBCDataset`; ``dataset.cache=false`` streams
-from the videos like ``lerobot-train``), optional random-shift and mirror augmentation
-(:mod:`~oasis_torchrl.train.shift`, :mod:`~oasis_torchrl.train.mirror`), TorchRL loggers,
-tqdm, and an evaluation in the env at the end. The output folder is a LeRobot policy folder
-(``save_pretrained`` weights, config and processors): it loads with
-``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``, and as a PPO warm start
-(``init_from``). Config: :class:`~oasis_torchrl.config.BCConfig`.
+from the videos like ``lerobot-train``), random-shift augmentation
+(:mod:`~oasis_torchrl.train.shift`), TorchRL loggers, tqdm, and an evaluation in the env at the
+end. The output folder is a LeRobot policy folder (``save_pretrained`` weights, config and
+processors): it loads with ``OasisPolicy.from_pretrained``, in ``lerobot-train --policy.path``,
+and as a PPO warm start (``init_from``). Config: :class:`~oasis_torchrl.config.BCConfig`.
 """
 
 from __future__ import annotations
@@ -22,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from lerobot.utils.constants import ACTION, OBS_STATE
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader
 from torchrl.record.loggers import get_logger
@@ -34,7 +32,6 @@ from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
-from oasis_torchrl.train.mirror import Mirror
 from oasis_torchrl.train.shift import random_shift
 
 logger = logging.getLogger(__name__)
@@ -142,15 +139,12 @@ class BCTrainer:
         self.optimizer = self.policy_config.get_optimizer_preset().build(
             list(self.policy.get_optim_params())
         )
-        schedule = self.policy_config.get_scheduler_preset()
-        self.scheduler = schedule.build(self.optimizer, cfg.train.steps) if schedule else None
         self.logger = get_logger(
             cfg.logger.backend,
             logger_name=str(self.output_dir / "logs"),
             experiment_name=cfg.logger.exp_name,
         )
         self.image_keys = [key for key in self.policy_config.image_features]
-        self.mirror = self._mirror(dataset.meta.features) if cfg.train.mirror else None
 
     def run(self) -> BCResult:
         """Train ``train.steps`` steps, save the policy folder, evaluate if configured."""
@@ -172,8 +166,7 @@ class BCTrainer:
             range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress
         ) as bar:
             for step in bar:
-                raw = next(batches)
-                batch = self._preprocessed(self.mirror(raw) if self.mirror else raw)
+                batch = self._preprocessed(next(batches))
                 if self.shift_in_loop is not None:
                     for key in self.image_keys:
                         batch[key] = self.shift_in_loop(batch[key])
@@ -182,31 +175,17 @@ class BCTrainer:
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)
                 self.optimizer.step()
-                if self.scheduler is not None:
-                    self.scheduler.step()
                 value = loss.item()
                 average = value if step == 1 else 0.98 * average + 0.02 * value
                 if step % cfg.log_every == 0 or step == cfg.steps:
                     self.logger.log_scalar("bc/loss", value, step=step)
                     self.logger.log_scalar("bc/grad_norm", float(grad_norm), step=step)
-                    lr = self.optimizer.param_groups[0]["lr"]
-                    self.logger.log_scalar("bc/lr", lr, step=step)
                     if "aux_loss" in info:
                         self.logger.log_scalar("bc/aux_loss", info["aux_loss"], step=step)
                     bar.set_postfix(loss=f"{average:.4f}")
                 if cfg.save_every and step % cfg.save_every == 0:
                     self.save(self.output_dir / "policy")
         return average
-
-    def _mirror(self, features: dict[str, Any]) -> Mirror:
-        privileged = features.get(PRIVILEGED_KEY)
-        names = privileged["names"] if privileged else None
-        return Mirror(
-            self.image_keys,
-            names,
-            share=self.cfg.train.mirror,
-            steering_keys=(ACTION, OBS_STATE),
-        )
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:
         """The batch through the policy's preprocessor, the privileged state kept beside it

@@ -1,6 +1,9 @@
 """The comparison a person reads at the end of a run: each evaluated policy's mean distance
 (with its standard error over episodes), collision rate, and ratios to the autopilot and to the
-best constant action, as a text table and as a matplotlib PNG.
+best constant action, as a text table and as a matplotlib PNG. Evaluations on an endpoint that
+sends frames only (``ground_truth: false``: no distance) are compared by their mean return
+under the reference's depth-collision reward instead, and their collisions are the reward's
+likely-collision terminations.
 
 Evaluations are :func:`oasis_torchrl.train.evaluate.EvalReport.to_dict` dicts (aggregates and
 ``per_episode`` results), keyed by policy name.
@@ -37,17 +40,35 @@ class PolicyRow:
     vs_autopilot: float | None = None
     vs_constant: float | None = None
     kind: str = "learned"
+    unit: str = "m"
+    """What ``mean_distance`` holds: metres, or ``return`` (frames only: the mean return)."""
 
 
-def distance_stderr(evaluation: Mapping[str, Any]) -> float:
-    """Standard error of the mean distance over the evaluation's episodes (NaN for fewer than
-    two).
+FRAMES_ONLY_UNIT = "return"
+
+
+def compared_value(evaluation: Mapping[str, Any]) -> tuple[str, str]:
+    """The per-episode key an evaluation is compared by and its unit: the distance, or on
+    frames alone (no ground truth) the return.
+
+    Example:
+        >>> compared_value({"ground_truth": False})
+        ('episode_return', 'return')
+    """
+    if evaluation.get("ground_truth", True):
+        return "distance", "m"
+    return "episode_return", FRAMES_ONLY_UNIT
+
+
+def distance_stderr(evaluation: Mapping[str, Any], key: str = "distance") -> float:
+    """Standard error of the mean distance (or another per-episode ``key``) over the
+    evaluation's episodes (NaN for fewer than two).
 
     Example:
         >>> distance_stderr({"per_episode": [{"distance": 10.0}, {"distance": 30.0}]})
         10.0
     """
-    distances = [episode["distance"] for episode in evaluation.get("per_episode", [])]
+    distances = [episode[key] for episode in evaluation.get("per_episode", [])]
     if len(distances) < 2:
         return math.nan
     mean = sum(distances) / len(distances)
@@ -78,18 +99,20 @@ def comparison(
     best = max((evaluations[name]["mean_distance"] for name in present), default=None)
     rows = []
     for name, evaluation in evaluations.items():
-        distance = evaluation["mean_distance"]
+        key, unit = compared_value(evaluation)
+        distance = evaluation["mean_distance" if unit == "m" else "mean_return"]
         kind = "autopilot" if name == autopilot else "constant" if name in present else "learned"
         rows.append(
             PolicyRow(
                 name,
                 distance,
-                distance_stderr(evaluation),
+                distance_stderr(evaluation, key),
                 evaluation["collision_rate"],
                 int(evaluation["episodes"]),
-                None if not expert else distance / expert,
-                None if not best else distance / best,
+                None if not expert or unit != "m" else distance / expert,
+                None if not best or unit != "m" else distance / best,
                 kind,
+                unit,
             )
         )
     return rows
@@ -103,11 +126,13 @@ def format_table(rows: Sequence[PolicyRow]) -> str:
         policy  mean distance   collision rate  vs autopilot  vs best constant
         bc      240.0 ± 12.5 m  0.25 (4/16)              80%             1.60x
     """
-    header = ("policy", "mean distance", "collision rate", "vs autopilot", "vs best constant")
+    frames_only = any(row.unit == FRAMES_ONLY_UNIT for row in rows)
+    measure = "mean return (frames only)" if frames_only else "mean distance"
+    header = ("policy", measure, "collision rate", "vs autopilot", "vs best constant")
     lines = [
         (
             row.name,
-            f"{row.mean_distance:.1f} ± {row.distance_stderr:.1f} m",
+            f"{row.mean_distance:.1f} ± {row.distance_stderr:.1f} {row.unit}",
             f"{row.collision_rate:.2f} ({round(row.collision_rate * row.episodes)}/{row.episodes})",
             "" if row.vs_autopilot is None else f"{row.vs_autopilot:.0%}",
             "" if row.vs_constant is None else f"{row.vs_constant:.2f}x",
@@ -150,14 +175,20 @@ def plot_comparison(rows: Sequence[PolicyRow], path: str | Path, title: str) -> 
     )
     for position, row in zip(positions, rows, strict=True):
         axes.annotate(
-            f" {row.mean_distance:.0f} m, collisions {row.collision_rate:.0%}",
+            f" {row.mean_distance:.1f} {row.unit}, collisions {row.collision_rate:.0%}",
             (row.mean_distance + (row.distance_stderr if row.distance_stderr > 0 else 0), position),
             va="center",
             fontsize=9,
         )
     axes.set_yticks(positions, [row.name for row in rows])
-    axes.set_xlabel("mean distance before collision (m), ± standard error")
-    axes.set_xlim(0, 1.35 * max((row.mean_distance for row in rows), default=1.0))
+    frames_only = any(row.unit == FRAMES_ONLY_UNIT for row in rows)
+    axes.set_xlabel(
+        "mean return, reference reward (frames only), ± standard error"
+        if frames_only
+        else "mean distance before collision (m), ± standard error"
+    )
+    values = [row.mean_distance for row in rows]
+    axes.set_xlim(1.35 * min([0.0, *values]), 1.35 * max([0.0, *values]) or 1.0)
     axes.set_title(title)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

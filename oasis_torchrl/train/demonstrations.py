@@ -14,8 +14,12 @@ reaches, e.g. an obstacle seen late at full speed, with what the expert would do
 same ``learner`` argument records late-reacting drives before any clone exists
 (:class:`~oasis_torchrl.drivers.late_reaction.LateReactionAutopilot`, ``record.late_reaction``).
 
+With a ``labeller`` (a saved or served policy, or any driver that needs no expert) it labels in
+the autopilot's place: what an endpoint that sends frames only (the hosted service) allows.
+
 Episodes are written through :class:`~oasis_torchrl.data.LeRobotRecorder`, one row per frame,
-with each frame's privileged state (the target of behaviour cloning's auxiliary loss).
+with each frame's privileged state (the target of behaviour cloning's auxiliary loss) where the
+endpoint sends it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,6 @@ from tqdm import tqdm
 
 from oasis_torchrl.drivers import Autopilot, Driver
 from oasis_torchrl.envs.factory import make_env
-from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
@@ -104,9 +107,10 @@ def record_demonstrations(
     seed: int,
     noise: ActionNoise,
     learner: Driver | None = None,
+    labeller: Driver | None = None,
     progress: bool = True,
 ) -> Path:
-    """Record ``episodes`` autopilot-labelled episodes at ``root`` (appended if it exists).
+    """Record ``episodes`` labelled episodes at ``root`` (appended if it exists).
 
     Args:
         env_cfg: the ``env`` config section (prompts, rows, episode length, sizes).
@@ -115,7 +119,9 @@ def record_demonstrations(
         seed: seeds the env's episodes and the noise.
         noise: the executed-action noise (all zeros records clean demonstrations).
         learner: a driver (run deterministically) whose actions are executed
-            instead of the autopilot's (DAgger); the labels stay the autopilot's.
+            instead of the labeller's (DAgger); the labels stay the labeller's.
+        labeller: the driver whose clean actions label every row (default: the autopilot, which
+            needs the embedded server's expert).
         progress: show a progress bar.
 
     Example:
@@ -128,15 +134,16 @@ def record_demonstrations(
     # Here rather than in each caller: a DAgger round may record into a reused dataset without
     # the main job's first recording having run; the writer keeps it quiet from then on.
     quiet_dataset_libraries()
-    frame_stack = POLICY_FRAMES if learner is None else learner.frame_stack
-    env = make_env(env_cfg, frame_stack=frame_stack, expert=True)
+    expert = Autopilot() if labeller is None else labeller
+    frame_stack = (learner or labeller or expert).frame_stack
+    env = make_env(env_cfg, frame_stack=frame_stack, expert=expert.needs_expert)
     env.set_seed(seed)
     rows = int(env.batch_size[0])
-    expert = Autopilot()
     process = NoiseProcess(noise, rows, seed)
     append = (Path(root) / "meta" / "info.json").exists()
+    privileged = bool(env.base_env.ground_truth)
     recorder = LeRobotRecorder(
-        root, max_episodes=episodes, keep_unfinished=False, append=append, privileged=True
+        root, max_episodes=episodes, keep_unfinished=False, append=append, privileged=privileged
     )
 
     def act(td: TensorDictBase) -> TensorDictBase:

@@ -8,6 +8,15 @@ episode ending *terminated* (the ground-truth collision, or the reward's termina
 return sums the rewards up to and including that step. With the same policy, prompts, seeds
 and server, the numbers are the same run after run.
 
+Every endpoint also gets what frames give: the return under the reference's depth-collision
+reward (the env's reward on frames alone, else scored beside it: :class:`ReferenceScore`), the
+episode length, the likely-collision terminations (that reward's) and the reference's progress
+term (the sum of its ``forward`` term). On an endpoint that sends frames only (the hosted
+service, a hosted-like server) there is no distance and no ground-truth collision, and the
+report says ``ground_truth: false``. Such an endpoint ignores seeds, so its
+episodes cannot be paired across policies: comparisons (:func:`difference`) then use the
+unpaired (Welch) standard error of the difference in mean return.
+
 The ``eval`` config section: ``prompts``, ``episodes`` (rows per prompt), ``seeds`` (one batch of
 episodes per seed), ``max_steps``, and optionally ``rerun`` (an ``.rrd`` path, ``spawn`` or a
 viewer URL) and ``lerobot`` (a dataset folder) to record the episodes.
@@ -18,14 +27,14 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
-from omegaconf import DictConfig
-from tensordict import NonTensorData, TensorDictBase
+from omegaconf import DictConfig, OmegaConf
+from tensordict import NonTensorData, TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 from tqdm import tqdm
 
@@ -34,12 +43,19 @@ from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
+from oasis_torchrl.rewards import DepthCollisionReward, NamedDepth
 from oasis_torchrl.train.driving import drive
+
+if TYPE_CHECKING:
+    from oasis_torchrl.viz import RolloutLogger
+    from oasis_torchrl.viz.side_by_side import SideBySide
 
 logger = logging.getLogger(__name__)
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 NEXT = "next"
+REFERENCE = "reference"
+"""Where :class:`ReferenceScore` puts the reference reward's entries of a step."""
 _PAIRED_KEYS = ("prompt", "episode_seed", "distance")
 
 
@@ -50,7 +66,7 @@ class EpisodeResult:
     Example:
         >>> EpisodeResult("urban", 7, distance=120.5, collided=True, episode_return=2.0, steps=60)
         EpisodeResult(prompt='urban', episode_seed=7, distance=120.5, collided=True, \
-episode_return=2.0, steps=60)
+episode_return=2.0, steps=60, progress=None, likely_collision=False, reference_return=None)
     """
 
     prompt: str
@@ -59,6 +75,12 @@ episode_return=2.0, steps=60)
     collided: bool
     episode_return: float
     steps: int
+    progress: float | None = None
+    """The reference reward's progress (its ``forward`` term) summed (None: not scored)."""
+    likely_collision: bool = False
+    """The reference reward terminated within the episode (a likely collision, from frames)."""
+    reference_return: float | None = None
+    """The return under the reference's depth-collision reward (None: not scored)."""
 
 
 @dataclass
@@ -73,6 +95,8 @@ class EvalReport:
     """
 
     episodes: list[EpisodeResult] = field(default_factory=list)
+    ground_truth: bool = True
+    """Whether the endpoint sent ground truth (distance, collisions) and honoured the seeds."""
 
     @property
     def mean_distance(self) -> float:
@@ -89,18 +113,55 @@ class EvalReport:
         """Mean episode return."""
         return _mean([episode.episode_return for episode in self.episodes])
 
+    @property
+    def mean_steps(self) -> float:
+        """Mean episode length, steps (chunks)."""
+        return _mean([float(episode.steps) for episode in self.episodes])
+
+    @property
+    def mean_progress(self) -> float | None:
+        """Mean of the reference reward's progress term (None under another reward)."""
+        progress = [episode.progress for episode in self.episodes]
+        return None if None in progress else _mean(progress)
+
+    @property
+    def mean_reference_return(self) -> float | None:
+        """Mean return under the reference's depth-collision reward (None: not scored)."""
+        values = [episode.reference_return for episode in self.episodes]
+        return None if None in values else _mean(values)
+
+    @property
+    def likely_collision_rate(self) -> float:
+        """Fraction of episodes the reward ended (the depth reward's likely collisions)."""
+        return _mean([float(episode.likely_collision) for episode in self.episodes])
+
     def summary(self) -> dict[str, float]:
-        """The aggregates (for loggers and progress bars)."""
+        """The aggregates (for loggers and progress bars; ``mean_progress`` under the
+        reference reward only)."""
+        progress, reference = self.mean_progress, self.mean_reference_return
         return {
             "mean_distance": self.mean_distance,
             "collision_rate": self.collision_rate,
             "mean_return": self.mean_return,
+            "mean_steps": self.mean_steps,
+            **({} if reference is None else {"mean_reference_return": reference}),
+            **({} if progress is None else {"mean_progress": progress}),
+            "likely_collision_rate": self.likely_collision_rate,
             "episodes": float(len(self.episodes)),
         }
 
     def to_dict(self, **extra: Any) -> dict[str, Any]:
-        """``extra`` items, the aggregates and every episode, JSON-ready."""
-        return {**extra, **self.summary(), "per_episode": [asdict(e) for e in self.episodes]}
+        """``extra`` items, the aggregates and every episode, JSON-ready; a frames-only report
+        says what its figures are."""
+        labels = {"ground_truth": self.ground_truth}
+        if not self.ground_truth:
+            labels["note"] = FRAMES_ONLY_NOTE
+        return {
+            **extra,
+            **labels,
+            **self.summary(),
+            "per_episode": [asdict(e) for e in self.episodes],
+        }
 
     def write_json(self, path: str | Path, **extra: Any) -> Path:
         """Write :meth:`to_dict` as JSON."""
@@ -108,6 +169,64 @@ class EvalReport:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.to_dict(**extra), indent=2))
         return path
+
+
+FRAMES_ONLY_NOTE = (
+    "frames only: no ground-truth distance or collisions (collision_rate counts the reward's "
+    "likely-collision terminations); the endpoint ignores seeds, so episodes are not paired"
+)
+
+
+def difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, Any]:
+    """``treated - baseline`` (two :meth:`EvalReport.to_dict` results): the paired distance
+    difference where both had ground truth and seeds, else the unpaired (Welch) difference in
+    mean return (a frames-only endpoint ignores seeds, so no episode pairs with another).
+
+    Example:
+        >>> def report(*returns):
+        ...     runs = [EpisodeResult("urban", 0, math.nan, False, r, 9) for r in returns]
+        ...     return EvalReport(runs, ground_truth=False).to_dict()
+        >>> gain = difference(report(3.0, 5.0), report(1.0, 2.0, 3.0))
+        >>> gain["mean"], round(gain["stderr"], 3), gain["metric"], gain["paired"]
+        (2.0, 1.155, 'episode_return', False)
+    """
+    if treated.get("ground_truth", True) and baseline.get("ground_truth", True):
+        return {**paired_difference(treated, baseline), "metric": "distance", "paired": True}
+    return {
+        **unpaired_difference(treated, baseline, "episode_return"),
+        "metric": "episode_return",
+        "paired": False,
+    }
+
+
+def unpaired_difference(
+    treated: dict[str, Any], baseline: dict[str, Any], key: str
+) -> dict[str, float]:
+    """Difference in the mean of episode ``key`` and its Welch standard error
+    ``sqrt(s1^2/n1 + s2^2/n2)``: no pairing of episodes assumed.
+
+    Example:
+        >>> def report(*values):
+        ...     return {"per_episode": [{"episode_return": v} for v in values]}
+        >>> unpaired_difference(report(2.0, 4.0), report(1.0, 1.0), "episode_return")
+        {'mean': 2.0, 'stderr': 1.0, 'episodes': 4.0}
+    """
+    groups = [[float(e[key]) for e in report["per_episode"]] for report in (treated, baseline)]
+    if min(len(values) for values in groups) < 2:
+        raise ValueError(
+            f"an unpaired difference needs at least 2 episodes on each side, got "
+            f"{len(groups[0])} and {len(groups[1])}"
+        )
+    means = [sum(values) / len(values) for values in groups]
+    variances = [
+        sum((v - mean) ** 2 for v in values) / (len(values) - 1) / len(values)
+        for values, mean in zip(groups, means, strict=True)
+    ]
+    return {
+        "mean": means[0] - means[1],
+        "stderr": math.sqrt(sum(variances)),
+        "episodes": float(len(groups[0]) + len(groups[1])),
+    }
 
 
 def paired_difference(treated: dict[str, Any], baseline: dict[str, Any]) -> dict[str, float]:
@@ -192,15 +311,16 @@ def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float)
     if kept is None:
         return True
     if not margin:
-        return candidate["mean_distance"] > kept["mean_distance"]
+        key = "mean_distance" if kept.get("ground_truth", True) else "mean_return"
+        return candidate[key] > kept[key]
     if len(kept["per_episode"]) < 2:
         raise ValueError(
             f"a selection margin ({margin} standard errors) needs at least 2 evaluation "
             f"episodes on the selection seeds, got {len(kept['per_episode'])}: raise "
             "eval.episodes or set eval.selection_margin=0"
         )
-    difference = paired_difference(candidate, kept)
-    return difference["mean"] > margin * difference["stderr"]
+    gain = difference(candidate, kept)
+    return gain["mean"] > margin * gain["stderr"]
 
 
 def _mean(values: Sequence[float]) -> float:
@@ -280,6 +400,9 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     reward = rollout.get((NEXT, "reward")).reshape(rollout.batch_size).cpu()
     returns = (reward * within).sum(1)
     collided = rollout.get((NEXT, "terminated")).reshape(rollout.batch_size).cpu()[rows, end]
+    reference, progress, likely = _reference_sums(rollout, within)
+    if likely is None:  # nothing scored the reference: the env's terminations are all there is
+        likely = collided.clone()
     truth = rollout.get((NEXT, "truth"), None)
     if truth is not None:
         distance = truth.get("distance")[rows, end, -1].cpu()
@@ -287,19 +410,89 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
     else:
         distance = torch.full((done.shape[0],), math.nan)
     seeds = rollout.get("episode_seed")[:, 0].reshape(-1).tolist()
+    rows_of = zip(
+        _row_prompts(rollout),
+        seeds,
+        distance,
+        collided,
+        returns,
+        end,
+        [None] * len(seeds) if progress is None else progress.tolist(),
+        likely,
+        [None] * len(seeds) if reference is None else reference.tolist(),
+        strict=True,
+    )
     return [
-        EpisodeResult(prompt, int(seed), float(dist), bool(hit), float(ret), int(last) + 1)
-        for prompt, seed, dist, hit, ret, last in zip(
-            _row_prompts(rollout), seeds, distance, collided, returns, end, strict=True
+        EpisodeResult(
+            prompt,
+            int(seed),
+            float(dist),
+            bool(hit),
+            float(ret),
+            int(last) + 1,
+            gone,
+            bool(ended),
+            score,
         )
+        for prompt, seed, dist, hit, ret, last, gone, ended, score in rows_of
     ]
+
+
+def _reference_sums(
+    rollout: TensorDictBase, within: torch.Tensor
+) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+    """Per row: the reference reward's return, its progress term and whether it terminated
+    within the episode, from :class:`ReferenceScore`'s entries or, where the env's reward is the
+    reference, from the env's own; all None when neither is there."""
+    scored = rollout.get((NEXT, REFERENCE), None)
+    forward_key = "forward" if scored is not None else ("reward_terms", "forward")
+    scored = rollout.get(NEXT) if scored is None else scored
+    forward = scored.get(forward_key, None)
+    if forward is None:
+        return None, None, None
+    shape = rollout.batch_size
+    reference = (scored.get("reward").reshape(shape).cpu() * within).sum(1)
+    progress = (forward.reshape(shape).cpu() * within).sum(1)
+    likely = (scored.get("terminated").reshape(shape).cpu() & within).any(1)
+    return reference, progress, likely
+
+
+class ReferenceScore:
+    """The reference's depth-collision reward scored beside an env whose own reward is another
+    (the ground-truth reward): every step gets ``("next", "reference", <reward | terminated |
+    forward>)``, so an evaluation reports what frames give on every endpoint.
+
+    Example:
+        >>> score = ReferenceScore("small")
+        >>> score.reward.terms[0]
+        'forward'
+    """
+
+    def __init__(self, depth_model: str) -> None:
+        self.reward = DepthCollisionReward(NamedDepth(depth_model))
+
+    def on_reset(self, td: TensorDictBase) -> None:
+        """New episodes on every row: the reference's heading restarts."""
+        self.reward.reset(torch.ones(int(td.batch_size[0]), dtype=torch.bool))
+
+    def on_step(self, td: TensorDictBase) -> None:
+        """Score the step (``td`` holds the action and ``"next"``) into ``("next", REFERENCE)``."""
+        step = td.get(NEXT)
+        scored = self.reward(step.clone(False).set("action", td.get("action")))
+        entries = {
+            "reward": scored.get("reward").float(),
+            "terminated": scored.get("terminated"),
+            "forward": scored.get(("reward_terms", "forward")).float(),
+        }
+        step.set(REFERENCE, TensorDict(entries, batch_size=step.batch_size))
 
 
 class EpisodeRecorders:
     """Where evaluation episodes go besides the metrics: rerun and/or a LeRobot dataset.
 
     Args:
-        rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra).
+        rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra), or a
+            logger of a side-by-side recording (:mod:`oasis_torchrl.viz.side_by_side`).
         lerobot: a dataset folder; episodes are appended (one row per frame at 20 fps).
         scenes: the top-down view's scene source (``env.scene_source()``; None: car and path).
 
@@ -310,21 +503,31 @@ class EpisodeRecorders:
 
     def __init__(
         self,
-        rerun: str | None = None,
+        rerun: str | RolloutLogger | None = None,
         lerobot: str | Path | None = None,
         scenes: SceneLookup | None = None,
     ) -> None:
         self.rerun = None
         self.lerobot = None
-        if rerun:
+        if isinstance(rerun, str) and rerun:
             from oasis_torchrl.viz import RolloutLogger
 
             self.rerun = RolloutLogger(rerun, scenes=scenes)
+        elif rerun:
+            self.rerun = rerun
+            if rerun.scenes is None:
+                rerun.scenes = scenes
         if lerobot:
             from oasis_torchrl.data import LeRobotRecorder
 
             root = Path(lerobot)
             self.lerobot = LeRobotRecorder(root, append=(root / "meta").exists())
+
+    def align(self, tick: int) -> None:
+        """Start the next batch of episodes at ``tick`` of the recording (so the same batch
+        starts at the same frame in every policy's recording)."""
+        if self.rerun is not None:
+            self.rerun.align(tick)
 
     def on_reset(self, td: TensorDictBase) -> None:
         """Log the reset observations."""
@@ -361,6 +564,8 @@ class Evaluator:
         expert: run the embedded server's expert (for a policy that drives with it, see
             :attr:`~oasis_torchrl.drivers.Driver.needs_expert`).
         progress: show a progress bar per evaluation.
+        rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s (a
+            policy's logger of a side-by-side recording).
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
@@ -381,11 +586,13 @@ class Evaluator:
         frame_stack: int = POLICY_FRAMES,
         expert: bool = False,
         progress: bool = True,
+        rerun_logger: RolloutLogger | None = None,
     ) -> None:
         if eval_cfg.episodes < 1 or not eval_cfg.seeds or not eval_cfg.prompts:
             raise ValueError("eval needs episodes >= 1 and at least one prompt and one seed")
         self.cfg = eval_cfg
         self.progress = progress
+        self._batches = 0
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
         self.env = make_env(
             env_cfg,
@@ -394,17 +601,32 @@ class Evaluator:
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
             # Recorders keep every frame; the metrics and the policies need the last alone.
-            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot")),
+            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger),
             frame_stack=frame_stack,
             expert=expert,
         )
         self.recorders = EpisodeRecorders(
-            eval_cfg.get("rerun"), eval_cfg.get("lerobot"), scenes=self.env.scene_source()
+            rerun_logger or eval_cfg.get("rerun"),
+            eval_cfg.get("lerobot"),
+            scenes=self.env.scene_source(),
         )
+        scored = isinstance(self.env.base_env.reward_module, DepthCollisionReward)
+        self.reference = None if scored else ReferenceScore(env_cfg.reward.depth_model)
+        if rerun_logger is not None and self.frames_only:
+            logger.warning(
+                "policies side by side on a frames-only endpoint: it ignores seeds, so each "
+                "policy drives other scenes (recorded all the same)"
+            )
 
     @classmethod
     def for_driver(
-        cls, env_cfg: DictConfig, eval_cfg: DictConfig, driver: Driver, *, progress: bool = True
+        cls,
+        env_cfg: DictConfig,
+        eval_cfg: DictConfig,
+        driver: Driver,
+        *,
+        progress: bool = True,
+        rerun_logger: RolloutLogger | None = None,
     ) -> Evaluator:
         """An evaluator whose env serves what ``driver`` reads: its image size, its frame
         stack and, if it drives with it, the embedded server's expert.
@@ -425,30 +647,41 @@ class Evaluator:
             frame_stack=driver.frame_stack,
             expert=driver.needs_expert,
             progress=progress,
+            rerun_logger=rerun_logger,
         )
 
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
         """Run one batch of episodes per seed (``seeds``, default ``eval.seeds``); the report
         holds all of them."""
-        report = EvalReport()
+        report = EvalReport(ground_truth=bool(self.env.base_env.ground_truth))
         seeds = [int(seed) for seed in (self.cfg.seeds if seeds is None else seeds)]
         if not seeds:
             raise ValueError("evaluate needs at least one seed")
         steps = len(seeds) * self.cfg.max_steps
         with tqdm(total=steps, desc="evaluating", unit="step", disable=not self.progress) as bar:
 
+            def on_reset(td: TensorDictBase) -> None:
+                if self.reference is not None:
+                    self.reference.on_reset(td)
+                self.recorders.on_reset(td)
+
             def on_step(td: TensorDictBase) -> None:
+                if self.reference is not None:
+                    self.reference.on_step(td)
                 self.recorders.on_step(td)
                 bar.update()
 
             for index, seed in enumerate(seeds):
+                # Each batch of episodes gets a reset's tick and max_steps ticks of the recording.
+                self.recorders.align(self._batches * (self.cfg.max_steps + 1))
+                self._batches += 1
                 self.env.set_seed(seed)
                 rollout = rollout_episodes(
                     self.env,
                     policy,
                     self.cfg.max_steps,
                     keep_pixels=self.recorders.lerobot is not None,
-                    on_reset=self.recorders.on_reset,
+                    on_reset=on_reset,
                     on_step=on_step,
                 )
                 results = episode_results(rollout)
@@ -457,6 +690,12 @@ class Evaluator:
                 bar.update((index + 1) * self.cfg.max_steps - bar.n)
                 bar.set_postfix(distance=f"{report.mean_distance:.1f}")
         return report
+
+    @property
+    def frames_only(self) -> bool:
+        """Whether the endpoint sends frames alone (no ground truth), as the hosted service
+        does, which ignores seeds: its episodes of one seed are not the same scene twice."""
+        return self.env.observation_spec.get("truth", None) is None
 
     def close(self) -> None:
         """Close the recorders and the env."""
@@ -470,3 +709,69 @@ class Evaluator:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def side_by_side_for(eval_cfg: DictConfig, policies: Mapping[str, str]) -> SideBySide | None:
+    """The side-by-side recording (``eval.rerun``) of an evaluation of named policy specs: the
+    last policy's and those whose spec is in ``eval.compare``, each under the first name of its
+    spec; None when ``eval.rerun`` is unset or that is one policy (recorded alone, as usual).
+
+    Example:
+        >>> from oasis_torchrl.config import load_config
+        >>> cfg = load_config("eval", ["compare=[autopilot]"])
+        >>> side_by_side_for(cfg, {"autopilot": "autopilot", "bc": "out/bc"}) is None  # no rerun
+        True
+    """
+    from oasis_torchrl.viz.side_by_side import SideBySide
+
+    specs = list(policies.values())
+    wanted = {str(spec) for spec in eval_cfg.get("compare", [])} | set(specs[-1:])
+    firsts = {spec: name for name, spec in reversed(list(policies.items()))}
+    names = [name for spec, name in firsts.items() if spec in wanted][::-1]
+    if not eval_cfg.get("rerun") or len(names) < 2:
+        return None
+    return SideBySide(eval_cfg.rerun, names, threshold=eval_cfg.divergence)
+
+
+def evaluate_side_by_side(
+    env_cfg: DictConfig,
+    eval_cfg: DictConfig,
+    drivers: Mapping[str, Driver],
+    *,
+    progress: bool = True,
+) -> dict[str, EvalReport]:
+    """Evaluate each named driver on the same prompts and seeds, recording them side by side
+    into ``eval.rerun`` (:class:`~oasis_torchrl.viz.side_by_side.SideBySide`; the first step
+    where a policy's actions leave the first policy's by more than ``eval.divergence`` is an
+    event).
+
+    Example:
+        >>> from oasis_torchrl.drivers import load_driver
+        >>> from oasis_torchrl.config import load_config
+        >>> import tempfile
+        >>> cfg = load_config("eval", ["episodes=1", "max_steps=2",
+        ...                            f"rerun={tempfile.mkdtemp()}/pair.rrd"])
+        >>> drivers = {name: load_driver(name) for name in ("autopilot", "constant:throttle=1")}
+        >>> reports = evaluate_side_by_side(cfg.env, cfg, drivers, progress=False)
+        >>> sorted(reports)
+        ['autopilot', 'constant:throttle=1']
+    """
+    from oasis_torchrl.viz.side_by_side import SideBySide
+
+    # The others are compared, not evaluated for their own records (no LeRobot episodes).
+    plain = OmegaConf.merge(eval_cfg, {"rerun": None, "lerobot": None})
+    recording = SideBySide(eval_cfg.rerun, list(drivers), threshold=eval_cfg.divergence)
+    reports = {}
+    try:
+        for index, (name, driver) in enumerate(drivers.items()):
+            with Evaluator.for_driver(
+                env_cfg,
+                plain if index else eval_cfg,
+                driver,
+                progress=progress,
+                rerun_logger=recording.logger(name),
+            ) as evaluator:
+                reports[name] = evaluator.evaluate(driver)
+    finally:
+        recording.close()
+    return reports

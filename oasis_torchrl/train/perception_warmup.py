@@ -1,12 +1,9 @@
 """Perception before PPO: the encoder fitted to the privileged state of the run's first env steps.
 
 Why: PPO from scratch on the cameras learns to see and to act at once, and its encoders never
-learn to read the obstacle in the car's own lane (R^2 -0.01 to 0.25 on their own drives,
-``benchmarks/perception.py --own-drives``), the one number a lane change hangs on; handed the
-privileged state, the same PPO passes 1.5x the best constant within 102,400 env steps
-(``benchmarks/state_ppo.py``). Started from an encoder fitted first to the autopilot's drives
-(``benchmarks/perception_data.py --ppo-checkpoint``, env steps no budget counts), camera PPO drove
-1.59x within 61,440 (BENCHMARKS.md, "PPO from scratch").
+learn to read the obstacle in the car's own lane, the one number a lane change hangs on; handed
+the privileged state, or started from an encoder fitted first to the autopilot's drives, the
+same PPO drives much farther (docs/experiments/2026-11-28-ppo-from-scratch.md).
 
 How: the first ``warmup.frames`` env steps are driven, by the initial policy or by a named driver
 that needs no expert (``warmup.driver``), and counted in ``collector.total_frames``; their
@@ -15,14 +12,8 @@ observations and privileged state go into a ring
 take ``warmup.steps`` minibatches of the auxiliary loss alone, with an Adam of their own. Then PPO
 starts, its actor and critic fresh on features that already see (its learning rates anneal over
 the whole budget, the warm-up's env steps included). No demonstration: only the simulator's
-privileged state is a label.
-
-Measured (20,480 env steps of warm-up; BENCHMARKS.md, "PPO from scratch"): driven by the initial
-policy, whose episodes end after 40-50 m, 1.18x the best constant within 102,400 env steps, like
-runs without it; driven by the best constant action (``constant:throttle=1.0,steering=0.0``:
-blind to obstacles, about 200 m an episode), 1.42x on two seeds, 51-57 m farther than the same
-seeds without it, the first PPO policies from scratch that brake for obstacles, but level with
-them on other urban seeds and prompts. So ``warmup.frames`` defaults to 0 (off).
+privileged state is a label. Off by default; the ``ppo_scratch`` preset turns it on, driven by
+the best constant action (docs/experiments/2026-11-28-ppo-from-scratch.md).
 """
 
 from __future__ import annotations
@@ -45,7 +36,6 @@ class PerceptionWarmup:
         capacity: rows kept (the oldest are overwritten): the warm-up's env steps.
         mini_batch_size: rows per minibatch.
         lr: Adam's learning rate for the warm-up.
-        shift_pad: each minibatch row's frames shifted by up to this many pixels (0: none).
 
     Example:
         >>> from tensordict import TensorDict
@@ -62,14 +52,9 @@ class PerceptionWarmup:
     """
 
     def __init__(
-        self,
-        loss: DrivingPPOLoss,
-        capacity: int,
-        mini_batch_size: int,
-        lr: float,
-        shift_pad: int = 0,
+        self, loss: DrivingPPOLoss, capacity: int, mini_batch_size: int, lr: float
     ) -> None:
-        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size, shift_pad=shift_pad)
+        self.replay = AuxiliaryReplay(loss, capacity, mini_batch_size)
         net = loss.net
         parameters = [*net.encoder.parameters(), *net.aux.parameters()]
         self.optimizer = torch.optim.Adam(parameters, lr=lr)

@@ -5,13 +5,20 @@
 2. ``bc``: behaviour cloning on it (the ``bc`` stage settings,
    :class:`~oasis_torchrl.config.BCSettings`),
    then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
-   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all
-   (or, with ``dagger.from_scratch``, a fresh clone is trained on it all);
+   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
    :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
 4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
    prompts and seeds; the fine-tuned policy's episodes go to rerun (``eval.rerun``, by default
    ``<output_dir>/eval.rrd``) and to a LeRobot dataset if ``eval.lerobot`` is set.
+
+On an endpoint that sends frames only (the hosted service, a hosted-like server) there is no
+autopilot: the demonstrations come from ``record.source`` (a saved or served policy, a LeRobot
+dataset of a person's drives, or a folder of recordings in the reference format, imported), the
+DAgger rounds are labelled by ``dagger.labeller`` (by default the demonstrating policy; none
+after a dataset), behaviour cloning has no auxiliary loss, PPO a camera-only critic and the
+depth-collision reward, and the comparison reports returns (:class:`Demonstrators`). Without a
+source it stops at once, saying what to pass.
 
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
@@ -37,11 +44,13 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
-from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
+from oasis_torchrl.config.env import AUTO
+from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, Driver, load_driver
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
+from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator, side_by_side_for
 
 logger = logging.getLogger(__name__)
 
@@ -119,13 +128,75 @@ def timed_stage(seconds: dict[str, float], stage: str) -> Iterator[None]:
     seconds[stage] = round(time.perf_counter() - started, 1)
 
 
+@dataclass(frozen=True)
+class Demonstrators:
+    """Who demonstrates and who labels the DAgger rounds, for what the endpoint sends.
+
+    Example:
+        >>> Demonstrators.of(load_config("demo"))
+        Demonstrators(source='autopilot', labeller='autopilot', ground_truth=True)
+        >>> Demonstrators.of(load_config("demo", ["env.server.hosted=true"]))
+        Traceback (most recent call last):
+        ...
+        ValueError: the demonstrations need a source: the hosted-like embedded server sends ...
+    """
+
+    source: str
+    """A driver spec (recorded from), a LeRobot dataset folder or a recordings folder."""
+    labeller: str | None
+    """The DAgger rounds' labeller (a driver spec); None: no rounds."""
+    ground_truth: bool
+
+    @classmethod
+    def of(cls, cfg: DictConfig) -> Demonstrators:
+        """Resolve ``record.source`` and ``dagger.labeller`` (``auto``: the autopilot where the
+        endpoint sends ground truth; elsewhere the source must be given)."""
+        found = env_capabilities(cfg.env)
+        source, labeller = str(cfg.record.source), str(cfg.dagger.labeller)
+        if source == AUTO and found.frames_only:
+            raise ValueError(
+                f"the demonstrations need a source: {found.endpoint} sends frames only (no "
+                "autopilot); pass record.source=<a policy folder, checkpoint or "
+                "grpc://host:port>, or a LeRobot dataset of a person's drives (lerobot-record "
+                "with the keyboard teleoperators), or a folder of recordings in the reference "
+                "format (episode_*/manifest.jsonl)"
+            )
+        source = AUTOPILOT if source == AUTO else source
+        recorded = _is_dataset(source) or _is_recordings(source)
+        if labeller == AUTO:
+            labeller = AUTOPILOT if found.ground_truth else None if recorded else source
+        for name, spec in (("record.source", source), ("dagger.labeller", labeller)):
+            if spec == AUTOPILOT:
+                found.require(f"{name}=autopilot", f"pass a policy or a person's drives as {name}")
+        return cls(source, labeller, found.ground_truth)
+
+    def driver(self) -> Driver | None:
+        """The demonstrating driver (None: the autopilot, or demonstrations already recorded)."""
+        if self.source == AUTOPILOT or _is_dataset(self.source) or _is_recordings(self.source):
+            return None
+        return load_driver(self.source)
+
+
+def _is_dataset(source: str) -> bool:
+    return (Path(source) / "meta" / "info.json").is_file()
+
+
+def _is_recordings(source: str) -> bool:
+    return any(Path(source).glob("episode_*/manifest.jsonl"))
+
+
 def demonstrations(cfg: DictConfig, root: Path) -> Path:
-    """Record ``cfg.record.episodes`` noisy-execution autopilot episodes into ``root`` (a
-    complete earlier recording is reused).
+    """The demonstrations: ``record.source``'s dataset, its recordings imported into ``root``,
+    or ``cfg.record.episodes`` noisy-execution episodes recorded into ``root`` (labelled by the
+    autopilot or the source policy; a complete earlier recording is reused).
 
     Example:
         >>> demonstrations(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
     """
+    who = Demonstrators.of(cfg)
+    if _is_dataset(who.source):
+        logger.info("demonstrations: the dataset %s", who.source)
+        return Path(who.source)
     info = root / "meta" / "info.json"
     if info.exists():
         episodes = json.loads(info.read_text())["total_episodes"]
@@ -135,32 +206,34 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
         raise FileExistsError(
             f"{root} holds {episodes} of {cfg.record.episodes} episodes; delete it"
         )
+    if _is_recordings(who.source):
+        from oasis_torchrl.data.importer import import_recordings
+
+        report = import_recordings(who.source, root, image_size=tuple(cfg.env.image_size))
+        logger.info("imported %d recordings from %s", len(report.imported), who.source)
+        return root
     reaction = cfg.record.late_reaction
+    late = reaction is not None and who.source == AUTOPILOT
     return record_demonstrations(
         cfg.env,
         root,
         episodes=cfg.record.episodes,
         seed=cfg.record.seed,
         noise=ActionNoise(**cfg.record.noise),
-        learner=None
-        if reaction is None
-        else LateReactionAutopilot(tuple(reaction), seed=cfg.record.seed),
+        learner=LateReactionAutopilot(tuple(reaction), seed=cfg.record.seed) if late else None,
+        labeller=who.driver(),
         progress=cfg.progress,
     )
 
 
 def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
     """The BC config of clone round ``round_`` (0: from scratch; k: DAgger round k, which
-    fine-tunes the previous clone unless ``dagger.from_scratch``).
+    fine-tunes the previous clone).
 
     Example:
         >>> bc = bc_config(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/x"), 1)
         >>> bc.output_dir, bc.init_from, bc.dataset.root, bc.train.steps
         ('/tmp/d/bc/round_1', '/tmp/d/bc/round_0/policy', '/tmp/d/x', 500)
-        >>> fresh = load_config("demo", ["output_dir=/tmp/d", "dagger.from_scratch=true"])
-        >>> bc = bc_config(fresh, Path("/tmp/d/x"), 1)
-        >>> bc.output_dir, bc.init_from, bc.train.steps
-        ('/tmp/d/bc/round_1', None, 1000)
     """
     values: dict[str, Any] = {
         "seed": cfg.seed + round_,
@@ -170,9 +243,11 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
         "eval": {"episodes": 0},
         "policy": {"image_size": list(cfg.env.image_size)},
     }
-    if round_ and not cfg.dagger.from_scratch:
+    if round_:
         values["init_from"] = str(previous_clone(cfg, round_))
         values["train"] = {"steps": cfg.dagger.steps}
+    if not env_capabilities(cfg.env).ground_truth:  # no privileged state in the demonstrations
+        values["policy"]["aux_weight"] = 0.0
     return OmegaConf.merge(load_config("bc"), _plain(cfg.bc), values)
 
 
@@ -235,8 +310,12 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
     """
     from oasis_torchrl.train.bc import train_bc
 
+    labeller = Demonstrators.of(cfg).labeller
+    rounds = cfg.dagger.rounds if labeller is not None else 0
+    if rounds < cfg.dagger.rounds:
+        logger.info("no DAgger rounds: demonstrations from a dataset have no labeller")
     policy = Path()
-    for round_ in range(cfg.dagger.rounds + 1):
+    for round_ in range(rounds + 1):
         bc_cfg = bc_config(cfg, dataset, round_)
         policy = Path(bc_cfg.output_dir) / "policy"
         if (policy / "model.safetensors").exists():
@@ -250,6 +329,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
                 seed=cfg.record.seed + 1000 * round_,
                 noise=ActionNoise(**cfg.dagger.noise),
                 learner=load_driver(str(previous_clone(cfg, round_))),
+                labeller=None if labeller == AUTOPILOT else load_driver(labeller),
                 progress=cfg.progress,
             )
         train_bc(bc_cfg)
@@ -260,7 +340,8 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     """Evaluate each named policy spec on the config's fixed prompts and seeds: the aggregates
     and every episode (:meth:`~oasis_torchrl.train.evaluate.EvalReport.to_dict`).
 
-    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``). A spec
+    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``), side by
+    side with those of the policies in ``eval.compare`` if any. A spec
     named twice is evaluated once: evaluations are deterministic, so a second run would repeat
     the first to the digit.
 
@@ -270,16 +351,24 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     """
     plain = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
     recorded = list(policies.values())[-1] if policies else None
+    side_by_side = side_by_side_for(cfg.eval, policies)
     reports: dict[str, EvalReport] = {}
     results = {}
     for name, spec in policies.items():
         if spec not in reports:
             driver = load_driver(spec)
             eval_cfg = cfg.eval if spec == recorded else plain
-            with Evaluator.for_driver(cfg.env, eval_cfg, driver, progress=cfg.progress) as run:
+            rerun_logger = None
+            if side_by_side is not None and name in side_by_side.roots:
+                rerun_logger = side_by_side.logger(name)
+            with Evaluator.for_driver(
+                cfg.env, eval_cfg, driver, progress=cfg.progress, rerun_logger=rerun_logger
+            ) as run:
                 reports[spec] = run.evaluate(driver)
         results[name] = reports[spec].to_dict()
         logger.info("%s: %s", name, reports[spec].summary())
+    if side_by_side is not None:
+        side_by_side.close()  # marks the divergences, then ends the file
     return results
 
 
@@ -344,6 +433,8 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
         # PPO's own final evaluation would repeat it.
         ppo = run_ppo(OmegaConf.merge(ppo_config(cfg, bc_policy), {"eval": {"final": False}}))
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
+    if not env_capabilities(cfg.env).ground_truth:  # the autopilot drives with ground truth
+        references.pop(AUTOPILOT, None)
     # A fine-tuning that kept its warm start left the clone: one evaluation serves both rows.
     fine_tuned = bc_policy if ppo.policy_frames == 0 else ppo.policy_dir
     policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(fine_tuned)}

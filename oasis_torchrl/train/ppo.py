@@ -1,8 +1,7 @@
 """PPO on :class:`~oasis_torchrl.envs.OasisEnv`, the TorchRL recipe.
 
 A :class:`~torchrl.collectors.Collector` steps the batched env with the stochastic actor (a
-distribution over the 4-action chunk, its noise drawn afresh every chunk or held over several:
-:mod:`oasis_torchrl.train.exploration`); :class:`~oasis_torchrl.train.ppo_update.PPOUpdate`
+distribution over the 4-action chunk); :class:`~oasis_torchrl.train.ppo_update.PPOUpdate`
 turns each batch into new weights (GAE advantages with the critic, then
 :class:`~torchrl.objectives.ClipPPOLoss` on both heads, the shared encoder run once per
 minibatch, for a few epochs of minibatches; optionally an auxiliary replay). Around that:
@@ -16,6 +15,7 @@ and the kept policy exported as a LeRobot policy folder. Config:
 
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from collections.abc import Iterator, Sequence
@@ -33,8 +33,10 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.config.training import AUX_COEFF
 from oasis_torchrl.drivers import DriverSpec
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
+from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
@@ -46,7 +48,6 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
-from oasis_torchrl.train.exploration import HeldNoisePolicy
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
 
@@ -71,8 +72,7 @@ class PPOResult:
 
 def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     """A fresh network from ``cfg.network``, or the ``cfg.init_from`` one with its scale reset
-    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's)
-    and its mixture's component logits multiplied by ``cfg.warm_start_sharpen``;
+    to ``cfg.warm_start_scale`` (one value or one per action number; null keeps the source's);
     with ``cfg.privileged_critic``, its critic also reads the env's ``"critic_inputs"``; with
     ``cfg.loss.aux_coeff``, an auxiliary head predicts them from the camera features.
 
@@ -87,14 +87,7 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         net = load_net(cfg.init_from)
         if cfg.warm_start_scale is not None:
             net.set_scale(OmegaConf.to_object(cfg.warm_start_scale))
-        if cfg.warm_start_sharpen != 1:
-            net.sharpen_components(cfg.warm_start_sharpen)
-        logger.info(
-            "warm start from %s (scale %s, component logits x%g)",
-            cfg.init_from,
-            cfg.warm_start_scale,
-            cfg.warm_start_sharpen,
-        )
+        logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
         config = {"cameras": cameras, "image_size": image_size, **network}
@@ -109,6 +102,27 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
             f"gives {cameras} at {image_size}: set env.image_size to the network's size"
         )
     return net
+
+
+def with_capabilities(cfg: DictConfig) -> DictConfig:
+    """A copy of ``cfg`` whose null ``privileged_critic`` and ``loss.aux_coeff`` are set from
+    what its endpoint sends (:mod:`~oasis_torchrl.envs.capabilities`): on with ground truth, off
+    on frames alone (explicit values are kept; on a frames-only endpoint
+    :func:`~oasis_torchrl.envs.make_env` refuses them).
+
+    Example:
+        >>> from oasis_torchrl.config import load_config
+        >>> resolved = with_capabilities(load_config("ppo", ["env.server.hosted=true"]))
+        >>> resolved.privileged_critic, resolved.loss.aux_coeff
+        (False, 0.0)
+    """
+    found = env_capabilities(cfg.env)
+    cfg = copy.deepcopy(cfg)
+    if cfg.privileged_critic is None:
+        cfg.privileged_critic = found.ground_truth
+    if cfg.loss.aux_coeff is None:
+        cfg.loss.aux_coeff = AUX_COEFF if found.ground_truth else 0.0
+    return cfg
 
 
 def uses_ground_truth(cfg: DictConfig) -> bool:
@@ -162,7 +176,7 @@ class PPOTrainer:
     """
 
     def __init__(self, cfg: DictConfig) -> None:
-        self.cfg = cfg
+        self.cfg = cfg = with_capabilities(cfg)
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
         torch.manual_seed(cfg.seed)
@@ -195,10 +209,6 @@ class PPOTrainer:
         self.net = net_from_checkpoint(resumed) if resumed else build_net(cfg, cameras)
         self.env.append_transform(ChunkFrameStack(cameras, depth=self.net.config.frames))
         self.modules = make_actor_critic(self.net)
-        hold = cfg.exploration.hold_chunks
-        self.collecting_policy = (
-            HeldNoisePolicy(self.modules.policy, hold) if hold > 1 else self.modules.policy
-        )
         anneal_frames = cfg.optim.anneal_frames or cfg.collector.total_frames
         self.update = PPOUpdate(self.modules, cfg, anneal_frames)
         if resumed:
@@ -257,9 +267,7 @@ class PPOTrainer:
         steps, and the encoder and the auxiliary head are fitted to their privileged state
         (:mod:`~oasis_torchrl.train.perception_warmup`); PPO's first update follows."""
         cfg = self.cfg.warmup
-        warmup = PerceptionWarmup(
-            self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr, cfg.shift_pad
-        )
+        warmup = PerceptionWarmup(self.update.loss, cfg.frames, cfg.mini_batch_size, cfg.lr)
         driver = DriverSpec(cfg.driver) if cfg.driver else None
         if driver is not None and driver().needs_expert:
             raise ValueError(
@@ -327,7 +335,7 @@ class PPOTrainer:
                 bar.update(batch.numel())
                 bar.set_postfix(_postfix(metrics))
                 if cfg.ray.enabled:  # TorchRL's Ray weight sync: new weights to every worker
-                    collector.update_policy_weights_(self.collecting_policy)
+                    collector.update_policy_weights_(self.modules.policy)
                 waiting = time.perf_counter()
 
     @contextmanager
@@ -365,7 +373,7 @@ class PPOTrainer:
                     frame_stack=self.net.config.frames,
                     privileged=uses_ground_truth(cfg),
                 ),
-                None if driver else self.collecting_policy,
+                None if driver else self.modules.policy,
                 frames_per_batch=cfg.collector.frames_per_batch,
                 total_frames=remaining,
                 auto_register_policy_transforms=False,
@@ -373,7 +381,7 @@ class PPOTrainer:
             )
         return Collector(
             self.env,
-            driver() if driver else self.collecting_policy,
+            driver() if driver else self.modules.policy,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
             auto_register_policy_transforms=False,
@@ -383,8 +391,11 @@ class PPOTrainer:
 
     @property
     def best_selection(self) -> float | None:
-        """Mean distance of the kept policy on the selection seeds (None: none chosen yet)."""
-        return None if self.kept_selection is None else self.kept_selection["mean_distance"]
+        """Mean distance of the kept policy on the selection seeds, or on frames alone its mean
+        return (None: none chosen yet)."""
+        if self.kept_selection is None:
+            return None
+        return self.kept_selection[_selection_key(self.kept_selection)]
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
@@ -429,8 +440,9 @@ class PPOTrainer:
         path = self.checkpoint_dir / BEST
         state = load_checkpoint(path)
         logger.info(
-            "keeping the policy of %d env steps (mean distance %.1f on the selection seeds)",
+            "keeping the policy of %d env steps (%s %.2f on the selection seeds)",
             state["frames"],
+            _selection_key(self.kept_selection),
             self.best_selection,
         )
         return net_from_checkpoint(state), path, state["frames"]
@@ -539,6 +551,11 @@ def evaluated_checkpoint_name(frames: int) -> str:
         'frames_10240.pt'
     """
     return f"frames_{frames}.pt"
+
+
+def _selection_key(evaluation: dict[str, Any]) -> str:
+    """What selection compares: the mean distance, or on frames alone the mean return."""
+    return "mean_distance" if evaluation.get("ground_truth", True) else "mean_return"
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:

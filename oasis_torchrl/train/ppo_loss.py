@@ -6,11 +6,7 @@ shared encoder run once per minibatch, plus the auxiliary loss.
 for the log-probabilities, once for the values), and the encoder is most of an update's cost.
 :class:`DrivingPPOLoss` encodes the minibatch once and hands ClipPPOLoss the two heads, which
 read the fresh ``"features"``; gradients reach the encoder through them, so the result is the
-same loss at about half the cost (``benchmarks/ppo_update.py``).
-
-With ``encoder_grad="aux"`` the heads read the features detached, so the encoder learns from the
-auxiliary loss alone and PPO trains the actor and critic on what it sees (representation learning
-decoupled from the policy's, as in Stooke et al., 2021).
+same loss for one encoder pass instead of two (``benchmarks/ppo_update.py`` compares them).
 """
 
 from __future__ import annotations
@@ -20,7 +16,6 @@ from tensordict import TensorDictBase
 from torch import nn
 from torchrl.objectives import ClipPPOLoss
 
-from oasis_torchrl.config.training import ENCODER_GRADS
 from oasis_torchrl.models import ActorCritic
 from oasis_torchrl.models.actor_critic import CRITIC_INPUTS, FEATURES
 
@@ -37,14 +32,8 @@ class DrivingPPOLoss(nn.Module):
     Args:
         modules: the actor-critic modules of the network (:func:`make_actor_critic`).
         aux_coeff: weight of the auxiliary loss (ignored without an auxiliary head).
-        encoder_grad: what trains the encoder: ``"all"`` (the PPO and auxiliary losses) or
-            ``"aux"`` (the auxiliary loss alone; needs ``aux_coeff`` and an auxiliary head).
         **ppo_kwargs: :class:`~torchrl.objectives.ClipPPOLoss` arguments (``clip_epsilon``,
             ``entropy_coeff``, ``critic_coeff``, ``loss_critic_type``, ...).
-
-    Raises:
-        ValueError: ``encoder_grad`` is neither ``"all"`` nor ``"aux"``, or is ``"aux"``
-            without an auxiliary loss.
 
     Example:
         >>> from tensordict import TensorDict
@@ -60,19 +49,9 @@ class DrivingPPOLoss(nn.Module):
         >>> losses = DrivingPPOLoss(modules, aux_coeff=1.0)(batch)
         >>> sorted(key for key in losses.keys() if key.startswith("loss"))
         ['loss_aux', 'loss_critic', 'loss_entropy', 'loss_objective']
-        >>> DrivingPPOLoss(modules, encoder_grad="aux")  # doctest: +ELLIPSIS
-        Traceback (most recent call last):
-        ...
-        ValueError: encoder_grad 'aux' trains the encoder by the auxiliary loss alone: ...
     """
 
-    def __init__(
-        self,
-        modules: ActorCritic,
-        aux_coeff: float = 0.0,
-        encoder_grad: str = "all",
-        **ppo_kwargs: object,
-    ) -> None:
+    def __init__(self, modules: ActorCritic, aux_coeff: float = 0.0, **ppo_kwargs: object) -> None:
         super().__init__()
         self.features = modules.features
         self.net = modules.net
@@ -80,14 +59,6 @@ class DrivingPPOLoss(nn.Module):
             modules.operator.get_policy_head(), modules.operator.get_value_head(), **ppo_kwargs
         )
         self.aux_coeff = aux_coeff if self.net.aux is not None else 0.0
-        if encoder_grad not in ENCODER_GRADS:
-            raise ValueError(f"encoder_grad must be one of {ENCODER_GRADS}, got {encoder_grad!r}")
-        if encoder_grad == "aux" and not self.aux_coeff:
-            raise ValueError(
-                "encoder_grad 'aux' trains the encoder by the auxiliary loss alone: set "
-                "aux_coeff > 0 on a network with an auxiliary head"
-            )
-        self.detach_features = encoder_grad == "aux"
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -102,10 +73,7 @@ class DrivingPPOLoss(nn.Module):
         detached) are replaced by a fresh encoding.
         """
         encoded = self.features(minibatch.clone(False))
-        heads_input = encoded
-        if self.detach_features:
-            heads_input = encoded.clone(False).set(FEATURES, encoded.get(FEATURES).detach())
-        losses = self.ppo(heads_input)
+        losses = self.ppo(encoded)
         if self.aux_coeff:
             losses[AUX_TERM] = self.aux_loss(encoded)
         return losses

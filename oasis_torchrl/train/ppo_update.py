@@ -2,11 +2,10 @@
 
 :class:`PPOUpdate` owns what turns a batch of env steps into new weights: GAE advantages,
 :class:`~oasis_torchrl.train.ppo_loss.DrivingPPOLoss` over shuffled minibatches for a few epochs,
-Adam with three learning-rate groups annealed over the run, gradient clipping, the KL stop, the
-skipping of non-finite steps, and the auxiliary replay
-(:mod:`~oasis_torchrl.train.aux_replay`). It knows nothing of envs, evaluation or files, so the
-camera trainer (:class:`~oasis_torchrl.train.ppo.PPOTrainer`) and any other collection loop
-(``benchmarks/state_ppo.py``, on the privileged state) update alike.
+Adam with three learning-rate groups annealed over the run, gradient clipping, the skipping of
+non-finite steps, and the auxiliary replay (:mod:`~oasis_torchrl.train.aux_replay`). It knows
+nothing of envs, evaluation or files, so the camera trainer
+(:class:`~oasis_torchrl.train.ppo.PPOTrainer`) and any other collection loop update alike.
 """
 
 from __future__ import annotations
@@ -68,7 +67,6 @@ class PPOUpdate:
         self.loss = DrivingPPOLoss(
             modules,
             aux_coeff=cfg.loss.aux_coeff,
-            encoder_grad=cfg.loss.encoder_grad,
             clip_epsilon=cfg.loss.clip_epsilon,
             entropy_coeff=cfg.loss.entropy_coeff,
             critic_coeff=cfg.loss.critic_coeff,
@@ -87,9 +85,7 @@ class PPOUpdate:
         self._anneal(0)
         replay = cfg.aux_replay
         self.aux_replay = (
-            AuxiliaryReplay(
-                self.loss, replay.capacity, replay.mini_batch_size, replay.mirror, replay.shift_pad
-            )
+            AuxiliaryReplay(self.loss, replay.capacity, replay.mini_batch_size)
             if replay.capacity
             else None
         )
@@ -99,18 +95,17 @@ class PPOUpdate:
         (critic, auxiliary) at ``optim.critic_lr``; the action scale at ``optim.scale_lr``
         (``null``: ``optim.lr``).
 
-        Why the heads: a fresh critic on a warm-started encoder (whose features are small,
-        ~0.08) moves too slowly at the actor's fine-tuning rate: measured on 1536 steps of the
-        cloned policy, a critic fitted for 320 minibatches explains 31% of the returns' variance
-        at 1e-4 and 61% at 1e-3; PPO's advantages are only as good as that fit.
+        Why the heads: a fresh critic on a warm-started encoder (whose features are small)
+        moves too slowly at the actor's fine-tuning rate and explains less of the returns'
+        variance; PPO's advantages are only as good as that fit
+        (docs/experiments/2026-11-24-what-shapes-ppo.md).
 
         Why the scale: its policy gradient is a weak, noisy signal (whether samples far from
         the mean did worse), so at the actor's rate Adam moves it by little more than a random
-        walk: measured, PPO's scale stayed at its initial 0.5 through 184k env steps, and the
-        policy drove 260 m deterministically but 224 m with that noise. With the scale pooled
-        per action number (``optim.pool_scale``) and this rate, a clone fine-tuned from a
-        scale of 1.0 cut its steering scale to 0.67 in 20,480 env steps and kept its throttle
-        scale near 0.94 (BENCHMARKS.md, "Exploration that shrinks").
+        walk, and PPO's scale stays near its initial value. With the scale pooled per action
+        number (``optim.pool_scale``) and its own rate, a fine-tuned clone cuts its steering
+        scale and keeps its throttle scale
+        (docs/experiments/2026-11-26-exploration-that-shrinks.md).
         """
         heads = [self.net.critic] + ([self.net.aux] if self.net.aux is not None else [])
         head_ids = {id(parameter) for head in heads for parameter in head.parameters()}
@@ -133,8 +128,7 @@ class PPOUpdate:
         self, batch: TensorDictBase, frames: int, critic_only: bool = False
     ) -> dict[str, float]:
         """Update on ``batch`` (``[rows, time]`` as collected) after ``frames`` env steps of the
-        run: advantages, then ``optim.epochs`` passes of minibatch PPO steps (fewer when the
-        approximate KL to the collecting policy passes ``optim.target_kl``; only the critic's
+        run: advantages, then ``optim.epochs`` passes of minibatch PPO steps (only the critic's
         loss with ``critic_only``), then the auxiliary replay's steps. The mean losses and
         diagnostics."""
         factor = self._anneal(frames)
@@ -145,8 +139,6 @@ class PPOUpdate:
         updates = skipped = 0
         for minibatch in self._minibatches(flat):
             losses = self.loss(minibatch)
-            if not critic_only and self.kl_exceeded(losses):
-                break
             terms = ("loss_critic",) if critic_only else self.loss.terms
             grad_norm = self._step(sum(losses[key] for key in terms), critic_only)
             if grad_norm is None:
@@ -187,16 +179,6 @@ class PPOUpdate:
         for _ in range(self.cfg.optim.epochs):
             for index in torch.randperm(flat.numel()).split(self.cfg.optim.mini_batch_size):
                 yield flat[index]
-
-    def kl_exceeded(self, losses: TensorDictBase) -> bool:
-        """Whether the minibatch's approximate KL passes ``optim.target_kl`` (``null``: never).
-
-        Why: a clone's near-saturated actions make single updates jump (approximate KL up to
-        2.5 measured while fine-tuning at lr 3e-4); stopping the iteration's remaining
-        minibatches then, as Stable-Baselines3's ``target_kl`` does, keeps PPO's trust region.
-        """
-        target = self.cfg.optim.get("target_kl")
-        return target is not None and float(losses["kl_approx"].mean()) > target
 
     def _step(self, total: torch.Tensor, critic_only: bool = False) -> float | None:
         """One optimizer step on the summed loss; the gradient norm, or ``None`` when the loss or

@@ -25,14 +25,14 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamWConfig
-from lerobot.optim.schedulers import CosineAnnealingWithWarmupSchedulerConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
+from oasis_torchrl.config.training import BCPolicyConfig
 from oasis_torchrl.models import CAMERAS, DrivingNetConfig
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.protocol import ACTION_DIM, CHUNK
@@ -40,9 +40,7 @@ from oasis_torchrl.protocol import ACTION_DIM, CHUNK
 POLICY_TYPE = "oasis"
 FRAME_SPACING = CHUNK
 """Rows (world frames at 20 fps) between two frames the policy sees: one world-model chunk."""
-LOSSES = ("nll", "manoeuvre", "l1", "mse")
-SCHEDULERS = (None, "cosine")
-"""Learning-rate schedules: ``None`` (constant) or ``"cosine"`` (warm-up, then annealing to 0)."""
+LOSSES = ("nll", "manoeuvre")
 NETWORK_FIELDS = (
     "image_size",
     "shared_encoder",
@@ -63,20 +61,30 @@ NETWORK_FIELDS = (
 LeRobot's fields (``frames``: ``n_obs_steps``, ``chunk``: ``chunk_size``, ``cameras`` and
 ``state_dim``: the input features, ``aux_outputs``: ``aux_weight``) or belong to PPO's
 training-only critic (``critic_inputs``)."""
+TRAINING_FIELDS = tuple(
+    item.name for item in fields(BCPolicyConfig) if item.name not in NETWORK_FIELDS
+)
+"""Behaviour cloning's own settings (loss, auxiliary weight, optimiser): those of
+:class:`~oasis_torchrl.config.training.BCPolicyConfig` that are no network field."""
 
 
-def _network_fields() -> type:
-    """A dataclass of :data:`NETWORK_FIELDS` with :class:`DrivingNetConfig`'s types and
-    defaults, so the policy config follows the network's without a copy."""
-    types = typing.get_type_hints(DrivingNetConfig)
-    defaults = DrivingNetConfig()
-    fields = [
-        (name, types[name], field(default=getattr(defaults, name))) for name in NETWORK_FIELDS
-    ]
-    return dataclasses.make_dataclass("DrivingNetFields", fields)
+def _policy_fields() -> type:
+    """A dataclass of :data:`NETWORK_FIELDS` (:class:`DrivingNetConfig`'s types) and
+    :data:`TRAINING_FIELDS`, each field's default behaviour cloning's
+    (:class:`~oasis_torchrl.config.training.BCPolicyConfig`, what ``oasis-torchrl train bc``
+    uses) where it has one, else the network's: one definition, so ``lerobot-train
+    --policy.type=oasis`` and ``oasis-torchrl train bc`` train the same policy."""
+    types = {**typing.get_type_hints(BCPolicyConfig), **typing.get_type_hints(DrivingNetConfig)}
+    cloning, network = BCPolicyConfig(), DrivingNetConfig()
+    specs = []
+    for name in (*NETWORK_FIELDS, *TRAINING_FIELDS):
+        default = getattr(cloning, name, getattr(network, name, None))
+        default = tuple(default) if isinstance(default, list) else default
+        specs.append((name, types[name], field(default=default)))
+    return dataclasses.make_dataclass("OasisPolicyFields", specs)
 
 
-DrivingNetFields = _network_fields()
+OasisPolicyFields = _policy_fields()
 
 
 def _identity_mapping() -> dict[str, NormalizationMode]:
@@ -89,16 +97,19 @@ def _identity_mapping() -> dict[str, NormalizationMode]:
 
 @PreTrainedConfig.register_subclass(POLICY_TYPE)
 @dataclass
-class OasisConfig(PreTrainedConfig, DrivingNetFields):
+class OasisConfig(PreTrainedConfig, OasisPolicyFields):
     """Configuration of :class:`~lerobot_policy_oasis.modeling_oasis.OasisPolicy`.
 
     The network's fields (:data:`NETWORK_FIELDS`: ``image_size``, ``shared_encoder``,
     ``encoder_channels``, ``encoder_strides``, ``pool_grid``, ``camera_features``,
     ``hidden_dim``, ``use_state``, ``head``, ``components``, ``init_action``, ``init_spread``,
     ``init_scale``, ``min_scale``)
-    are :class:`oasis_torchrl.models.DrivingNetConfig`'s, with its types, defaults and meaning
+    are :class:`oasis_torchrl.models.DrivingNetConfig`'s, with its types and meaning
     (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
-    ``image_size`` is also the size the preprocessor resizes frames to.
+    ``image_size`` is also the size the preprocessor resizes frames to. Their defaults, and
+    those of the training settings below (:data:`TRAINING_FIELDS`), are behaviour cloning's
+    (:class:`oasis_torchrl.config.training.BCPolicyConfig`, e.g. ``use_state`` off), so
+    ``lerobot-train --policy.type=oasis`` trains what ``oasis-torchrl train bc`` does.
 
     Args:
         n_obs_steps: frames per camera the network sees, :data:`FRAME_SPACING` rows apart (its
@@ -111,19 +122,7 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             to one; it also fits the distribution's scale), ``"manoeuvre"`` (the same, jointly
             with the chunk's manoeuvre: the mixture component whose initial steering is nearest
             the chunk's, so the components are left, keep and right and the weights a
-            classifier of them, :meth:`~oasis_torchrl.models.DrivingNet.manoeuvre`), ``"l1"``
-            or ``"mse"`` (regression of the deterministic chunk, ``action_loss_weights``
-            weighted).
-        action_loss_weights: weight of the throttle and steering errors of ``"l1"`` and
-            ``"mse"``. Actions are not normalised (see above), so with equal weights the loss
-            follows the dimension that varies most: in autopilot demonstrations throttle (std
-            ~0.30) drowns steering (std ~0.055), whose rare lane changes are what avoids
-            obstacles. (``"nll"`` weighs each number by its fitted scale instead.)
-        manoeuvre_weight: extra weight of the demonstrations that steer: each sample's action
-            loss is weighted ``1 + manoeuvre_weight * s``, ``s`` the mean absolute steering of
-            its demonstrated chunk. Lane changes are a few percent of an autopilot's chunks, and
-            unweighted a clone steers in a third as many as the autopilot (measured at 0: 1.2%
-            of chunks against 4.1%) and drives into what it should change lanes for.
+            classifier of them, :meth:`~oasis_torchrl.models.DrivingNet.manoeuvre`).
         aux_weight: weight of an auxiliary loss (0: none): the network's auxiliary head
             predicts each frame's privileged state (``privileged_state``: speed, offsets, heading
             error, obstacle distances ahead in the car's path, its lane and the lanes beside it,
@@ -131,35 +130,21 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             Dense labels on every frame teach the encoder to see obstacles and free lanes, which
             the rare lane changes of the action labels alone do not; at deployment the head is
             unused.
-        optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset.
-        scheduler_name: the learning-rate schedule: ``None`` keeps ``optimizer_lr`` throughout;
-            ``"cosine"`` warms up linearly over ``scheduler_warmup_steps`` to ``optimizer_lr``,
-            then anneals to zero at the last training step (LeRobot's
-            ``cosine_annealing_with_warmup``; ``lerobot-train`` builds it with its ``steps``).
-        scheduler_warmup_steps: the cosine schedule's warm-up.
+        optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset (a
+            constant learning rate: no scheduler preset).
 
     Example:
         >>> config = OasisConfig(device="cpu")
         >>> config.type, config.observation_delta_indices, config.action_delta_indices
         ('oasis', [-4, 0], [0, 1, 2, 3])
-        >>> config.head == DrivingNetConfig().head
-        True
+        >>> config.head == DrivingNetConfig().head, config.use_state
+        (True, False)
     """
 
     n_obs_steps: int = 2
     chunk_size: int = 4
     n_action_steps: int = 4
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=_identity_mapping)
-
-    loss: str = "nll"
-    action_loss_weights: tuple[float, float] = (1.0, 1.0)
-    manoeuvre_weight: float = 0.0
-    aux_weight: float = 0.0
-    optimizer_lr: float = 1e-3
-    optimizer_weight_decay: float = 1e-4
-    optimizer_grad_clip_norm: float = 10.0
-    scheduler_name: str | None = None
-    scheduler_warmup_steps: int = 0
 
     # Nothing is uploaded unless asked for, so `lerobot-train` needs no `policy.repo_id`.
     push_to_hub: bool = False
@@ -175,25 +160,8 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             )
         if self.loss not in LOSSES:
             raise ValueError(f"OasisConfig.loss must be one of {LOSSES}, got {self.loss!r}")
-        for name in ("aux_weight", "manoeuvre_weight"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"OasisConfig.{name} must be >= 0, got {getattr(self, name)}")
-        if self.scheduler_name not in SCHEDULERS:
-            raise ValueError(
-                f"OasisConfig.scheduler_name must be one of {SCHEDULERS}, "
-                f"got {self.scheduler_name!r}"
-            )
-        if self.scheduler_warmup_steps < 0:
-            raise ValueError(
-                "OasisConfig.scheduler_warmup_steps must be >= 0, "
-                f"got {self.scheduler_warmup_steps}"
-            )
-        weights = tuple(self.action_loss_weights)
-        if len(weights) != ACTION_DIM or min(weights) < 0 or max(weights) == 0:
-            raise ValueError(
-                "OasisConfig.action_loss_weights must be two non-negative weights, not both 0, "
-                f"got {self.action_loss_weights!r}"
-            )
+        if not self.aux_weight >= 0:
+            raise ValueError(f"OasisConfig.aux_weight must be >= 0, got {self.aux_weight}")
 
     @property
     def cameras(self) -> tuple[str, ...]:
@@ -270,18 +238,9 @@ class OasisConfig(PreTrainedConfig, DrivingNetFields):
             grad_clip_norm=self.optimizer_grad_clip_norm,
         )
 
-    def get_scheduler_preset(self) -> CosineAnnealingWithWarmupSchedulerConfig | None:
-        """The ``scheduler_name`` schedule, or ``None`` for a constant learning rate.
-
-        Example:
-            >>> OasisConfig(device="cpu", scheduler_name="cosine").get_scheduler_preset()
-            CosineAnnealingWithWarmupSchedulerConfig(num_warmup_steps=0)
-        """
-        if self.scheduler_name is None:
-            return None
-        return CosineAnnealingWithWarmupSchedulerConfig(
-            num_warmup_steps=self.scheduler_warmup_steps
-        )
+    def get_scheduler_preset(self) -> None:
+        """No schedule: the learning rate stays ``optimizer_lr``."""
+        return None
 
     @property
     def observation_delta_indices(self) -> list[int] | None:

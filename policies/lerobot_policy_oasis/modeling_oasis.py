@@ -2,9 +2,9 @@
 
 The network is :class:`oasis_torchrl.models.DrivingNet`, the one TorchRL PPO trains; this class
 only adapts LeRobot batches to it: ``forward`` returns the behaviour-cloning loss against the
-next ``chunk_size`` actions (padded actions past an episode's end are masked out): by default
-their negative log-likelihood under the network's chunk distribution (a mixture: the clone keeps
-each manoeuvre and commits to one), or a regression of the deterministic chunk;
+next ``chunk_size`` actions (padded actions past an episode's end are masked out): their
+negative log-likelihood under the network's chunk distribution (a mixture: the clone keeps each
+manoeuvre and commits to one);
 ``predict_action_chunk`` returns the chunk the policy commits to and ``select_action`` serves it
 one action at a time from a queue.
 
@@ -32,8 +32,6 @@ from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
-LIKELIHOOD_LOSSES = ("nll", "manoeuvre")
-"""The losses that fit the chunk distribution (its scale too) rather than regress a chunk."""
 
 
 class OasisPolicy(PreTrainedPolicy):
@@ -73,12 +71,11 @@ class OasisPolicy(PreTrainedPolicy):
         self._history: dict[str, deque[Tensor]] = {}
 
     def get_optim_params(self) -> Iterator[nn.Parameter]:
-        """The parameters behaviour cloning trains: the encoder and the actor, with the
-        likelihood loss the distribution's scale, with ``aux_weight`` the auxiliary head."""
+        """The parameters behaviour cloning trains: the encoder, the actor, the distribution's
+        scale and, with ``aux_weight``, the auxiliary head."""
         yield from self.model.encoder.parameters()
         yield from self.model.actor.parameters()
-        if self.config.loss in LIKELIHOOD_LOSSES:
-            yield self.model.log_scale
+        yield self.model.log_scale
         if self.model.aux is not None:
             yield from self.model.aux.parameters()
 
@@ -147,26 +144,14 @@ class OasisPolicy(PreTrainedPolicy):
         pad = batch.get(ACTION_IS_PAD)
         valid = torch.ones_like(target[..., 0]) if pad is None else (~pad).to(target.dtype)
         features = self._features(batch)
-        if self.config.loss in LIKELIHOOD_LOSSES:
-            numbers = valid.sum(-1).clamp_min(1.0) * target.shape[-1]
-            if self.config.loss == "nll":
-                log_likelihood = self.model.chunk_log_likelihood(features, target, valid.bool())
-                per_sample = -log_likelihood / numbers
-            else:  # the chunk per number, its manoeuvre once per sample (a classification)
-                chunk, manoeuvre = self.model.manoeuvre_log_likelihood(
-                    features, target, valid.bool()
-                )
-                per_sample = -chunk / numbers - manoeuvre
-        else:
-            error = self.model.deterministic_chunk(features) - target
-            error = error.abs() if self.config.loss == "l1" else error.square()
-            weights = error.new_tensor(self.config.action_loss_weights)
-            weighted = (error * weights).sum(-1) / weights.sum()
-            per_sample = (weighted * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
+        numbers = valid.sum(-1).clamp_min(1.0) * target.shape[-1]
+        if self.config.loss == "nll":
+            log_likelihood = self.model.chunk_log_likelihood(features, target, valid.bool())
+            per_sample = -log_likelihood / numbers
+        else:  # the chunk per number, its manoeuvre once per sample (a classification)
+            chunk, manoeuvre = self.model.manoeuvre_log_likelihood(features, target, valid.bool())
+            per_sample = -chunk / numbers - manoeuvre
         info = {f"{self.config.loss}_loss": per_sample.mean().item()}
-        if self.config.manoeuvre_weight:
-            steering = (target[..., 1].abs() * valid).sum(-1) / valid.sum(-1).clamp_min(1.0)
-            per_sample = per_sample * (1.0 + self.config.manoeuvre_weight * steering)
         if self.config.aux_weight:
             aux = self._aux_loss(batch, features)
             per_sample = per_sample + self.config.aux_weight * aux

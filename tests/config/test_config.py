@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,8 @@ from oasis_torchrl.config import config_names, load_config, to_object
 from oasis_torchrl.config.arguments import load_from_args
 from oasis_torchrl.config.recording import RecordConfig
 from oasis_torchrl.config.training import BCConfig
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("name", ["bc", "demo", "drive", "eval", "ppo", "serve"])
@@ -112,6 +115,27 @@ def test_help_comes_from_the_dataclasses(capsys: pytest.CaptureFixture[str]) -> 
     assert "--vp9-cpu-used VP9_CPU_USED" in text and "libvpx speed 0-8 (default: 8)" in text
     assert "--num-envs NUM_ENVS" in text and "sets env.num_envs" in text
     assert "--optim.lr LR" in text and "(default: 0.0003)" in text
+
+
+def test_each_setting_has_one_flag_and_required_ones_say_so(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    for command in (["serve-policy"], ["serve"], ["record"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+    text = capsys.readouterr().out
+    assert "--api-key API_KEYS" in text and "--input INPUTS" in text  # the aliases ...
+    assert "--api-keys" not in text and "--inputs" not in text  # ... are their one flag
+    assert "--num-envs" in text and "--env.num-envs" not in text
+    assert "???" not in text
+    assert "(required)" in " ".join(text.split())  # serve-policy's policy, record's root
+
+
+def test_version_is_the_distributions(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert capsys.readouterr().out.split() == ["oasis-torchrl", version]
 
 
 def test_saved_config_loads_back(tmp_path: Path) -> None:

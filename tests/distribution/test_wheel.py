@@ -1,4 +1,5 @@
-"""The wheel works outside the source tree: package data shipped, configs load, the CLI runs.
+"""The wheel works outside the source tree: package data, presets and .proto sources shipped,
+configs load, the CLI runs.
 
 The wheel is built from a copy of the distribution's files (the build writes ``build/`` and
 ``*.egg-info`` next to its sources) and installed with ``--no-deps`` into a scratch venv whose
@@ -21,7 +22,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-DISTRIBUTION_FILES = ("pyproject.toml", "README.md", "LICENSE")
+DISTRIBUTION_FILES = ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "LICENSE")
+SHIPPED_FOLDERS = ("configs", "protos")
+"""Top-level folders the wheel carries inside the package (setup.py)."""
 
 PROTOS = ("a2v", "common", "policy", "sim")
 
@@ -31,6 +34,7 @@ from pathlib import Path
 
 import oasis_torchrl
 from oasis_torchrl.config import config_names, load_config, to_object
+from oasis_torchrl.config.presets import presets
 from oasis_torchrl.proto import proto_sources
 
 REQUIRED = {"import-recordings": ["source=in", "root=out"], "record": ["root=out"],
@@ -42,6 +46,9 @@ print("protos", " ".join(sorted(proto_sources())))
 for name in config_names():
     to_object(load_config(name, REQUIRED.get(name, [])))
     print("config", name)
+for name, path in presets().items():
+    assert Path(path).is_relative_to(sys.prefix), path
+    print("preset", name)
 """
 
 
@@ -57,6 +64,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )
     for name in DISTRIBUTION_FILES:
         shutil.copy2(ROOT / name, source / name)
+    for name in SHIPPED_FOLDERS:
+        shutil.copytree(ROOT / name, source / name)
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
     dist = scratch / "dist"
     build = [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", str(dist), str(source)]
@@ -65,6 +74,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     with zipfile.ZipFile(wheel) as archive:
         names = set(archive.namelist())
     assert {f"oasis_torchrl/proto/{p}.proto" for p in PROTOS} <= names
+    presets = {f"oasis_torchrl/configs/{path.name}" for path in (ROOT / "configs").glob("*.yaml")}
+    assert presets and presets <= names
     assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
 
     venv = scratch / "venv"
@@ -111,6 +122,8 @@ def test_every_named_config_and_the_protos_load_from_the_wheel(
     assert f"version {version}" in lines  # the wheel's metadata, not a source tree's fallback
     protos = [f"oasis_torchrl/proto/{name}.proto" for name in PROTOS]
     assert f"protos {' '.join(protos)}" in lines
+    shipped = {line.split()[1] for line in lines if line.startswith("preset ")}
+    assert shipped == {path.stem for path in (ROOT / "configs").glob("*.yaml")}
     loaded = {line.split()[1] for line in lines if line.startswith("config ")}
     assert {
         "bc",

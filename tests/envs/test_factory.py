@@ -31,7 +31,7 @@ def test_privileged_state_follows_the_ground_truth() -> None:
 
 def test_privileged_state_needs_ground_truth() -> None:
     with pytest.raises(ValueError, match=r"loss.aux_coeff\) needs ground truth"):
-        make_env(EnvConfig(endpoint="http://127.0.0.1:9"), privileged=True)
+        make_env(EnvConfig(server=EmbeddedServerConfig(hosted=True)), privileged=True)
 
 
 def test_make_env_builds_the_configured_env() -> None:

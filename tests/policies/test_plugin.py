@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -14,7 +13,11 @@ from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot_policy_oasis import OasisConfig, OasisPolicy
+from lerobot_policy_oasis.configuration_oasis import NETWORK_FIELDS, TRAINING_FIELDS
+from omegaconf import OmegaConf
 
+from oasis_torchrl.cli import main
+from oasis_torchrl.config import load_config
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 
 CAMERAS = ("left_forward", "front", "right_forward")
@@ -112,7 +115,7 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
     )
 
 
-@pytest.mark.parametrize("loss", ["l1", "nll", "manoeuvre"])
+@pytest.mark.parametrize("loss", ["nll", "manoeuvre"])
 def test_forward_masks_padded_actions(loss: str) -> None:
     policy = _policy(loss=loss)
     batch = _stacked(_observation(seed=0), _observation(seed=1))
@@ -122,8 +125,6 @@ def test_forward_masks_padded_actions(loss: str) -> None:
     assert f"{loss}_loss" in info
     batch["action"][:, 2:] = 0.9  # wrong, but padding
     torch.testing.assert_close(policy.forward(batch)[0], fitted)
-    if loss == "l1":
-        assert fitted.item() == pytest.approx(0.0, abs=1e-6)
     batch["action_is_pad"][:, 2] = False
     worse, _ = policy.forward(batch)
     assert worse.item() > fitted.item() + 0.1
@@ -131,9 +132,8 @@ def test_forward_masks_padded_actions(loss: str) -> None:
     assert per_sample.shape == (2,)
     worse.backward()
     assert policy.model.encoder.convs[0].weight.grad is not None
-    # The likelihood fits the distribution's scale too; the regression leaves it alone.
-    trained = {id(parameter) for parameter in policy.get_optim_params()}
-    assert (id(policy.model.log_scale) in trained) == (loss != "l1")
+    # The likelihood fits the distribution's scale too.
+    assert id(policy.model.log_scale) in {id(parameter) for parameter in policy.get_optim_params()}
 
 
 def test_the_auxiliary_loss_predicts_the_privileged_state() -> None:
@@ -173,40 +173,12 @@ def test_the_policy_config_is_the_networks() -> None:
     assert OasisPolicy(config).model.log_scale.shape == (4, 2)  # the unimodal head
 
 
-def test_action_loss_weights_pick_the_dimensions() -> None:
-    batch = _stacked(_observation(seed=0), _observation(seed=1))
-    target = _policy().predict_action_chunk(batch)
-    batch["action"] = target.clone()
-    batch["action"][..., 0] += 0.5  # throttle wrong by 0.5, steering right
-    assert _policy(loss="l1").forward(batch)[0].item() == pytest.approx(0.25, abs=1e-5)
-    steering_only = _policy(loss="l1", action_loss_weights=(0.0, 1.0))
-    assert steering_only.forward(batch)[0].item() == pytest.approx(0.0, abs=1e-6)
-    throttle_heavy = _policy(loss="l1", action_loss_weights=(3.0, 1.0))
-    assert throttle_heavy.forward(batch)[0].item() == pytest.approx(0.375, abs=1e-5)
-
-
-@pytest.mark.parametrize("loss", ["l1", "nll"])
-def test_manoeuvre_weight_weighs_the_samples_that_steer(loss: str) -> None:
-    batch = _stacked(_observation(seed=0), _observation(seed=1))
-    batch["action"] = torch.zeros(2, 4, 2)
-    batch["action"][1, :, 1] = torch.tensor([0.2, 0.4, -0.4, -0.2])  # sample 1 steers: mean 0.3
-    batch["action_is_pad"] = torch.tensor([[False] * 4, [False, False, False, True]])
-    plain, _ = _policy(loss=loss).forward(batch, reduction="none")
-    weighted, _ = _policy(loss=loss, manoeuvre_weight=10.0).forward(batch, reduction="none")
-    steering = (0.2 + 0.4 + 0.4) / 3  # the padded action left out
-    torch.testing.assert_close(weighted, plain * torch.tensor([1.0, 1.0 + 10.0 * steering]))
-    with pytest.raises(ValueError, match="manoeuvre_weight must be >= 0"):
-        _config(manoeuvre_weight=-1.0)
-
-
 def test_bad_features_are_named() -> None:
     with pytest.raises(ValueError, match="needs 'action' of shape \\(2,\\)"):
         _config(action_dim=8).net_config()
     with pytest.raises(ValueError, match="n_action_steps must be in"):
         OasisConfig(device="cpu", n_action_steps=5)
-    with pytest.raises(ValueError, match="action_loss_weights must be two non-negative"):
-        OasisConfig(device="cpu", action_loss_weights=(0.0, 0.0))
-    expected = r"loss must be one of \('nll', 'manoeuvre', 'l1', 'mse'\)"
+    expected = r"loss must be one of \('nll', 'manoeuvre'\)"
     with pytest.raises(ValueError, match=expected):
         OasisConfig(device="cpu", loss="huber")
     with pytest.raises(ValueError, match="head must be one of"):
@@ -234,7 +206,26 @@ def _record(root: Path) -> None:
     subprocess.run(command, check=True, capture_output=True, timeout=120)
 
 
-def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
+def test_the_policys_defaults_are_behaviour_clonings() -> None:
+    cloning = OmegaConf.to_container(load_config("bc").policy)
+    config = OasisConfig(device="cpu")
+    assert set(cloning) <= {*NETWORK_FIELDS, *TRAINING_FIELDS}
+    for name, value in cloning.items():
+        expected = tuple(value) if isinstance(value, list) else value
+        assert getattr(config, name) == expected, name
+    assert config.use_state is False and config.loss == "nll"
+
+
+def _policy_settings(config: OasisConfig) -> dict[str, object]:
+    """What a trained policy's config says about the policy (not where it ran)."""
+    names = (*NETWORK_FIELDS, *TRAINING_FIELDS, "n_obs_steps", "chunk_size", "n_action_steps")
+    settings = {name: getattr(config, name) for name in names}
+    settings["features"] = (config.input_features, config.output_features)
+    settings["normalization"] = config.normalization_mapping
+    return settings
+
+
+def test_lerobot_train_and_train_bc_build_the_same_policy(tmp_path: Path) -> None:
     root = tmp_path / "drives"
     _record(root)
     output = tmp_path / "train"
@@ -245,8 +236,6 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
         f"--dataset.root={root}",
         "--policy.image_size=[32,48]",
         "--policy.components=2",  # a network field, taken from DrivingNetConfig
-        "--policy.scheduler_name=cosine",  # the policy's preset: LeRobot builds and steps it
-        "--policy.scheduler_warmup_steps=1",
         "--steps=2",
         "--batch_size=4",
         "--num_workers=0",
@@ -260,5 +249,9 @@ def test_lerobot_train_runs_a_few_steps(tmp_path: Path) -> None:
     loaded = OasisPolicy.from_pretrained(folder)
     assert loaded.config.image_size == SIZE and loaded.model.config.components == 2
     assert (folder / "policy_preprocessor.json").exists()
-    schedule = json.loads((folder.parent / "training_state" / "scheduler_state.json").read_text())
-    assert schedule["last_epoch"] == 2 and schedule["_last_lr"] == [0.0]  # annealed to 0
+
+    bc = ["train", "bc", f"--dataset.root={root}", f"output_dir={tmp_path / 'bc'}"]
+    bc += ["policy.image_size=[32,48]", "policy.components=2", "train.steps=2", "eval.episodes=0"]
+    assert main([*bc, "train.batch_size=4", "progress=false"]) == 0
+    cloned = OasisPolicy.from_pretrained(tmp_path / "bc" / "policy").config
+    assert _policy_settings(cloned) == _policy_settings(loaded.config)

@@ -1,4 +1,4 @@
-"""The committed generated modules must be exactly what protoc makes from the shipped sources."""
+"""The committed generated modules must be exactly what ``make protos`` makes from ``protos/``."""
 
 from __future__ import annotations
 
@@ -7,32 +7,28 @@ import sys
 from importlib.resources import files
 from pathlib import Path
 
-from oasis_torchrl.proto import proto_sources
+from oasis_torchrl.proto import IMPORT_PREFIX, proto_sources
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_generated_modules_match_protos(tmp_path: Path) -> None:
-    sources = proto_sources()
-    assert sources, "no .proto sources found"
-    include = tmp_path / "include"
-    for import_path, text in sources.items():
-        (include / import_path).parent.mkdir(parents=True, exist_ok=True)
-        (include / import_path).write_text(text, encoding="utf-8")
-    out = tmp_path / "out"
-    out.mkdir()
-    subprocess.run(
+    sources = sorted((ROOT / "protos").glob("*.proto"))
+    assert [f"{IMPORT_PREFIX}/{path.name}" for path in sources] == sorted(proto_sources())
+    subprocess.run(  # the Makefile's command, into a scratch folder
         [
             sys.executable,
             "-m",
             "grpc_tools.protoc",
-            f"-I{include}",
-            f"--python_out={out}",
-            f"--grpc_python_out={out}",
-            f"--pyi_out={out}",
-            *sorted(sources),
+            f"-I{IMPORT_PREFIX}={ROOT / 'protos'}",
+            f"--python_out={tmp_path}",
+            f"--grpc_python_out={tmp_path}",
+            f"--pyi_out={tmp_path}",
+            *map(str, sources),
         ],
         check=True,
     )
-    regenerated = {p.name: p.read_bytes() for p in (out / "oasis_torchrl" / "proto").iterdir()}
+    regenerated = {p.name: p.read_bytes() for p in (tmp_path / IMPORT_PREFIX).iterdir()}
     committed = {
         entry.name: entry.read_bytes()
         for entry in files("oasis_torchrl.proto").iterdir()

@@ -90,8 +90,8 @@ def test_serve_has_a_flag_for_every_setting_and_configs_travel_as_json() -> None
         allow_any_key=True, latency_ms=2.5, failure_rate=0.1, failure_seed=7, idle_timeout_s=9.0,
         max_sessions=5, max_sessions_per_key=3, max_prompt_chars=50, max_message_bytes=4096,
         tls_cert="cert.pem", tls_key="key.pem", workers=4, processes=3, encode_workers=2,
-        formats=(common_pb2.FRAME_FORMAT_JPEG,), vp9_cpu_used=5, vp9_bit_rate=500_000,
-        vp9_threads=2, jpeg_quality=70,
+        formats=(common_pb2.FRAME_FORMAT_VP9,), vp9_cpu_used=5, vp9_bit_rate=500_000,
+        vp9_threads=2, jpeg_quality=70, hosted=True,
     )  # fmt: skip
     defaults = ServerConfig(api_keys=("other",))
     changed = [
@@ -105,7 +105,7 @@ def test_serve_has_a_flag_for_every_setting_and_configs_travel_as_json() -> None
         "--latency-ms 2.5 --failure-rate 0.1 --failure-seed 7 --idle-timeout 9 --max-sessions 5 "
         "--max-sessions-per-key 3 --max-prompt-chars 50 --max-message-bytes 4096 "
         "--tls-cert cert.pem --tls-key key.pem --workers 4 --processes 3 --encode-workers 2 "
-        "--formats jpeg "
+        "--formats vp9 --hosted "
         "--vp9-cpu-used 5 --vp9-bit-rate 500000 --vp9-threads 2 --jpeg-quality 70"
     )
     assert _served(argv).server_config() == config

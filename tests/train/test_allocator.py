@@ -42,7 +42,7 @@ def test_batch_sized_tensors_come_from_the_heap_not_fresh_mappings() -> None:
     """glibc maps a fresh block for a 28 MiB tensor (and unmaps it on free, so the next step
     faults its pages in again); with the threshold fixed it comes from the heap. Deterministic,
     unlike the page faults it saves, which the kernel's own memory management moves from run to
-    run (``benchmarks/allocator.py`` measures those)."""
+    run."""
     assert mapped_for_a_batch("default") >= BATCH_BYTES
     assert mapped_for_a_batch("keep") == 0
 

@@ -51,8 +51,6 @@ def test_bad_settings_are_refused() -> None:
         load_config("ppo", ["warmup.frames=32"])
     with pytest.raises(ValueError, match=r"warmup\.lr > 0, got 1024, 6000 and 0\.0"):
         load_config("ppo", ["warmup.frames=1024", "warmup.lr=0"])
-    with pytest.raises(ValueError, match=r"warmup\.shift_pad is a shift in pixels, >= 0, got -4"):
-        load_config("ppo", ["warmup.shift_pad=-4"])
 
 
 def test_ppo_starts_after_the_warmup_whose_env_steps_count(tmp_path: Path) -> None:
@@ -63,7 +61,6 @@ def test_ppo_starts_after_the_warmup_whose_env_steps_count(tmp_path: Path) -> No
         "warmup.frames=32",
         "warmup.steps=40",
         "warmup.mini_batch_size=8",
-        "warmup.shift_pad=2",
     )
     trainer = PPOTrainer(load_config("ppo", overrides))
     fresh = {key: value.clone() for key, value in trainer.net.state_dict().items()}

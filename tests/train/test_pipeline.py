@@ -7,14 +7,12 @@ from pathlib import Path
 
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from omegaconf import OmegaConf
 from viz._readback import Readback
 
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train import pipeline
-from oasis_torchrl.train.pipeline import clone, demonstrations
 
 from .conftest import TINY_ENV
 
@@ -95,17 +93,6 @@ def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
     assert results["again"] == results["fast"] != results["slow"]
     assert results["again"] is not results["fast"]  # separate rows of the summary
     assert rerun.stat().st_size > 0
-
-
-def test_dagger_from_scratch_trains_a_fresh_clone_on_everything(tmp_path: Path) -> None:
-    overrides = [*TINY_PIPELINE, "dagger.from_scratch=true", "bc.train.steps=4"]
-    cfg = load_config("demo", [f"output_dir={tmp_path}", *overrides])
-    dataset = demonstrations(cfg, tmp_path / "demos")
-    assert clone(cfg, dataset) == tmp_path / "bc" / "round_1" / "policy"
-    round_1 = OmegaConf.load(tmp_path / "bc" / "round_1" / "config.yaml")
-    assert round_1.init_from is None and round_1.train.steps == 4  # not dagger.steps
-    # the first clone drove the round's episodes, appended to the demonstrations
-    assert LeRobotDataset("local/demos", root=dataset, video_backend="pyav").num_episodes == 4
 
 
 def test_demo_command_rejects_a_bad_key_before_writing(tmp_path: Path) -> None:

@@ -92,24 +92,3 @@ def test_leaves_the_callers_minibatch_alone(rollout: TensorDict) -> None:
     assert losses["loss_objective"].requires_grad
     assert not rollout["features"].requires_grad
     torch.testing.assert_close(rollout["features"], stored)
-
-
-def test_encoder_grad_aux_leaves_the_encoder_to_the_auxiliary_loss(rollout: TensorDict) -> None:
-    torch.manual_seed(0)
-    net = DrivingNet(ASYMMETRIC)
-    modules = make_actor_critic(net)
-    ppo_terms = ("loss_objective", "loss_critic", "loss_entropy")
-    encoder, actor = "encoder.convs.0.weight", "actor.0.weight"
-
-    def gradients(encoder_grad: str, terms: tuple[str, ...]) -> dict[str, torch.Tensor]:
-        loss = DrivingPPOLoss(modules, aux_coeff=1.0, encoder_grad=encoder_grad, **PPO_KWARGS)
-        losses = loss(rollout)
-        return _gradients(net, sum(losses[key] for key in terms))
-
-    every, decoupled = gradients("all", ppo_terms), gradients("aux", ppo_terms)
-    assert every[encoder].abs().sum() > 0 and encoder not in decoupled
-    torch.testing.assert_close(decoupled[actor], every[actor])  # the heads learn as before
-    torch.testing.assert_close(
-        gradients("aux", (*ppo_terms, "loss_aux"))[encoder],
-        gradients("all", ("loss_aux",))[encoder],
-    )

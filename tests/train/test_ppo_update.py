@@ -77,14 +77,6 @@ def test_a_critic_warm_up_trains_the_critic_head_alone() -> None:
         assert torch.equal(before[key], after[key]), key
 
 
-def test_the_kl_stop_ends_an_iterations_updates() -> None:
-    update = _update("optim.target_kl=1e-9")
-    batch = _batch(update)
-    batch["action_log_prob"] = batch["action_log_prob"] + 1.0  # the policy moved since
-    metrics = update(batch, frames=100)
-    assert metrics["optim/updates"] == 0
-
-
 def test_non_finite_steps_are_skipped_and_the_weights_stay_finite() -> None:
     update = _update()
     batch = _batch(update)
@@ -95,13 +87,3 @@ def test_non_finite_steps_are_skipped_and_the_weights_stay_finite() -> None:
     assert metrics["optim/updates"] == 0
     for key, value in update.net.state_dict().items():
         assert torch.equal(before[key], value), key
-
-
-def test_encoder_grad_is_checked_and_reaches_the_loss() -> None:
-    assert _update("loss.encoder_grad=aux").loss.detach_features
-    assert not _update().loss.detach_features
-    with pytest.raises(ValueError, match=r"loss\.encoder_grad must be one of \('all', 'aux'\)"):
-        load_config("ppo", ["loss.encoder_grad=actor"])
-    needs_aux = r"loss\.encoder_grad=aux trains the auxiliary loss: set loss\.aux_coeff > 0"
-    with pytest.raises(ValueError, match=needs_aux):
-        load_config("ppo", ["loss.encoder_grad=aux", "loss.aux_coeff=0"])

@@ -1,0 +1,143 @@
+"""README.md: short, its quick start runs as written, its links resolve, and its env card is the
+env's (and ``OasisEnv``'s docstring's)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.sim.config import ServerConfig
+
+from ._hooks import ROOT
+
+README = (ROOT / "README.md").read_text()
+QUICK_START = re.compile(r"<!-- quick-start -->\n```(?P<lang>\w+)\n(?P<code>.*?)```", re.DOTALL)
+CARD_ROW = re.compile(
+    r"^\s*\| `(?P<key>[^`]+)` \| `(?P<spec>[^`]+)` "
+    r"\| `\[(?P<shape>[^\]]+)\]` \| `(?P<dtype>\w+)` \|$"
+)
+
+
+def quick_start(lang: str) -> list[str]:
+    return [m["code"] for m in QUICK_START.finditer(README) if m["lang"] == lang]
+
+
+def command_env() -> dict[str, str]:
+    """The environment a reader has after activating the venv: its scripts first on PATH."""
+    scripts = str(Path(sys.executable).parent)
+    return {**os.environ, "PATH": f"{scripts}{os.pathsep}{os.environ.get('PATH', '')}"}
+
+
+def test_readme_is_at_most_250_lines() -> None:
+    assert len(README.splitlines()) <= 250
+
+
+def test_readme_links_resolve() -> None:
+    targets = re.findall(r"\]\((?!https?://|#)([^)#]+)", README)
+    assert targets
+    missing = [target for target in targets if not (ROOT / target).exists()]
+    assert not missing
+
+
+def test_quick_start_python_runs_as_written(tmp_path: Path) -> None:
+    blocks = quick_start("python")
+    assert blocks, "README marks no python block as the quick start"
+    for code in blocks:
+        result = subprocess.run(
+            [sys.executable, "-c", code],
+            cwd=tmp_path,
+            env=command_env(),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert result.returncode == 0, result.stderr[-3000:]
+
+
+def test_quick_start_commands_run_as_written(tmp_path: Path) -> None:
+    lines = [line for code in quick_start("bash") for line in code.splitlines() if line.strip()]
+    assert lines, "README marks no shell block as the quick start"
+    for line in lines:
+        result = subprocess.run(
+            ["bash", "-c", line],
+            cwd=tmp_path,
+            env=command_env(),
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert result.returncode == 0, f"{line}: {result.stderr[-2000:]}"
+        assert result.stdout.strip(), line
+
+
+def card_rows(text: str) -> list[re.Match[str]]:
+    return [match for line in text.splitlines() if (match := CARD_ROW.match(line))]
+
+
+def test_readme_card_is_the_env_docstring_card() -> None:
+    readme = [match.group(0).strip() for match in card_rows(README)]
+    docstring = [match.group(0).strip() for match in card_rows(OasisEnv.__doc__ or "")]
+    assert readme and readme == docstring
+
+
+@pytest.fixture(scope="module")
+def small_env() -> OasisEnv:
+    # Specs come from the layout: nothing is opened, so no server starts.
+    return OasisEnv("local", num_envs=2, server=ServerConfig(width=96, height=64))
+
+
+def test_env_card_matches_the_specs(small_env: OasisEnv) -> None:
+    sizes = {"N": 2, "H": 64, "W": 96}
+    specs = small_env.full_action_spec.clone().update(small_env.observation_spec)
+    for row in card_rows(OasisEnv.__doc__ or ""):
+        # ("pixels", camera): quoted parts are names, bare ones stand for every name there.
+        pattern = tuple(part.strip() for part in row["key"].strip("()").split(","))
+        keys = [
+            key if isinstance(key, tuple) else (key,)
+            for key in specs.keys(include_nested=True, leaves_only=True)
+        ]
+        matching = [
+            key
+            for key in keys
+            if len(key) == len(pattern)
+            and all(
+                f'"{part}"' == want or not want.startswith('"')
+                for part, want in zip(key, pattern, strict=True)
+            )
+        ]
+        assert matching, row["key"]
+        shape = tuple(int(sizes.get(dim, dim)) for dim in row["shape"].replace(" ", "").split(","))
+        for key in matching:
+            spec = specs[key]
+            assert tuple(spec.shape) == shape, (key, spec.shape)
+            assert spec.dtype == getattr(torch, row["dtype"]), (key, spec.dtype)
+            bounded = re.fullmatch(r"Bounded\((?P<low>[-\d.]+), (?P<high>[-\d.]+)\)", row["spec"])
+            if bounded:
+                assert spec.space.low.min().item() == float(bounded["low"]), key
+                assert spec.space.high.max().item() == float(bounded["high"]), key
+            else:
+                assert row["spec"] == "Unbounded" and "Unbounded" in type(spec).__name__, key
+
+
+def section(text: str, heading: str) -> str:
+    start = text.index(f"## {heading}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start : end if end >= 0 else None]
+
+
+def test_readme_and_docs_home_say_the_same_about_where_features_work() -> None:
+    home = (ROOT / "docs" / "index.md").read_text()
+    table = [
+        line for line in section(README, "Where each feature works").splitlines() if "|" in line
+    ]
+    assert table
+    assert table == [
+        line for line in section(home, "Where each feature works").splitlines() if "|" in line
+    ]
