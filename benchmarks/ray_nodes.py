@@ -10,7 +10,7 @@ network namespaces on this machine (:mod:`oasis_torchrl.distributed.namespace_cl
 
 Prints JSON with both ratios. Every driver runs inside the head's namespace.
 
-    python benchmarks/ray_nodes.py --episodes 16 --batches 4
+    python benchmarks/ray_nodes.py --episodes 16 --batches 4 [--parts recording ppo]
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import csv
 import json
 import logging
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -33,14 +34,19 @@ from oasis_torchrl.distributed.namespace_cluster import NamespaceCluster, unavai
 logger = logging.getLogger(__name__)
 
 RUN_TIMEOUT_S = 1200.0
+PARTS = ["recording", "ppo"]
 
 
 def oasis(*args: str) -> list[str]:
     return [sys.executable, "-m", "oasis_torchrl", "--log-level", "INFO", *args]
 
 
-def _stamp(line: str) -> datetime:
-    return datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f")
+LOG_LINE = re.compile(r"(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) ([^\r\n]*)")
+"""A record of the driver's log: its time stamp and its text."""
+
+
+def _stamp(stamp: str) -> datetime:
+    return datetime.strptime(stamp, "%Y-%m-%d %H:%M:%S,%f")
 
 
 def recording_rate(node_cpus: tuple[int, ...], args: argparse.Namespace, work: Path) -> dict:
@@ -54,12 +60,12 @@ def recording_rate(node_cpus: tuple[int, ...], args: argparse.Namespace, work: P
         run = cluster.run(oasis(*command, "--ray-address", cluster.address), timeout=RUN_TIMEOUT_S)
     if run.returncode != 0:
         raise RuntimeError(f"recording on {node_cpus} failed: {run.stdout[-3000:]}")
-    lines = [line for line in run.stdout.splitlines() if line[:2] == "20"]  # timestamped
-    placed = next(line for line in lines if "collectors placed" in line)
-    seconds = (_stamp(lines[-1]) - _stamp(placed)).total_seconds()
+    entries = LOG_LINE.findall(run.stdout)  # progress bars share lines with the log's
+    placed = next((stamp, text) for stamp, text in entries if "collectors placed" in text)
+    seconds = (_stamp(entries[-1][0]) - _stamp(placed[0])).total_seconds()
     return {
         "node_cpus": list(node_cpus),
-        "placement": placed.split("collectors placed in ", 1)[1],
+        "placement": placed[1].split("collectors placed in ", 1)[1],
         "episodes": args.episodes,
         "seconds": round(seconds, 2),
         "episodes_per_s": round(args.episodes / seconds, 3),
@@ -119,6 +125,9 @@ def main() -> None:
     parser.add_argument("--batch-steps", type=int, default=4, help="PPO steps per session")
     parser.add_argument("--width", type=int, default=96)
     parser.add_argument("--height", type=int, default=64)
+    parser.add_argument(
+        "--parts", nargs="+", choices=PARTS, default=PARTS, help="what to measure (both)"
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO)
     reason = unavailable_reason()
@@ -126,27 +135,25 @@ def main() -> None:
         raise SystemExit(f"cannot build the clusters: {reason}")
     with tempfile.TemporaryDirectory(prefix="ray-nodes-") as folder:
         work = Path(folder)
-        measured = []
-        for measure in (
-            lambda: recording_rate((1, 1), args, work),
-            lambda: recording_rate((2,), args, work),
-            lambda: ppo_collect_seconds(True, args, work),
-            lambda: ppo_collect_seconds(False, args, work),
-        ):
-            measured.append(measure())
-            logger.info("measured %s", json.dumps(measured[-1]))  # kept if a later one fails
-        two, one, remote, local = measured
-    result: dict[str, Any] = {
-        "recording_two_nodes": two,
-        "recording_one_node": one,
-        "recording_rate_ratio_two_vs_one": round(two["episodes_per_s"] / one["episodes_per_s"], 3),
-        "ppo_remote": remote,
-        "ppo_local": local,
-        "ppo_collect_ratio_remote_vs_local": round(
-            remote["collect_s_per_batch"] / local["collect_s_per_batch"], 3
-        ),
-    }
+        result: dict[str, Any] = {}
+        if "recording" in args.parts:
+            two = _logged(recording_rate((1, 1), args, work))
+            one = _logged(recording_rate((2,), args, work))
+            result["recording_two_nodes"], result["recording_one_node"] = two, one
+            ratio = two["episodes_per_s"] / one["episodes_per_s"]
+            result["recording_rate_ratio_two_vs_one"] = round(ratio, 3)
+        if "ppo" in args.parts:
+            remote = _logged(ppo_collect_seconds(True, args, work))
+            local = _logged(ppo_collect_seconds(False, args, work))
+            result["ppo_remote"], result["ppo_local"] = remote, local
+            ratio = remote["collect_s_per_batch"] / local["collect_s_per_batch"]
+            result["ppo_collect_ratio_remote_vs_local"] = round(ratio, 3)
     print(json.dumps(result, indent=2))
+
+
+def _logged(figures: dict) -> dict:
+    logger.info("measured %s", json.dumps(figures))  # kept if a later measurement fails
+    return figures
 
 
 if __name__ == "__main__":

@@ -251,6 +251,8 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.distributed.ray_recording",
             "oasis_torchrl.distributed.sharded_recording",
             "oasis_torchrl.distributed.merge",
+            "oasis_torchrl.distributed.placement",
+            "oasis_torchrl.distributed.namespace_cluster",
         ),
     ),
     "protocol": ApiPage(

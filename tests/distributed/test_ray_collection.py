@@ -126,6 +126,7 @@ def test_shards_merge_into_one_dataset_keeping_the_lost_workers_parts(run: Run) 
     assert dataset[len(dataset) - 1]["observation.images.front"].shape == (3, HEIGHT, WIDTH)
 
 
+@pytest.mark.timeout(600)  # 153 s alone, past 300 s on a loaded 2-core machine
 def test_a_killed_worker_stops_the_run_cleanly(tmp_path: Path, caplog) -> None:
     collection, _ = make_collection(tmp_path, on_failure="stop")
     batches = iter(collection)
