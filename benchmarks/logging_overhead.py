@@ -9,7 +9,16 @@ shared machine the load drifts between blocks, so besides the totals the report 
 of the per-round slowdowns, which one load spike cannot move much.
 Target: at most 10% slower with the logger.
 
-Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 4 --rounds 8]``; prints JSON.
+With ``--side-by-side`` it measures instead what recording policies side by side costs: the
+evaluation of two policies (the autopilot and a constant throttle) on the same seeds, unlogged
+(one ``Evaluator`` per policy, as ``oasis-torchrl eval`` runs without ``rerun``) against the same
+evaluation recorded side by side into one ``.rrd``
+(:func:`~oasis_torchrl.train.evaluate.evaluate_side_by_side`, ``eval compare=[...]``), in
+alternating rounds; env start-up is inside both timings, as a user pays it.
+
+Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 4 --rounds 8]`` or
+``python benchmarks/logging_overhead.py --side-by-side [--envs 4 --steps 30 --rounds 2]``;
+prints JSON.
 """
 
 from __future__ import annotations
@@ -25,12 +34,15 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 
+from oasis_torchrl.config import load_config
+from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.viz import LogOptions, RerunTransform, RolloutLogger
 
 PROMPTS = ["urban street", "rural road", "highway at sunset", "city at night"]
 TARGET_MAX_SLOWDOWN = 0.10
+SIDE_BY_SIDE_POLICIES = ("autopilot", "constant:throttle=0.6,steering=0.0")
 
 
 def run_block(
@@ -74,6 +86,49 @@ def measure(args: argparse.Namespace, rrd: Path) -> dict[str, list[float]]:
     return seconds
 
 
+def measure_side_by_side(args: argparse.Namespace, folder: Path) -> dict[str, list[float]]:
+    """Seconds of each unlogged and each side-by-side evaluation, over ``rounds`` pairs."""
+    from oasis_torchrl.train.evaluate import Evaluator, evaluate_side_by_side
+
+    settings = [f"episodes={args.envs}", f"max_steps={args.steps}", "seeds=[1000]"]
+    settings.append(f"env.image_size=[{args.height},{args.width}]")
+    drivers = {spec: load_driver(spec) for spec in SIDE_BY_SIDE_POLICIES}
+    seconds: dict[str, list[float]] = {"unlogged": [], "side_by_side": []}
+    for index in range(args.rounds):
+        cfg = load_config("eval", settings)
+        started = time.perf_counter()
+        for driver in drivers.values():
+            with Evaluator.for_driver(cfg.env, cfg, driver, progress=False) as evaluator:
+                evaluator.evaluate(driver)
+        seconds["unlogged"].append(time.perf_counter() - started)
+        cfg = load_config("eval", [*settings, f"rerun={folder / f'pair{index}.rrd'}"])
+        started = time.perf_counter()
+        evaluate_side_by_side(cfg.env, cfg, drivers, progress=False)
+        seconds["side_by_side"].append(time.perf_counter() - started)
+    return seconds
+
+
+def side_by_side_report(args: argparse.Namespace) -> dict:
+    """The side-by-side overhead as a JSON-ready report."""
+    with tempfile.TemporaryDirectory() as folder:
+        seconds = measure_side_by_side(args, Path(folder))
+        rrd_bytes = sum(path.stat().st_size for path in Path(folder).glob("*.rrd"))
+    ratios = [g / b for b, g in zip(seconds["unlogged"], seconds["side_by_side"], strict=True)]
+    return {
+        "benchmark": "logging_overhead_side_by_side",
+        "policies": list(SIDE_BY_SIDE_POLICIES),
+        "episodes_per_policy": args.envs,
+        "max_steps": args.steps,
+        "policy_frame_size": [args.height, args.width],
+        "rounds": args.rounds,
+        "seconds_unlogged": [round(s, 2) for s in seconds["unlogged"]],
+        "seconds_side_by_side": [round(s, 2) for s in seconds["side_by_side"]],
+        "time_ratio": round(sum(seconds["side_by_side"]) / sum(seconds["unlogged"]), 3),
+        "median_round_ratio": round(statistics.median(ratios), 3),
+        "rrd_bytes_per_recording": round(rrd_bytes / args.rounds),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", type=int, default=4, choices=range(1, len(PROMPTS) + 1))
@@ -82,7 +137,17 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=4, help="steps per block")
     parser.add_argument("--rounds", type=int, default=8, help="bare/logged block pairs")
     parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument(
+        "--side-by-side",
+        action="store_true",
+        help="time an evaluation of two policies recorded side by side against it unlogged "
+        "(--envs episodes per policy, --steps its max steps, --width/--height the policy's "
+        "frames: use e.g. --width 96 --height 64)",
+    )
     args = parser.parse_args()
+    if args.side_by_side:
+        print(json.dumps(side_by_side_report(args), indent=2))
+        return
     with tempfile.TemporaryDirectory() as folder:
         rrd = Path(folder) / "overhead.rrd"
         seconds = measure(args, rrd)

@@ -18,6 +18,12 @@ misbehaving on a layout it does not know). What is used, and why no public API d
 - TorchRL's ``RayCollector`` (:func:`drop_ray_collectors`): it can add remote collectors but not
   remove one, so after a worker died the survivors are kept by rewriting its actor list and
   those of its weight senders.
+- TorchRL's Ray weight sync (:func:`ray_weight_sync_scheme`): the learner publishes the address
+  its hostname resolves to, and every rank's gloo device binds to it; on the many hosts whose
+  hostname maps to a loopback address (Debian's and Ubuntu's 127.0.1.1) collectors on other
+  nodes then cannot reach the learner. TorchRL has no setting for it, so the scheme runs its
+  set-up with this node's cluster address as Ray knows it (``ray.util.get_node_ip_address()``)
+  in place of the hostname and gloo on that address's interface (``GLOO_SOCKET_IFNAME``).
 - LeRobot's episode announcements (:func:`on_lerobot_episode_start`): a robot has no hook for
   the start of an episode, but ``lerobot-record`` and ``lerobot-rollout``'s episodic strategy
   announce each one with ``log_say("Recording episode N")`` (a root-logger INFO record); the oasis
@@ -31,12 +37,16 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.metadata
 import logging
+import os
 import re
+import socket
 import time
-from collections.abc import Callable, Sequence
+import types
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 SUPPORTED: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
@@ -233,9 +243,12 @@ def count_image_statistics() -> None:
 
 
 def __getattr__(name: str) -> Any:
-    # CountedImageStats is built lazily (importing this module must not import LeRobot).
+    # The subclasses are built lazily (importing this module must not import LeRobot or
+    # TorchRL); the names resolve here so that pickles of their instances find them.
     if name == "CountedImageStats":
         return _counted_image_stats()
+    if name == "NodeAddressRayWeightSyncScheme":
+        return _node_address_scheme()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -256,6 +269,84 @@ def drop_ray_collectors(collector: Any, keep: Sequence[int]) -> None:
     for scheme in (collector._weight_sync_schemes or {}).values():
         scheme._remote_collectors = list(actors)
         scheme._num_workers = len(actors)
+
+
+# -- TorchRL: the address Ray weight sync listens and connects on --------------------------------
+
+GLOO_INTERFACE_VARIABLE = "GLOO_SOCKET_IFNAME"
+"""The variable naming the network interface of gloo's device (read when a group is made)."""
+
+
+def _interface_of(address: str) -> str | None:
+    """Name of this machine's network interface holding IPv4 ``address`` (None: none does)."""
+    import psutil  # a TorchRL dependency
+
+    for name, entries in psutil.net_if_addrs().items():
+        if any(entry.family == socket.AF_INET and entry.address == address for entry in entries):
+            return name
+    return None
+
+
+@contextlib.contextmanager
+def _on_ray_node_address() -> Iterator[str]:
+    """Within it, TorchRL's Ray weight sync takes this node's cluster address (as Ray knows it)
+    for its hostname's address, and gloo's device binds to that address's interface (unless
+    ``GLOO_SOCKET_IFNAME`` is already set). Yields the address."""
+    require("torchrl")
+    import ray
+    from torchrl.weight_update import _ray as ray_weight_sync
+
+    address = ray.util.get_node_ip_address()
+    interface = _interface_of(address)
+    set_interface = interface is not None and GLOO_INTERFACE_VARIABLE not in os.environ
+    hostname_module = ray_weight_sync.socket
+    ray_weight_sync.socket = types.SimpleNamespace(
+        gethostname=lambda: address,  # an address resolves to itself
+        gethostbyname=socket.gethostbyname,
+        gaierror=socket.gaierror,
+    )
+    if set_interface:
+        os.environ[GLOO_INTERFACE_VARIABLE] = interface
+    try:
+        yield address
+    finally:
+        ray_weight_sync.socket = hostname_module
+        if set_interface:
+            del os.environ[GLOO_INTERFACE_VARIABLE]
+
+
+@functools.cache
+def _node_address_scheme() -> type:
+    require("torchrl")
+    from torchrl.weight_update import RayWeightSyncScheme
+
+    class NodeAddressRayWeightSyncScheme(RayWeightSyncScheme):
+        """TorchRL's Ray weight sync, reached at each node's cluster address."""
+
+        def _setup_distributed_connection_sender(self, *args: Any, **kwargs: Any) -> None:
+            with _on_ray_node_address():
+                super()._setup_distributed_connection_sender(*args, **kwargs)
+
+        def _setup_connection_and_weights_on_receiver_impl(self, *args: Any, **kwargs: Any) -> None:
+            with _on_ray_node_address():
+                super()._setup_connection_and_weights_on_receiver_impl(*args, **kwargs)
+
+    NodeAddressRayWeightSyncScheme.__module__ = __name__
+    NodeAddressRayWeightSyncScheme.__qualname__ = NodeAddressRayWeightSyncScheme.__name__
+    return NodeAddressRayWeightSyncScheme
+
+
+def ray_weight_sync_scheme() -> Any:
+    """TorchRL's ``RayWeightSyncScheme`` whose learner and collectors meet at their nodes'
+    cluster addresses, whatever each node's hostname resolves to.
+
+    Example:
+        >>> import pickle
+        >>> scheme = ray_weight_sync_scheme()
+        >>> type(pickle.loads(pickle.dumps(scheme))).__name__
+        'NodeAddressRayWeightSyncScheme'
+    """
+    return _node_address_scheme()()
 
 
 # -- LeRobot: the episode announcements of its recording loops -----------------------------------

@@ -7,6 +7,7 @@ methods submit a coroutine and wait for the result.
 from __future__ import annotations
 
 import asyncio
+import inspect
 import threading
 from collections.abc import Coroutine
 from typing import Any, TypeVar
@@ -40,11 +41,16 @@ class EventLoopThread:
         if threading.current_thread() is self._thread:
             coroutine.close()
             raise RuntimeError("a blocking call was made from the pool's own event loop thread")
-        future = asyncio.run_coroutine_threadsafe(coroutine, self._loop)
+        try:
+            future = asyncio.run_coroutine_threadsafe(coroutine, self._loop)
+        except RuntimeError:  # the loop is closed: the coroutine will never run
+            coroutine.close()
+            raise
         try:
             return future.result()
         except BaseException:
-            future.cancel()
+            if future.cancel() and inspect.getcoroutinestate(coroutine) == inspect.CORO_CREATED:
+                coroutine.close()  # cancelled before the loop started it: it never will
             raise
 
     def stop(self) -> None:

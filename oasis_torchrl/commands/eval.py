@@ -17,6 +17,11 @@ On an endpoint that sends frames only (the hosted service) the report holds what
 (return under the reference's depth-collision reward, episode length, likely-collision
 terminations, the reference's progress term; ``ground_truth: false``), and ``vs_baseline`` is
 the unpaired (Welch) difference in mean return: such an endpoint ignores seeds.
+
+With ``compare=[autopilot]`` and ``rerun=pair.rrd`` the other policies
+drive the same seeds too, recorded side by side with the policy (their aggregates under
+``compared``): ``oasis-torchrl eval policy=outputs/bc/policy compare=[autopilot]
+rerun=pair.rrd``.
 """
 
 from __future__ import annotations
@@ -49,17 +54,28 @@ def run(cfg: DictConfig) -> int:
     """
     from oasis_torchrl.drivers import load_driver
     from oasis_torchrl.remote import RemotePolicyError
-    from oasis_torchrl.train.evaluate import Evaluator, load_report
+    from oasis_torchrl.train.evaluate import Evaluator, evaluate_side_by_side, load_report
 
+    compared: dict[str, Any] = {}
     try:
         baseline = load_report(cfg.baseline) if cfg.baseline else None
-        driver = load_driver(cfg.policy)
-        with Evaluator.for_driver(cfg.env, cfg, driver) as evaluator:
-            report = evaluator.evaluate(driver)
+        if cfg.compare:
+            if not cfg.rerun:
+                raise ValueError("compare records policies side by side: set rerun=<file>.rrd")
+            drivers = {str(spec): load_driver(spec) for spec in [cfg.policy, *cfg.compare]}
+            reports = evaluate_side_by_side(cfg.env, cfg, drivers)
+            report = reports.pop(str(cfg.policy))
+            compared = {spec: other.summary() for spec, other in reports.items()}
+        else:
+            driver = load_driver(cfg.policy)
+            with Evaluator.for_driver(cfg.env, cfg, driver) as evaluator:
+                report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)
         return 2
     extra: dict[str, Any] = {"policy": str(cfg.policy)}
+    if compared:
+        extra["compared"] = compared
     code = 0
     if baseline is not None:
         try:

@@ -1,4 +1,5 @@
-"""``oasis-torchrl view PATH``: show an ``.rrd``, a saved rollout or a LeRobot dataset in rerun
+"""``oasis-torchrl view PATH``: show an ``.rrd``, a saved rollout or a LeRobot dataset in rerun;
+``oasis-torchrl view A.rrd B.rrd``: two recordings side by side on one timeline
 (settings: :class:`~oasis_torchrl.config.viewing.ViewConfig`)."""
 
 from __future__ import annotations
@@ -50,6 +51,17 @@ def _replay_rollout(cfg: ViewConfig) -> None:
         replay_rollout(cfg.path, rollout_logger)
 
 
+def _align(cfg: ViewConfig) -> None:
+    from oasis_torchrl.viz.replay import RRD, source_kind
+    from oasis_torchrl.viz.side_by_side import align_recordings
+
+    for path in (cfg.path, cfg.beside):
+        if source_kind(path) != RRD:
+            raise ValueError(f"side by side needs two .rrd recordings; {path} is not one")
+    roots = align_recordings([cfg.path, cfg.beside], cfg.target)
+    logger.info("side by side: %s", ", ".join(f"{path} as {root}" for path, root in roots.items()))
+
+
 def run(settings: DictConfig) -> int:
     """Open, replay or convert PATH; exit code 2 for bad input.
 
@@ -63,7 +75,9 @@ def run(settings: DictConfig) -> int:
     cfg: ViewConfig = to_object(settings)
     try:
         kind = source_kind(cfg.path)
-        if kind == RRD:
+        if cfg.beside is not None:
+            _align(cfg)
+        elif kind == RRD:
             if cfg.save is not None or cfg.connect is not None:
                 raise ValueError(f"{cfg.path} is already a recording: open it without --save")
             open_in_viewer(cfg.path, **_given(cfg, "memory_limit"))

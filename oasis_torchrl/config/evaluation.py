@@ -20,6 +20,16 @@ class EvaluationConfig:
         None, help="record the episodes: an .rrd path, 'spawn' or a viewer URL"
     )
     lerobot: str | None = option(None, help="also record them as a LeRobot dataset here")
+    compare: list[str] = option(
+        default_factory=list,
+        help="more driver specs recorded side by side with the evaluated policy, on the same "
+        "seeds, into eval.rerun (the main job: among the policies it evaluates)",
+    )
+    divergence: float = option(
+        0.25,
+        help="side by side: throttle or steering further apart than this marks the first step "
+        "where a policy leaves the first one",
+    )
 
     def __post_init__(self) -> None:
         if self.episodes < 0 or self.max_steps < 1:

@@ -31,6 +31,7 @@ def _named() -> dict[str, type]:
     from oasis_torchrl.config.serving import ServeConfig
     from oasis_torchrl.config.training import BCConfig, PPOConfig
     from oasis_torchrl.config.viewing import DriveConfig, ViewConfig
+    from oasis_torchrl.config.web import PlayConfig
 
     return {
         "bc": BCConfig,
@@ -38,6 +39,7 @@ def _named() -> dict[str, type]:
         "drive": DriveConfig,
         "eval": EvalConfig,
         "import-recordings": ImportConfig,
+        "play": PlayConfig,
         "ppo": PPOConfig,
         "record": RecordConfig,
         "serve": ServeConfig,

@@ -180,8 +180,9 @@ class DemoConfig:
     )
     eval: PipelineEvaluationConfig = option(
         default_factory=lambda: PipelineEvaluationConfig(
-            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd"
+            episodes=16, max_steps=150, rerun="${output_dir}/eval.rrd", compare=["autopilot"]
         ),
-        help="the final comparison (the final policy's episodes are recorded)",
+        help="the final comparison (the final policy's episodes are recorded, side by side with "
+        "the autopilot's)",
     )
     progress: bool = option(True, help="tqdm progress bars")

@@ -23,6 +23,29 @@ RAY_ALIASES = {
 """Short flags of the ``ray`` section of a command that records or collects on Ray."""
 
 
+def parse_resources(entries: list[str]) -> dict[str, float]:
+    """Ray's resource dict of ``name=amount`` entries.
+
+    Example:
+        >>> parse_resources(["gpu_box=1"])
+        {'gpu_box': 1.0}
+        >>> parse_resources(["gpu_box"])
+        Traceback (most recent call last):
+        ...
+        ValueError: ray.resources_per_collector entries are name=amount, got 'gpu_box'
+    """
+    resources = {}
+    for entry in entries:
+        name, _, amount = entry.partition("=")
+        try:
+            resources[name.strip()] = float(amount)
+        except ValueError:
+            raise ValueError(
+                f"ray.resources_per_collector entries are name=amount, got {entry!r}"
+            ) from None
+    return resources
+
+
 @dataclass(frozen=True)
 class RayCollectionConfig:
     """Where and how wide Ray collection runs (each field's help says what it sets).
@@ -51,6 +74,19 @@ class RayCollectionConfig:
         "server: all envs share it",
     )
     cpus_per_collector: float = option(1.0, help="Ray CPUs reserved per actor")
+    memory_per_collector: int | None = option(
+        None, help="bytes of Ray memory reserved per actor (null: none reserved)"
+    )
+    resources_per_collector: list[str] = option(
+        default_factory=list,
+        help="custom Ray resources reserved per actor, as name=amount, e.g. [gpu_box=1] (nodes "
+        "started with ray start --resources)",
+    )
+    startup_timeout_s: float = option(
+        120.0,
+        help="seconds to reach the cluster and place every actor before the run stops, naming "
+        "what was asked and what the cluster has",
+    )
     num_cpus: int | None = option(None, help="local runtime only: CPUs Ray may use (null: all)")
     object_store_memory: int | None = option(
         None, help="local runtime only: bytes of object store (null: Ray's default)"
@@ -78,12 +114,20 @@ class RayCollectionConfig:
             )
         if self.part_batches < 0:
             raise ValueError(f"ray.part_batches must be >= 0, got {self.part_batches}")
+        parse_resources(self.resources_per_collector)  # a malformed entry raises here
+        if self.startup_timeout_s <= 0:
+            raise ValueError(f"ray.startup_timeout_s must be > 0, got {self.startup_timeout_s}")
         if self.shard_root is not None and self.envs_per_collector != 1:
             # The hook would run in each env's subprocess, all writing the same shard.
             raise ValueError(
                 f"ray.shard_root needs ray.envs_per_collector=1, got {self.envs_per_collector}; "
                 "widen with sessions_per_env or num_collectors instead"
             )
+
+    @property
+    def custom_resources(self) -> dict[str, float]:
+        """``resources_per_collector`` as Ray's resource dict (see :func:`parse_resources`)."""
+        return parse_resources(self.resources_per_collector)
 
     @property
     def total_sessions(self) -> int:
@@ -112,10 +156,30 @@ class RayCollectionConfig:
         return kwargs
 
     def remote_config(self) -> dict[str, Any]:
-        """Ray resources of one collector actor.
+        """Ray resources of one collector actor (``ray.remote`` options).
 
         Example:
             >>> RayCollectionConfig(cpus_per_collector=0.5).remote_config()
             {'num_cpus': 0.5, 'num_gpus': 0}
+            >>> RayCollectionConfig(memory_per_collector=2**30, resources_per_collector=["box=1"]
+            ...                     ).remote_config()
+            {'num_cpus': 1.0, 'num_gpus': 0, 'memory': 1073741824, 'resources': {'box': 1.0}}
         """
-        return {"num_cpus": self.cpus_per_collector, "num_gpus": 0}
+        options: dict[str, Any] = {"num_cpus": self.cpus_per_collector, "num_gpus": 0}
+        if self.memory_per_collector is not None:
+            options["memory"] = self.memory_per_collector
+        if self.custom_resources:
+            options["resources"] = self.custom_resources
+        return options
+
+    def bundle(self) -> dict[str, float]:
+        """The resources of one collector as a Ray placement-group bundle.
+
+        Example:
+            >>> RayCollectionConfig(memory_per_collector=100, resources_per_collector=["box=1"]
+            ...                     ).bundle()
+            {'CPU': 1.0, 'memory': 100, 'box': 1.0}
+        """
+        bundle = {"CPU": self.cpus_per_collector, "memory": self.memory_per_collector}
+        bundle.update(self.custom_resources)
+        return {name: amount for name, amount in bundle.items() if amount}

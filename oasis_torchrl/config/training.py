@@ -496,6 +496,11 @@ class DepthTrainConfig:
     batch_size: int = option(32, help="frames per step")
     lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
     weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    near_weight: float = option(
+        0.0,
+        help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
+        "normalised nearness (0: every pixel alike)",
+    )
     validation: float = option(
         0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
     )
@@ -526,6 +531,8 @@ class DepthTrainConfig:
         for name, value in positive.items():
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
+        if self.near_weight < 0:
+            raise ValueError(f"near_weight must be >= 0, got {self.near_weight}")
         if not 0.0 <= self.validation < 1.0:
             raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
         if not self.drivers or not self.prompts:

@@ -31,12 +31,20 @@ def parse_indices(text: str) -> list[int]:
 class ViewConfig:
     """``oasis-torchrl view PATH``: an ``.rrd`` (opened in the native viewer), a LeRobot dataset
     folder or a rollout saved with ``oasis_torchrl.viz.replay.save_rollout``, shown in a spawned
-    rerun viewer, sent to a running one (``--connect``) or saved (``--save out.rrd``)."""
+    rerun viewer, sent to a running one (``--connect``) or saved (``--save out.rrd``); two
+    ``.rrd`` files are laid out side by side."""
 
     path: str = option(
         REQUIRED,
         help=".rrd file, LeRobot dataset folder or saved rollout folder",
         positional=True,
+    )
+    beside: str | None = option(
+        None,
+        help="a second .rrd file: both recordings are laid out side by side on one timeline, "
+        "where their actions diverge marked",
+        positional=True,
+        metavar="B.rrd",
     )
     episodes: list[int] | None = option(
         None, help="dataset episodes to show, e.g. 0,3,5 (null: all)", parse=parse_indices
@@ -64,6 +72,11 @@ class ViewConfig:
     def __post_init__(self) -> None:
         if self.save is not None and self.connect is not None:
             raise ValueError("--save and --connect exclude each other: give one")
+        if self.beside is not None and "=" in self.beside and not self.beside.endswith(".rrd"):
+            raise ValueError(
+                f"{self.beside!r} stands where a second .rrd goes: give view's settings as flags "
+                "(--rows 0,5), not KEY=VALUE"
+            )
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be in 1-100, got {self.jpeg_quality}")
 

@@ -23,6 +23,9 @@ dataset fps = world fps / 4 (5): one row per step, image = last frame of ``O_t``
 ``state`` of ``O_t``, action = the chunk flattened ``[t0, s0, ..., t3, s3]`` (or the single
 ``[throttle, steering]`` of an env with ``chunk_actions=False``), reward ``r_t``, done ``d_t``.
 
+A batch with an ``"intervention"`` key (bool ``[..., T, 1]``: a person drove the step over a
+policy) adds the ``intervention`` column, the step's flag on each of its rows.
+
 So the chunk reward sits on the row whose action completes the chunk (sums over an episode are
 preserved), every row's action is the one applied next, and the reset observation is row 0 of
 each episode. The observation after the last step has no next action and is not stored: an
@@ -41,7 +44,7 @@ import torch
 from lerobot.utils.constants import ACTION, DONE, OBS_STATE, REWARD
 from tensordict import NonTensorData, TensorDictBase
 
-from oasis_torchrl.data.features import SEED_KEY, DatasetLayout, image_key
+from oasis_torchrl.data.features import INTERVENTION_KEY, SEED_KEY, DatasetLayout, image_key
 from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY, privileged_state
 from oasis_torchrl.protocol import CAMERAS, CHUNK
@@ -130,7 +133,13 @@ def infer_layout(
     chunked = action.dim() == 4
     actions_per_row = 1 if frame_rows or not chunked else action.shape[-2]
     size = image_size or tuple(pixels.shape[-3:-1])
-    return DatasetLayout(cameras, size, actions_per_row=actions_per_row, with_privileged=privileged)
+    return DatasetLayout(
+        cameras,
+        size,
+        actions_per_row=actions_per_row,
+        with_privileged=privileged,
+        with_intervention=INTERVENTION_KEY in steps.keys(),
+    )
 
 
 def rows_per_step(batch: TensorDictBase) -> int:
@@ -282,6 +291,11 @@ def batch_to_rows(
     columns[DONE] = _on_last_row(done.bool(), rows).numpy()
     if layout.with_privileged:
         columns[PRIVILEGED_KEY] = _privileged(steps, rows).numpy()
+    if layout.with_intervention:
+        flags = _get(steps, INTERVENTION_KEY, "who drove each step").cpu().bool()
+        columns[INTERVENTION_KEY] = (
+            flags.reshape(*steps.batch_size, 1, 1).expand(-1, -1, rows, 1).numpy()
+        )
     seeds = _get(steps, SEED_KEY, "the world seed of each episode").cpu().reshape(*steps.batch_size)
     if layout.with_seed:
         columns[SEED_KEY] = seeds.reshape(*steps.batch_size, 1, 1).expand(-1, -1, rows, 1).numpy()

@@ -24,6 +24,9 @@ key                                dtype       shape          meaning
                                                               distances in the path and in the
                                                               lanes; scaled): an auxiliary
                                                               target, no policy input
+``intervention``                   bool        ``(1,)``       on request, a person drove this row
+                                                              over a policy (LeRobot's DAgger
+                                                              convention, ``lerobot-rollout``)
 ``task``                           string                     the episode's prompt
 =================================  ==========  =============  =====================================
 
@@ -55,6 +58,9 @@ from oasis_torchrl.protocol import ACTION_NAMES as WIRE_NAMES
 from oasis_torchrl.protocol import CHUNK
 
 SEED_KEY = "episode_seed"
+INTERVENTION_KEY = "intervention"
+"""Rows a person drove while a policy was in charge: the name and type ``lerobot-rollout``'s
+DAgger strategy gives its corrections."""
 VELOCITY_SUFFIX = ".vel"
 ACTION_NAMES = tuple(f"{name}{VELOCITY_SUFFIX}" for name in WIRE_NAMES)
 """Dataset names of ``[throttle, steering]`` (state and action)."""
@@ -86,6 +92,7 @@ class DatasetLayout:
         with_seed: include ``episode_seed``.
         with_privileged: include ``privileged_state`` (needs the embedded server's ground
             truth; :mod:`oasis_torchrl.models.privileged`).
+        with_intervention: include ``intervention`` (a person took over from a policy).
 
     Example:
         >>> layout = DatasetLayout(("front",), (48, 64), actions_per_row=1)
@@ -100,6 +107,7 @@ class DatasetLayout:
     with_reward: bool = True
     with_seed: bool = True
     with_privileged: bool = False
+    with_intervention: bool = False
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -155,6 +163,8 @@ def build_features(layout: DatasetLayout) -> dict[str, Feature]:
             "shape": (len(PRIVILEGED_FIELDS),),
             "names": list(PRIVILEGED_FIELDS),
         }
+    if layout.with_intervention:
+        features[INTERVENTION_KEY] = {"dtype": "bool", "shape": (1,), "names": None}
     return features
 
 

@@ -12,9 +12,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import av
 import numpy as np
+
+if TYPE_CHECKING:
+    from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
 
 
 class MissingFrameError(ValueError):
@@ -73,3 +77,20 @@ def frames_at(
             if index == wanted.size:
                 return
     raise MissingFrameError(f"{path} has no frame within {tolerance_s:g} s of {wanted[index]:g} s")
+
+
+def episode_frames(
+    meta: LeRobotDatasetMetadata, episode: int, key: str, count: int | None = None
+) -> Iterator[np.ndarray]:
+    """The frames of one episode in the video of feature ``key`` (the first ``count``; None:
+    the episode's length), decoded in one pass with :func:`frames_at`.
+
+    Example (``meta`` a ``LeRobotDatasetMetadata``):
+        >>> frames = episode_frames(meta, 0, "observation.images.front")  # doctest: +SKIP
+    """
+    row = meta.episodes[episode]
+    start = float(row[f"videos/{key}/from_timestamp"])
+    count = int(row["length"]) if count is None else count
+    path = Path(meta.root) / meta.get_video_file_path(episode, key)
+    times = start + np.arange(count) / meta.fps
+    yield from frames_at(path, times, tolerance_s=0.5 / meta.fps)

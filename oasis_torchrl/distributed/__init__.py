@@ -5,10 +5,13 @@
   from :func:`env_factory`.
 - :class:`ShardRecorder`: one worker's LeRobot shard; :func:`merge_shards`: one dataset from all.
 - :func:`record_on_ray`: record a dataset on Ray workers and merge it (``record --ray``).
+- :class:`ClusterStartupError`: a cluster that cannot be reached or cannot place the
+  collectors within ``ray.startup_timeout_s``.
 """
 
 from oasis_torchrl.config.ray import RayCollectionConfig
 from oasis_torchrl.distributed.merge import complete_shards, merge_shards
+from oasis_torchrl.distributed.placement import ClusterStartupError
 from oasis_torchrl.distributed.ray_collection import (
     RayCollection,
     WorkerLostError,
@@ -19,6 +22,7 @@ from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER, ShardRe
 
 __all__ = [
     "COMPLETE_MARKER",
+    "ClusterStartupError",
     "RayCollection",
     "RayCollectionConfig",
     "RayRecording",

@@ -3,16 +3,21 @@
 Every Ray actor runs a TorchRL collector over its own env(s); each ``OasisEnv`` opens its own
 channel in the actor (and, for ``endpoint="local"``, its own embedded server, or all share the
 ``server_address`` of one ``oasis-torchrl serve``). Every actor's env is seeded differently (from
-one run seed), so workers never drive the same worlds. Weights travel as TorchRL sends them
-(``RayWeightSyncScheme``). :class:`RayCollection` adds what a run needs around it: per-worker
-LeRobot shards (optionally up to an episode count split over the workers), and a lost worker
-reported and then either dropped (``on_failure="continue"``) or the run stopped cleanly
-(``"stop"``), with every surviving shard finalized either way. In sync mode the round in which a
-worker dies is not yielded (the survivors' part of it is still recorded in their shards).
+one run seed), so workers never drive the same worlds. Weights travel as TorchRL sends them (its Ray
+weight sync, met at each node's cluster address rather than its hostname's:
+:func:`~oasis_torchrl.compat.ray_weight_sync_scheme`). :class:`RayCollection` adds what a run needs
+around it: per-worker LeRobot shards (optionally up to an episode count split over the workers), and
+a lost worker reported and then either dropped (``on_failure="continue"``) or the run stopped
+cleanly (``"stop"``), with every surviving shard finalized either way. In sync mode the round in
+which a worker dies is not yielded (the survivors' part of it is still recorded in their shards).
+The collectors are reserved together before any starts, and a cluster that cannot be reached or
+cannot place them stops the run within ``ray.startup_timeout_s`` (:mod:`.placement`); closing shuts
+the live collectors down (their envs closed, every session finished) before Ray kills them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import warnings
@@ -26,6 +31,7 @@ import numpy as np
 import ray
 from omegaconf import DictConfig, OmegaConf
 from ray.exceptions import RayActorError
+from ray.util.placement_group import remove_placement_group
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torch import nn
@@ -33,15 +39,24 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
-from oasis_torchrl.compat import drop_ray_collectors
+from oasis_torchrl.compat import drop_ray_collectors, ray_weight_sync_scheme
 from oasis_torchrl.config.env import EnvConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
+from oasis_torchrl.distributed.placement import (
+    ClusterStartupError,
+    check_reachable,
+    collector_nodes,
+    collector_options,
+    reserve_collectors,
+)
 from oasis_torchrl.distributed.sharded_recording import ShardRecorder
 
 logger = logging.getLogger(__name__)
 
 PING_TIMEOUT_S = 60.0
 """How long a live worker may take to answer the liveness probe after a failure."""
+CLOSE_TIMEOUT_S = 60.0
+"""How long the live workers may take to close their envs (finishing every session)."""
 
 
 class WorkerLostError(RuntimeError):
@@ -139,6 +154,9 @@ class RayCollection:
             default everything; ``()`` keeps the frames on the workers for a record-only run).
         **collector_kwargs: further arguments of each remote TorchRL collector.
 
+    Attributes:
+        nodes: the cluster address of the node each collector runs on, as Ray placed them.
+
     Example:
         >>> config = RayCollectionConfig(num_collectors=2, sessions_per_env=2, num_cpus=2)
         >>> with RayCollection(config, env_factory(EnvConfig(), config), policy,
@@ -173,13 +191,17 @@ class RayCollection:
         self._recorded = dict.fromkeys(range(config.num_collectors), 0)
         self._owns_ray = not ray.is_initialized() and config.is_local
         if not ray.is_initialized():
+            check_reachable(config.address, config.startup_timeout_s)
             ray.init(**config.init_kwargs())
         create_envs = [
             SeededEnvFactory(create_env, worker_seed)
             for worker_seed in worker_seeds(seed, config.num_collectors)
         ]
+        self._group = None
+        self.collector: RayCollector | None = None
         try:
             self._check_local_cpus()
+            self._group = reserve_collectors(config)
             with warnings.catch_warnings():
                 # Built in the workers, a factory's policy has no central weights to sync.
                 warnings.filterwarnings("ignore", "The policy is not an nn.Module")
@@ -197,18 +219,26 @@ class RayCollection:
                     ),
                     num_workers_per_collector=config.envs_per_collector,
                     num_collectors=config.num_collectors,
-                    remote_configs=config.remote_config(),
+                    remote_configs=collector_options(config, self._group),
                     sync=config.sync,
-                    **({"weight_sync_schemes": {}} if policy is None else {}),
+                    weight_sync_schemes={}
+                    if policy is None
+                    else {"policy": ray_weight_sync_scheme()},
                 )
+            self.nodes = collector_nodes(self.collector.remote_collectors, config.startup_timeout_s)
+            if isinstance(policy, nn.Module):
+                self.collector.update_policy_weights_(policy)
+        except RayActorError as error:  # raised by TorchRL's set-up calls to the actors
+            self._release()
+            raise ClusterStartupError(
+                f"a collector was lost before it started (its node died?): "
+                f"{str(error).splitlines()[0]}"
+            ) from None
         except BaseException:
-            if self._owns_ray:
-                ray.shutdown()
+            self._release()
             raise
         self._workers = list(range(config.num_collectors))
         self._closed = False
-        if isinstance(policy, nn.Module):
-            self.collector.update_policy_weights_(policy)
 
     def _check_recording_options(
         self, max_episodes: int | None, batch_keys: Sequence[NestedKey] | None
@@ -340,7 +370,8 @@ class RayCollection:
     # -- closing -------------------------------------------------------------------------
 
     def close(self) -> dict[int, int]:
-        """Finalize the live workers' shards, stop the actors (and a Ray runtime started here).
+        """Finalize the live workers' shards, close their envs (every session finished), stop
+        the actors (and a Ray runtime started here).
 
         Returns the episodes each live worker recorded (empty without recording).
         """
@@ -352,10 +383,33 @@ class RayCollection:
                 episodes = self.collector.map_fn("post_collect_hook.close")
                 self.shard_episodes = dict(zip(self._workers, episodes, strict=True))
         finally:
-            self.collector.shutdown(shutdown_ray=False)
+            self._close_envs()
+            self._release()
+        return self.shard_episodes
+
+    def _close_envs(self) -> None:
+        """Shut the live workers' collectors down (closing their envs), waiting a bounded time:
+        Ray kills actors without closing anything."""
+        closing = [actor.shutdown.remote() for actor in self.collector.remote_collectors]
+        if not closing:
+            return
+        done, late = ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
+        for ref in done:
+            with contextlib.suppress(RayActorError):  # lost since the last batch: nothing to close
+                ray.get(ref)
+        if late:
+            logger.warning("%d workers did not close within %gs", len(late), CLOSE_TIMEOUT_S)
+
+    def _release(self) -> None:
+        """Stop the actors, free their reservation, stop a Ray runtime started here."""
+        try:
+            if self.collector is not None:
+                self.collector.shutdown(shutdown_ray=False)
+            if self._group is not None:
+                remove_placement_group(self._group)
+        finally:
             if self._owns_ray:
                 ray.shutdown()
-        return self.shard_episodes
 
     def __enter__(self) -> RayCollection:
         return self

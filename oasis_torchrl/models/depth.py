@@ -138,15 +138,28 @@ def normalize_robustly(maps: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
     return ((flat - median) / spread).view_as(maps)
 
 
-def scale_shift_invariant_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+def scale_shift_invariant_loss(
+    predicted: torch.Tensor, target: torch.Tensor, near_weight: float = 0.0
+) -> torch.Tensor:
     """Mean absolute difference of the robustly normalised maps (:func:`normalize_robustly`),
     the MiDaS loss on inverse depth: any positive scale and shift of a map costs nothing.
 
+    ``near_weight`` weighs each pixel by ``1 + near_weight * t``, where ``t`` is the target's
+    nearness min-max normalised per image (sky 0, the nearest pixel 1): the pixels that decide
+    the depth-collision reward count more.
+
     >>> target = torch.rand(2, 4, 6)
-    >>> scale_shift_invariant_loss(3 * target + 1, target).item() < 1e-5
+    >>> scale_shift_invariant_loss(3 * target + 1, target, near_weight=4.0).item() < 1e-5
     True
     """
-    return (normalize_robustly(predicted) - normalize_robustly(target)).abs().mean()
+    error = (normalize_robustly(predicted) - normalize_robustly(target)).abs()
+    if not near_weight:
+        return error.mean()
+    flat = target.flatten(1)
+    low, high = flat.amin(1, keepdim=True), flat.amax(1, keepdim=True)
+    nearness = ((flat - low) / (high - low).clamp_min(1e-6)).view_as(target)
+    weight = 1.0 + near_weight * nearness
+    return (error * weight).sum() / weight.sum()
 
 
 def nearness_target(depth: torch.Tensor, factor: int = 1) -> torch.Tensor:

@@ -219,6 +219,7 @@ def fit(
     batch_size: int,
     lr: float,
     weight_decay: float = 0.0,
+    near_weight: float = 0.0,
     seed: int = 0,
     progress: bool = False,
 ) -> list[float]:
@@ -233,7 +234,7 @@ def fit(
         net.train()
         total = 0.0
         for frames, nearness in batches(data, batch_size, generator):
-            loss = scale_shift_invariant_loss(net(frames), nearness)
+            loss = scale_shift_invariant_loss(net(frames), nearness, near_weight)
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -267,6 +268,7 @@ def train_depth(cfg: DepthTrainConfig | DictConfig) -> DepthTrainResult:
         batch_size=settings.batch_size,
         lr=settings.lr,
         weight_decay=settings.weight_decay,
+        near_weight=settings.near_weight,
         seed=settings.seed,
         progress=settings.progress,
     )

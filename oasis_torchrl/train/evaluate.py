@@ -27,13 +27,13 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from tensordict import NonTensorData, TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 from tqdm import tqdm
@@ -45,6 +45,10 @@ from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.rewards import DepthCollisionReward, NamedDepth
 from oasis_torchrl.train.driving import drive
+
+if TYPE_CHECKING:
+    from oasis_torchrl.viz import RolloutLogger
+    from oasis_torchrl.viz.side_by_side import SideBySide
 
 logger = logging.getLogger(__name__)
 
@@ -487,7 +491,8 @@ class EpisodeRecorders:
     """Where evaluation episodes go besides the metrics: rerun and/or a LeRobot dataset.
 
     Args:
-        rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra).
+        rerun: an ``.rrd`` path, ``"spawn"`` or a viewer URL (needs the ``rerun`` extra), or a
+            logger of a side-by-side recording (:mod:`oasis_torchrl.viz.side_by_side`).
         lerobot: a dataset folder; episodes are appended (one row per frame at 20 fps).
         scenes: the top-down view's scene source (``env.scene_source()``; None: car and path).
 
@@ -498,21 +503,31 @@ class EpisodeRecorders:
 
     def __init__(
         self,
-        rerun: str | None = None,
+        rerun: str | RolloutLogger | None = None,
         lerobot: str | Path | None = None,
         scenes: SceneLookup | None = None,
     ) -> None:
         self.rerun = None
         self.lerobot = None
-        if rerun:
+        if isinstance(rerun, str) and rerun:
             from oasis_torchrl.viz import RolloutLogger
 
             self.rerun = RolloutLogger(rerun, scenes=scenes)
+        elif rerun:
+            self.rerun = rerun
+            if rerun.scenes is None:
+                rerun.scenes = scenes
         if lerobot:
             from oasis_torchrl.data import LeRobotRecorder
 
             root = Path(lerobot)
             self.lerobot = LeRobotRecorder(root, append=(root / "meta").exists())
+
+    def align(self, tick: int) -> None:
+        """Start the next batch of episodes at ``tick`` of the recording (so the same batch
+        starts at the same frame in every policy's recording)."""
+        if self.rerun is not None:
+            self.rerun.align(tick)
 
     def on_reset(self, td: TensorDictBase) -> None:
         """Log the reset observations."""
@@ -549,6 +564,8 @@ class Evaluator:
         expert: run the embedded server's expert (for a policy that drives with it, see
             :attr:`~oasis_torchrl.drivers.Driver.needs_expert`).
         progress: show a progress bar per evaluation.
+        rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s (a
+            policy's logger of a side-by-side recording).
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
@@ -569,11 +586,13 @@ class Evaluator:
         frame_stack: int = POLICY_FRAMES,
         expert: bool = False,
         progress: bool = True,
+        rerun_logger: RolloutLogger | None = None,
     ) -> None:
         if eval_cfg.episodes < 1 or not eval_cfg.seeds or not eval_cfg.prompts:
             raise ValueError("eval needs episodes >= 1 and at least one prompt and one seed")
         self.cfg = eval_cfg
         self.progress = progress
+        self._batches = 0
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
         self.env = make_env(
             env_cfg,
@@ -582,19 +601,32 @@ class Evaluator:
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
             # Recorders keep every frame; the metrics and the policies need the last alone.
-            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot")),
+            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger),
             frame_stack=frame_stack,
             expert=expert,
         )
         self.recorders = EpisodeRecorders(
-            eval_cfg.get("rerun"), eval_cfg.get("lerobot"), scenes=self.env.scene_source()
+            rerun_logger or eval_cfg.get("rerun"),
+            eval_cfg.get("lerobot"),
+            scenes=self.env.scene_source(),
         )
         scored = isinstance(self.env.base_env.reward_module, DepthCollisionReward)
         self.reference = None if scored else ReferenceScore(env_cfg.reward.depth_model)
+        if rerun_logger is not None and self.frames_only:
+            logger.warning(
+                "policies side by side on a frames-only endpoint: it ignores seeds, so each "
+                "policy drives other scenes (recorded all the same)"
+            )
 
     @classmethod
     def for_driver(
-        cls, env_cfg: DictConfig, eval_cfg: DictConfig, driver: Driver, *, progress: bool = True
+        cls,
+        env_cfg: DictConfig,
+        eval_cfg: DictConfig,
+        driver: Driver,
+        *,
+        progress: bool = True,
+        rerun_logger: RolloutLogger | None = None,
     ) -> Evaluator:
         """An evaluator whose env serves what ``driver`` reads: its image size, its frame
         stack and, if it drives with it, the embedded server's expert.
@@ -615,6 +647,7 @@ class Evaluator:
             frame_stack=driver.frame_stack,
             expert=driver.needs_expert,
             progress=progress,
+            rerun_logger=rerun_logger,
         )
 
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
@@ -639,6 +672,9 @@ class Evaluator:
                 bar.update()
 
             for index, seed in enumerate(seeds):
+                # Each batch of episodes gets a reset's tick and max_steps ticks of the recording.
+                self.recorders.align(self._batches * (self.cfg.max_steps + 1))
+                self._batches += 1
                 self.env.set_seed(seed)
                 rollout = rollout_episodes(
                     self.env,
@@ -655,6 +691,12 @@ class Evaluator:
                 bar.set_postfix(distance=f"{report.mean_distance:.1f}")
         return report
 
+    @property
+    def frames_only(self) -> bool:
+        """Whether the endpoint sends frames alone (no ground truth), as the hosted service
+        does, which ignores seeds: its episodes of one seed are not the same scene twice."""
+        return self.env.observation_spec.get("truth", None) is None
+
     def close(self) -> None:
         """Close the recorders and the env."""
         try:
@@ -667,3 +709,69 @@ class Evaluator:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def side_by_side_for(eval_cfg: DictConfig, policies: Mapping[str, str]) -> SideBySide | None:
+    """The side-by-side recording (``eval.rerun``) of an evaluation of named policy specs: the
+    last policy's and those whose spec is in ``eval.compare``, each under the first name of its
+    spec; None when ``eval.rerun`` is unset or that is one policy (recorded alone, as usual).
+
+    Example:
+        >>> from oasis_torchrl.config import load_config
+        >>> cfg = load_config("eval", ["compare=[autopilot]"])
+        >>> side_by_side_for(cfg, {"autopilot": "autopilot", "bc": "out/bc"}) is None  # no rerun
+        True
+    """
+    from oasis_torchrl.viz.side_by_side import SideBySide
+
+    specs = list(policies.values())
+    wanted = {str(spec) for spec in eval_cfg.get("compare", [])} | set(specs[-1:])
+    firsts = {spec: name for name, spec in reversed(list(policies.items()))}
+    names = [name for spec, name in firsts.items() if spec in wanted][::-1]
+    if not eval_cfg.get("rerun") or len(names) < 2:
+        return None
+    return SideBySide(eval_cfg.rerun, names, threshold=eval_cfg.divergence)
+
+
+def evaluate_side_by_side(
+    env_cfg: DictConfig,
+    eval_cfg: DictConfig,
+    drivers: Mapping[str, Driver],
+    *,
+    progress: bool = True,
+) -> dict[str, EvalReport]:
+    """Evaluate each named driver on the same prompts and seeds, recording them side by side
+    into ``eval.rerun`` (:class:`~oasis_torchrl.viz.side_by_side.SideBySide`; the first step
+    where a policy's actions leave the first policy's by more than ``eval.divergence`` is an
+    event).
+
+    Example:
+        >>> from oasis_torchrl.drivers import load_driver
+        >>> from oasis_torchrl.config import load_config
+        >>> import tempfile
+        >>> cfg = load_config("eval", ["episodes=1", "max_steps=2",
+        ...                            f"rerun={tempfile.mkdtemp()}/pair.rrd"])
+        >>> drivers = {name: load_driver(name) for name in ("autopilot", "constant:throttle=1")}
+        >>> reports = evaluate_side_by_side(cfg.env, cfg, drivers, progress=False)
+        >>> sorted(reports)
+        ['autopilot', 'constant:throttle=1']
+    """
+    from oasis_torchrl.viz.side_by_side import SideBySide
+
+    # The others are compared, not evaluated for their own records (no LeRobot episodes).
+    plain = OmegaConf.merge(eval_cfg, {"rerun": None, "lerobot": None})
+    recording = SideBySide(eval_cfg.rerun, list(drivers), threshold=eval_cfg.divergence)
+    reports = {}
+    try:
+        for index, (name, driver) in enumerate(drivers.items()):
+            with Evaluator.for_driver(
+                env_cfg,
+                plain if index else eval_cfg,
+                driver,
+                progress=progress,
+                rerun_logger=recording.logger(name),
+            ) as evaluator:
+                reports[name] = evaluator.evaluate(driver)
+    finally:
+        recording.close()
+    return reports

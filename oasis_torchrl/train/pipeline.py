@@ -50,7 +50,7 @@ from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.evaluate import EvalReport, Evaluator, side_by_side_for
 
 logger = logging.getLogger(__name__)
 
@@ -340,7 +340,8 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     """Evaluate each named policy spec on the config's fixed prompts and seeds: the aggregates
     and every episode (:meth:`~oasis_torchrl.train.evaluate.EvalReport.to_dict`).
 
-    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``). A spec
+    The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``), side by
+    side with those of the policies in ``eval.compare`` if any. A spec
     named twice is evaluated once: evaluations are deterministic, so a second run would repeat
     the first to the digit.
 
@@ -350,16 +351,24 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     """
     plain = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
     recorded = list(policies.values())[-1] if policies else None
+    side_by_side = side_by_side_for(cfg.eval, policies)
     reports: dict[str, EvalReport] = {}
     results = {}
     for name, spec in policies.items():
         if spec not in reports:
             driver = load_driver(spec)
             eval_cfg = cfg.eval if spec == recorded else plain
-            with Evaluator.for_driver(cfg.env, eval_cfg, driver, progress=cfg.progress) as run:
+            rerun_logger = None
+            if side_by_side is not None and name in side_by_side.roots:
+                rerun_logger = side_by_side.logger(name)
+            with Evaluator.for_driver(
+                cfg.env, eval_cfg, driver, progress=cfg.progress, rerun_logger=rerun_logger
+            ) as run:
                 reports[spec] = run.evaluate(driver)
         results[name] = reports[spec].to_dict()
         logger.info("%s: %s", name, reports[spec].summary())
+    if side_by_side is not None:
+        side_by_side.close()  # marks the divergences, then ends the file
     return results
 
 

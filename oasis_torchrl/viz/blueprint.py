@@ -1,36 +1,44 @@
-"""The default rerun layout: per row, the cameras side by side, time series below, the top-down
-view, depth maps and the event log beside them; one tab per row."""
+"""The default rerun layout: a summary tab, then one tab per row: the cameras side by side, the
+plots below them (one unit each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view,
+depth maps and the event log beside them. The time panel opens at the start of the ``frame``
+timeline."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import inspect
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass
 
 import rerun.blueprint as rrb
 
-from oasis_torchrl.viz.paths import ENV_ROOT, RowPaths
+from oasis_torchrl.viz.palette import PLOTS
+from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
+from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, chart_path
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 BACKGROUND = (30, 34, 30)
 """Background of the top-down view: dark green-grey, off the road."""
-RISK_SERIES = ("reward/collision_risk", "reward/near_fraction", "truth/collided", "truth/off_road")
-"""Series shown in the risk plot (and kept out of the reward and truth plots)."""
+PLOTS_PER_LINE = 3
 
 
-def _series_view(
-    name: str, paths: RowPaths, include: Sequence[str], exclude: Sequence[str] = ()
-) -> rrb.TimeSeriesView:
-    contents = [f"+ $origin/{path}" for path in include]
-    contents += [f"- $origin/{path}" for path in exclude]
-    return rrb.TimeSeriesView(origin=paths.base, contents=contents, name=name)
+def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical | None:
+    """The row's plots that show at least one of ``signals`` (palette keys such as
+    ``truth/speed``; None: every plot), three to a line; None if there is none.
 
-
-def _time_series(paths: RowPaths) -> rrb.Horizontal:
-    return rrb.Horizontal(
-        _series_view("actions", paths, ("action/**", "state/**")),
-        _series_view("reward", paths, ("reward/**",), RISK_SERIES),
-        _series_view("collision risk", paths, RISK_SERIES),
-        _series_view("truth", paths, ("truth/**",), RISK_SERIES),
-    )
+    Example:
+        >>> views = plot_views(RowPaths("env", 0), {"action/throttle", "truth/speed"})
+        >>> [view.name for line in views.contents for view in line.contents]
+        ['actions (-1 to 1)', 'speed (m/s)']
+    """
+    chosen = [plot for plot in PLOTS if signals is None or any(plot.shows(key) for key in signals)]
+    views = [
+        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=plot.title)
+        for plot in chosen
+    ]
+    if not views:
+        return None
+    lines = [views[i : i + PLOTS_PER_LINE] for i in range(0, len(views), PLOTS_PER_LINE)]
+    return rrb.Vertical(*(rrb.Horizontal(*line) for line in lines))
 
 
 def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatial2DView:
@@ -46,6 +54,18 @@ def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatia
         name="top-down",
         visual_bounds=rrb.VisualBounds2D(x_range=window.x_range, y_range=window.y_range),
         background=BACKGROUND,
+    )
+
+
+def camera_views(paths: RowPaths, cameras: Sequence[str]) -> rrb.Horizontal:
+    """The row's cameras, left to right.
+
+    Example:
+        >>> len(camera_views(RowPaths("env", 0), ["left_forward", "front"]).contents)
+        2
+    """
+    return rrb.Horizontal(
+        *(rrb.Spatial2DView(origin=paths.camera(camera), name=camera) for camera in cameras)
     )
 
 
@@ -68,24 +88,57 @@ def row_layout(
     cameras: Sequence[str],
     depth_cameras: Sequence[str] = (),
     topdown: Window | None = DEFAULT_WINDOW,
+    signals: Collection[str] | None = None,
 ) -> rrb.Horizontal:
-    """The layout of one row: cameras over time series, side panel on the right.
+    """The layout of one row: cameras over plots (those with signals), side panel on the right.
 
     Example:
         >>> layout = row_layout(RowPaths("env", 0), ["left_forward", "front", "right_forward"])
         >>> type(layout).__name__
         'Horizontal'
     """
-    cameras_row = rrb.Horizontal(
-        *(rrb.Spatial2DView(origin=paths.camera(camera), name=camera) for camera in cameras)
-    )
-    main = rrb.Vertical(cameras_row, _time_series(paths), row_shares=[3, 2])
+    plots = plot_views(paths, signals)
+    cameras_row = camera_views(paths, cameras)
+    # 2 to 3: three 3:2 cameras across fill their panels on a wide screen, without black bars.
+    main = cameras_row if plots is None else rrb.Vertical(cameras_row, plots, row_shares=[2, 3])
     return rrb.Horizontal(
         main,
         _side_panel(paths, depth_cameras, topdown),
         column_shares=[3, 1],
         name=f"{paths.root} {paths.row}",
     )
+
+
+def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
+    """The summary tab: the table of episodes over one bar chart per policy (root).
+
+    Example:
+        >>> summary_layout(["env"]).name
+        'summary'
+    """
+    charts = [
+        rrb.BarChartView(origin=chart_path(root), name=f"{root}: distance in m (or return)")
+        for root in roots
+    ]
+    table = rrb.TextDocumentView(origin=TABLE, name="episodes")
+    return rrb.Vertical(table, rrb.Horizontal(*charts), row_shares=[2, 1], name=SUMMARY_ROOT)
+
+
+def time_panel(fps: float | None = None) -> rrb.TimePanel:
+    """The time panel: the ``frame`` timeline from its start (the viewer's default follows the
+    end of the data).
+
+    Example:
+        >>> type(time_panel()).__name__
+        'TimePanel'
+    """
+    # rerun-sdk 0.26's time panel takes a cursor; newer ones have none, but a panel set to
+    # "playing" starts from the beginning.
+    if "play_state" in inspect.signature(rrb.TimePanel).parameters:
+        start: dict = {"play_state": "playing"}
+    else:
+        start = {"sequence_cursor": 0}
+    return rrb.TimePanel(timeline=FRAME_TIMELINE, fps=fps, **start)
 
 
 def default_blueprint(
@@ -95,8 +148,12 @@ def default_blueprint(
     root: str = ENV_ROOT,
     depth_cameras: Sequence[str] = (),
     topdown: Window | None = DEFAULT_WINDOW,
+    signals: Collection[str] | None = None,
+    summary: bool = False,
+    fps: float | None = None,
 ) -> rrb.Blueprint:
-    """One tab per logged row (a single row gets no tabs).
+    """A summary tab (when ``summary``) and one tab per logged row (a single row and no summary
+    get no tabs).
 
     Args:
         rows: the logged rows (env rows or dataset episode indices).
@@ -104,6 +161,9 @@ def default_blueprint(
         root: entity root (``env`` for rollouts, ``episode`` for datasets).
         depth_cameras: cameras with depth maps.
         topdown: the top-down view's window around the car; None leaves the view out.
+        signals: the logged signals' palette keys (which plots to show; None: all).
+        summary: add the summary tab (ended episodes exist).
+        fps: the frame timeline's playback rate (frames per second).
 
     Example:
         >>> blueprint = default_blueprint([0, 5], ["front"])
@@ -112,6 +172,42 @@ def default_blueprint(
     """
     if not rows:
         raise ValueError("default_blueprint needs at least one row")
-    layouts = [row_layout(RowPaths(root, row), cameras, depth_cameras, topdown) for row in rows]
+    layouts = [
+        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals) for row in rows
+    ]
+    if summary:
+        layouts.insert(0, summary_layout([root]))
     container = layouts[0] if len(layouts) == 1 else rrb.Tabs(*layouts, active_tab=0)
-    return rrb.Blueprint(container)
+    return rrb.Blueprint(container, time_panel(fps))
+
+
+@dataclass(frozen=True)
+class RowsLayout:
+    """What a writer has logged so far, all its layout depends on.
+
+    Example:
+        >>> layout = RowsLayout("env", (0,), ("front",), (), None, frozenset(), False)
+        >>> type(layout.blueprint(fps=20.0)).__name__
+        'Blueprint'
+    """
+
+    root: str
+    rows: tuple[int, ...]
+    cameras: tuple[str, ...]
+    depth_cameras: tuple[str, ...]
+    topdown: Window | None
+    signals: frozenset[str]
+    summary: bool
+
+    def blueprint(self, fps: float | None = None) -> rrb.Blueprint:
+        """The default blueprint of these rows."""
+        return default_blueprint(
+            self.rows,
+            self.cameras,
+            root=self.root,
+            depth_cameras=self.depth_cameras,
+            topdown=self.topdown,
+            signals=self.signals,
+            summary=self.summary,
+            fps=fps,
+        )

@@ -10,6 +10,8 @@ from PIL import Image
 
 DEFAULT_JPEG_QUALITY = 85
 JPEG_MEDIA_TYPE = "image/jpeg"
+DEFAULT_DISPLAY_WIDTH = 384
+"""Frames narrower than this are upscaled for display (a policy's 96x64 becomes 384x256)."""
 
 
 def check_frame(frame: np.ndarray, name: str) -> np.ndarray:
@@ -40,13 +42,35 @@ def encode_jpeg(frame: np.ndarray, quality: int) -> bytes:
     return buffer.getvalue()
 
 
-def image_archetype(frame: np.ndarray, jpeg_quality: int | None) -> rr.EncodedImage | rr.Image:
-    """A JPEG ``EncodedImage`` (``jpeg_quality`` 1-100) or, with None, a raw ``Image``.
+def display_size(frame: np.ndarray, min_width: int | None) -> np.ndarray:
+    """``frame`` upscaled by the smallest whole factor that makes it at least ``min_width``
+    pixels wide (bilinear), for display only; as it is when wide enough or ``min_width`` is None.
+
+    Example:
+        >>> display_size(np.zeros((64, 96, 3), np.uint8), 384).shape
+        (256, 384, 3)
+        >>> display_size(np.zeros((512, 768, 3), np.uint8), 384).shape
+        (512, 768, 3)
+    """
+    width = frame.shape[1]
+    if min_width is None or width >= min_width:
+        return frame
+    factor = -(-min_width // width)
+    size = (width * factor, frame.shape[0] * factor)
+    return np.asarray(Image.fromarray(frame).resize(size, Image.Resampling.BILINEAR))
+
+
+def image_archetype(
+    frame: np.ndarray, jpeg_quality: int | None, min_width: int | None = None
+) -> rr.EncodedImage | rr.Image:
+    """A JPEG ``EncodedImage`` (``jpeg_quality`` 1-100) or, with None, a raw ``Image``, of the
+    frame upscaled to at least ``min_width`` pixels wide (:func:`display_size`).
 
     Example:
         >>> type(image_archetype(np.zeros((8, 8, 3), np.uint8), 85)).__name__
         'EncodedImage'
     """
+    frame = display_size(frame, min_width)
     if jpeg_quality is None:
         return rr.Image(frame)
     return rr.EncodedImage(contents=encode_jpeg(frame, jpeg_quality), media_type=JPEG_MEDIA_TYPE)

@@ -19,9 +19,14 @@ import numpy as np
 import rerun as rr
 
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
-from oasis_torchrl.data.video_frames import frames_at
+from oasis_torchrl.data.video_frames import episode_frames
 from oasis_torchrl.viz.blueprint import default_blueprint
-from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
+from oasis_torchrl.viz.images import (
+    DEFAULT_DISPLAY_WIDTH,
+    DEFAULT_JPEG_QUALITY,
+    check_frame,
+    image_archetype,
+)
 from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.series import send_series
 
@@ -101,7 +106,9 @@ class DatasetReplay:
 
         chosen = self.check_episodes(episodes)
         self.recording.send_blueprint(
-            default_blueprint(chosen, self.cameras, root=EPISODE_ROOT, topdown=None)
+            default_blueprint(
+                chosen, self.cameras, root=EPISODE_ROOT, topdown=None, signals=self._signals()
+            )
         )
         dataset = LeRobotDataset(
             self.repo_id, root=self.root, episodes=chosen, video_backend="pyav"
@@ -113,6 +120,16 @@ class DatasetReplay:
             self._log_episode(episode, rows)
             logger.info("replayed episode %d (%d frames)", episode, len(rows["frame_index"]))
         return chosen
+
+    def _signals(self) -> set[str]:
+        """The palette keys of the series a replay logs (which plots the layout shows)."""
+        features = self.meta.features
+        signals = {"reward/total"} if REWARD in features else set()
+        for key, group in ((ACTION, "action"), (STATE, "state")):
+            if key in features:
+                width = int(np.prod(features[key]["shape"]))
+                signals |= {f"{group}/{name}" for name in _names(features[key], width)}
+        return signals
 
     def _log_episode(self, episode: int, rows: dict[str, np.ndarray]) -> None:
         paths = RowPaths(EPISODE_ROOT, episode)
@@ -165,7 +182,10 @@ class DatasetReplay:
         images = self._images(episode, key, rows, len(frames))
         for frame, image in zip(frames, images, strict=False):
             self._at(frame)
-            self.recording.log(entity, image_archetype(check_frame(image, key), self.jpeg_quality))
+            self.recording.log(
+                entity,
+                image_archetype(check_frame(image, key), self.jpeg_quality, DEFAULT_DISPLAY_WIDTH),
+            )
 
     def _images(
         self, episode: int, key: str, rows: dict[str, np.ndarray], count: int
@@ -173,7 +193,4 @@ class DatasetReplay:
         if key not in self.meta.video_keys:  # stored as images: decoded with the table
             yield from (np.asarray(image, dtype=np.uint8) for image in rows[key])
             return
-        start = float(self.meta.episodes[episode][f"videos/{key}/from_timestamp"])
-        path = self.root / self.meta.get_video_file_path(episode, key)
-        times = start + np.arange(count) / self.meta.fps
-        yield from frames_at(path, times, tolerance_s=0.5 / self.meta.fps)
+        yield from episode_frames(self.meta, episode, key, count)

@@ -10,8 +10,10 @@ One logger, four ways in:
   (both in :mod:`oasis_torchrl.viz.hooks`, which stand on this module, not the reverse).
 
 Every logged reset or step is one *tick* of 4 world frames on the ``frame`` and ``sim_time``
-timelines (layout in :mod:`oasis_torchrl.viz.paths`). Frames are JPEG-encoded and logged on a
-background thread by default, at most ``max_pending`` steps behind the env, so memory stays
+timelines (layout in :mod:`oasis_torchrl.viz.paths`). Episodes end where they end: once a row is
+``done``, nothing more is logged for it until its next reset (an evaluation that steps finished
+rows until every row is done logs their last step and stops). Frames are JPEG-encoded and logged
+on a background thread by default, at most ``max_pending`` steps behind the env, so memory stays
 bounded and the env does not wait for the encoder.
 """
 
@@ -20,7 +22,7 @@ from __future__ import annotations
 import atexit
 import functools
 import weakref
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -31,9 +33,12 @@ import torch
 from tensordict import TensorDictBase
 
 from oasis_torchrl.client.scenes import SceneLookup
+from oasis_torchrl.viz.blueprint import RowsLayout
 from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.paths import ENV_ROOT
 from oasis_torchrl.viz.recording import APPLICATION_ID, DEFAULT_MEMORY_LIMIT, open_recording
 from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
+from oasis_torchrl.viz.summary import EpisodeSummary
 from oasis_torchrl.viz.worker import BoundedWorker
 from oasis_torchrl.viz.writer import RecordWriter
 
@@ -44,7 +49,8 @@ class RolloutLogger:
 
     Args:
         target: ``"spawn"`` (start a viewer), a ``rerun+http://host:port/proxy`` URL (a running
-            viewer or ``rerun --serve-grpc``), or an ``.rrd`` path.
+            viewer or ``rerun --serve-grpc``), an ``.rrd`` path, or a recording stream another
+            logger shares (it stays open when this logger closes).
         options: what to log (:class:`LogOptions`; e.g. ``LogOptions(rows=(0, 5))``).
         scenes: where the top-down view's road and obstacles come from: ``scenes(prompt,
             seed)``, e.g. ``env.scene_source()`` (the env's own server, through the protocol)
@@ -54,6 +60,9 @@ class RolloutLogger:
         application_id: rerun application id.
         recording_id: rerun recording id (default: a fresh one).
         memory_limit: memory limit of a spawned viewer; it drops the oldest data beyond it.
+        root: the entity root of the rows (``env``; a policy's own in a side-by-side recording).
+        summary: where ended episodes go (the summary tab; default: this logger's own).
+        send_layout: sends the layout when it changes (default: the default blueprint).
 
     Example:
         >>> import tempfile, os
@@ -70,25 +79,36 @@ class RolloutLogger:
 
     def __init__(
         self,
-        target: str | Path,
+        target: str | Path | rr.RecordingStream,
         options: LogOptions | None = None,
         *,
         scenes: SceneLookup | None = None,
         application_id: str = APPLICATION_ID,
         recording_id: str | None = None,
         memory_limit: str = DEFAULT_MEMORY_LIMIT,
+        root: str = ENV_ROOT,
+        summary: EpisodeSummary | None = None,
+        send_layout: Callable[[RowsLayout], None] | None = None,
     ) -> None:
         self.options = options if options is not None else LogOptions()
-        recording = open_recording(
-            target,
-            application_id=application_id,
-            recording_id=recording_id,
-            memory_limit=memory_limit,
+        self._owns_recording = not isinstance(target, rr.RecordingStream)
+        recording = (
+            open_recording(
+                target,
+                application_id=application_id,
+                recording_id=recording_id,
+                memory_limit=memory_limit,
+            )
+            if self._owns_recording
+            else target
         )
-        self._writer: RecordWriter | None = RecordWriter(recording, self.options, scenes)
+        self._writer: RecordWriter | None = RecordWriter(
+            recording, self.options, scenes, root=root, summary=summary, send_layout=send_layout
+        )
         self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
         self._tick = 0
         self._pending_starts: np.ndarray | None = None
+        self._ended: np.ndarray | None = None
         # Closing before interpreter teardown: rerun cannot flush a stream once its modules
         # are torn down. A weak reference, so an open logger can still be garbage-collected.
         self._close_at_exit = functools.partial(_close_if_alive, weakref.ref(self))
@@ -118,18 +138,24 @@ class RolloutLogger:
         if outside:
             raise ValueError(f"reset rows {outside} are outside the batch of {n} env rows")
         self._pending(n)[rows] = False
+        self._ended_rows(n)[rows] = False
         self._submit(read_step(obs, self._logged(n, rows), start=True, **self._read_options()))
 
     def log_step(self, next_obs: TensorDictBase, action: torch.Tensor | None = None) -> None:
         """Log one step: ``next_obs`` is the step's ``"next"`` TensorDict (batch ``[N]``) and
-        ``action`` the ``[N, 4, 2]`` (or ``[N, 2]``) action that produced it."""
+        ``action`` the ``[N, 4, 2]`` (or ``[N, 2]``) action that produced it. Rows whose episode
+        ended at an earlier step (and were not reset since) are not logged."""
         n = batch_rows(next_obs)
+        ended = self._ended_rows(n)
+        running = np.flatnonzero(~ended).tolist()
         record = read_step(
-            next_obs, self._logged(n), start=False, action=action, **self._read_options()
+            next_obs, self._logged(n, running), start=False, action=action, **self._read_options()
         )
         done = next_obs.get("done", None)
         if done is not None:
-            self._pending(n)[:] = done.detach().cpu().reshape(n).numpy()
+            flags = done.detach().cpu().reshape(n).numpy()
+            self._pending(n)[:] = flags
+            ended |= flags
         self._submit(record)
 
     def log_rollout(self, rollout: TensorDictBase, *, new_episodes: bool = True) -> None:
@@ -139,6 +165,10 @@ class RolloutLogger:
             rollout: the rollout; a ``[T]`` rollout is taken as one env row.
             new_episodes: every row starts an episode at ``t = 0`` (``env.rollout`` resets
                 first); False continues the episodes of the previous call (collector batches).
+
+        After a row's ``done``, its next root observation starts a new episode (a collector's
+        reset) unless it is still ``done`` (an evaluation stepping a finished row on): then
+        nothing more is logged for the row.
         """
         if rollout.batch_dims == 1:
             rollout = rollout.unsqueeze(0)
@@ -151,10 +181,35 @@ class RolloutLogger:
             self._pending(n)[:] = True
         for t in range(int(rollout.batch_size[1])):
             step = rollout[:, t]
-            starting = np.flatnonzero(self._pending(n)).tolist()
+            pending = self._pending(n)
+            still_done = step.get("done", None)  # a finished row stepped on, not reset
+            if still_done is not None:
+                pending = pending & ~still_done.detach().cpu().reshape(n).numpy()
+            starting = np.flatnonzero(pending).tolist()
             if starting:
                 self.log_reset(step, starting)
             self.log_step(step.get("next"), step.get("action", None))
+
+    def align(self, tick: int) -> None:
+        """Log the next reset or step at tick ``tick`` (world frame ``4 * tick``) instead of
+        right after the last one: batches of episodes that start at the same tick line up across
+        recordings, and across the policies of a side-by-side recording.
+
+        Example:
+            >>> import tempfile, os
+            >>> rerun_logger = RolloutLogger(os.path.join(tempfile.mkdtemp(), "a.rrd"))
+            >>> rerun_logger.align(151)
+            >>> rerun_logger.align(3)
+            Traceback (most recent call last):
+            ...
+            ValueError: cannot align to tick 3: tick 151 is already logged or next
+            >>> rerun_logger.close()
+        """
+        if tick < self._tick:
+            raise ValueError(
+                f"cannot align to tick {tick}: tick {self._tick} is already logged or next"
+            )
+        self._tick = tick
 
     def __call__(self, batch: TensorDictBase) -> TensorDictBase:
         """Collector hook (``postproc=logger``): log the batch, continuing episodes; return it."""
@@ -187,7 +242,8 @@ class RolloutLogger:
             if self._worker is not None:
                 self._worker.close()
             writer.recording.flush()
-            writer.recording.disconnect()
+            if self._owns_recording:
+                writer.recording.disconnect()
 
     def __enter__(self) -> RolloutLogger:
         return self
@@ -216,6 +272,12 @@ class RolloutLogger:
         if self._pending_starts is None or len(self._pending_starts) != n:
             self._pending_starts = np.ones(n, dtype=bool)
         return self._pending_starts
+
+    def _ended_rows(self, n: int) -> np.ndarray:
+        """Rows whose episode has ended and that have not been reset since (none, at first)."""
+        if self._ended is None or len(self._ended) != n:
+            self._ended = np.zeros(n, dtype=bool)
+        return self._ended
 
     def _logged(self, n: int, rows: Sequence[int] | None = None) -> list[int]:
         """The rows to log among ``rows`` (default all): those chosen in the options."""

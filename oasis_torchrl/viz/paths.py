@@ -12,8 +12,8 @@ entity                                 archetype       what
 ``<root>/<row>/reward/<term>``         Scalars         each reward term (``collision_risk``, ...)
 ``<root>/<row>/truth/<field>``         Scalars         embedded-server ground truth per frame
 ``<root>/<row>/state/<name>``          Scalars         ``observation.state`` of replayed datasets
-``<root>/<row>/events``                TextLog         episode starts (prompt, seed), collisions,
-                                                       episode ends
+``<root>/<row>/events``                TextLog         episode starts (prompt, seed), episode
+                                                       ends (cause, figures)
 ``<root>/<row>/topdown/road``          LineStrips2D    the road surface near the car (one thick
                                                        strip along the centreline)
 ``<root>/<row>/topdown/lanes``         LineStrips2D    road edges and lane lines (dashed)
@@ -21,7 +21,15 @@ entity                                 archetype       what
                                                        segment each)
 ``<root>/<row>/topdown/path``          LineStrips2D    the car's recent path
 ``<root>/<row>/topdown/car``           LineStrips2D    the car, filled (red after a collision)
+``<root>/<row>/topdown/scale``         LineStrips2D    a 10 m scale bar (static)
+``summary/table``                      TextDocument    every ended episode's outcome (static)
+``summary/<root>``                     BarChart        each episode's distance (or return)
+``divergence/<row>``                   TextLog         side by side: where the policies diverge
 =====================================  ==============  ==========================================
+
+``<root>`` is ``env`` for env rows, ``episode`` for dataset episodes, and each policy's own root
+in a side-by-side recording (:mod:`oasis_torchrl.viz.side_by_side`). Every scalar entity also
+holds its static ``SeriesLines`` style (:mod:`oasis_torchrl.viz.palette`).
 
 The top-down layers are in the car's frame (x metres to its right, y metres behind it), logged
 every step, so the view's fixed bounds follow the car.

@@ -26,7 +26,7 @@ class StepRecord:
 
     ``images[camera]``: uint8 ``[R, F, H, W, 3]`` (``F`` = 1, the last frame, or 4);
     ``depth[camera]``: float32 ``[R, H, W]``; ``actions``: float32 ``[R, 4, 2]``; ``reward``,
-    ``terms[name]``: ``[R]``; ``truth[field]``: ``[R, 4]``; ``terminated``/``truncated``:
+    ``terms[name]``: ``[R]``; ``truth[field]``: ``[R, 4]``; ``terminated``/``truncated``/``done``:
     bool ``[R]``; ``prompts``/``seeds``: per row, for episode starts.
 
     Example:
@@ -45,6 +45,7 @@ class StepRecord:
     truth: dict[str, np.ndarray] = field(default_factory=dict)
     terminated: np.ndarray | None = None
     truncated: np.ndarray | None = None
+    done: np.ndarray | None = None
     prompts: list[str] | None = None
     seeds: list[int] | None = None
 
@@ -171,6 +172,7 @@ def read_step(
         truth=_group(td, TRUTH, index),
         terminated=_flag(td, "terminated", index),
         truncated=_flag(td, "truncated", index),
+        done=_flag(td, "done", index),
         prompts=_strings(td, "prompt", rows),
         seeds=None if seeds is None else _numpy(seeds, index).reshape(len(rows)).tolist(),
     )

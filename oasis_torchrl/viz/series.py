@@ -1,5 +1,6 @@
 """Scalar time series sent as columns: one ``send_columns`` per entity instead of one ``log`` per
-value, which is most of the logging cost of a fast env (dozens of values per row and step).
+value, which is most of the logging cost of a fast env (dozens of values per row and step). Each
+entity is styled once with its fixed name and colour (:mod:`~oasis_torchrl.viz.palette`).
 
 :class:`SeriesBuffer` holds values for at most ``max_delay_s`` seconds (so a live plot lags at
 most that much) and at most ``max_values`` values (so memory stays bounded), then sends them.
@@ -13,18 +14,29 @@ from collections import defaultdict
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.viz.palette import series_style
 from oasis_torchrl.viz.paths import FRAME_TIMELINE, TIME_TIMELINE
 
 
 def send_series(
-    recording: rr.RecordingStream, path: str, frames: np.ndarray, values: np.ndarray, fps: float
+    recording: rr.RecordingStream,
+    path: str,
+    frames: np.ndarray,
+    values: np.ndarray,
+    fps: float,
+    *,
+    style: bool = True,
 ) -> None:
     """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
+    With ``style``, the signal's fixed name and colour (:mod:`~oasis_torchrl.viz.palette`) are
+    logged with it (static).
 
     Example:
         >>> recording = rr.RecordingStream("doc")
         >>> send_series(recording, "env/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
     """
+    if style:
+        recording.log(path, series_style(path), static=True)
     frames = np.asarray(frames, dtype=np.int64).reshape(-1)
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     recording.send_columns(
@@ -70,6 +82,7 @@ class SeriesBuffer:
         self._frames: defaultdict[str, list[np.ndarray]] = defaultdict(list)
         self._values: defaultdict[str, list[np.ndarray]] = defaultdict(list)
         self._oldest: float | None = None
+        self._styled: set[str] = set()
         self.pending = 0
 
     def add(self, path: str, frames: np.ndarray, values: np.ndarray) -> None:
@@ -86,7 +99,9 @@ class SeriesBuffer:
         """Send every buffered value."""
         for path, frames in self._frames.items():
             values = np.concatenate(self._values[path])
-            send_series(self.recording, path, np.concatenate(frames), values, self.fps)
+            style = path not in self._styled
+            self._styled.add(path)
+            send_series(self.recording, path, np.concatenate(frames), values, self.fps, style=style)
         self._frames.clear()
         self._values.clear()
         self._oldest = None

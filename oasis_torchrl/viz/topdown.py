@@ -49,7 +49,9 @@ LANE_RADIUS = 0.12
 PATH_RADIUS = 0.3
 DASH = (3.0, 6.0)
 """Lane-line dashes: metres painted, metres gap."""
-DRAW_ORDER = {"road": 1.0, "lanes": 2.0, "obstacles": 3.0, "path": 4.0, "car": 5.0}
+SCALE_COLOR: Color = (235, 235, 235)
+SCALE_RADIUS = 0.15
+DRAW_ORDER = {"road": 1.0, "lanes": 2.0, "obstacles": 3.0, "path": 4.0, "car": 5.0, "scale": 6.0}
 """Rerun draw order of each layer (higher is drawn over lower)."""
 
 
@@ -91,6 +93,22 @@ class Window:
 
 
 DEFAULT_WINDOW = Window()
+
+
+def scale_bar(window: Window) -> tuple[np.ndarray, int]:
+    """A scale bar for the view: a strip ``[4, 2]`` (view coordinates, ticked ends) one metre
+    in from the window's bottom-left corner, and its length in metres (10, or 5 in a window
+    narrower than 12 m).
+
+    Example:
+        >>> strip, metres = scale_bar(Window())
+        >>> metres, strip.tolist()
+        (10, [[-14.0, 18.0], [-14.0, 19.0], [-4.0, 19.0], [-4.0, 18.0]])
+    """
+    metres = 10 if 2 * window.half_width >= 12 else 5
+    left, y = window.x_range[0] + 1.0, window.y_range[1] - 1.0
+    right = left + metres
+    return np.array([[left, y - 1.0], [left, y], [right, y], [right, y - 1.0]]), metres
 
 
 def car_frame(points: np.ndarray, car: np.ndarray, heading: float) -> np.ndarray:

@@ -5,27 +5,33 @@ Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 *
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
 frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
 at most a second late). Each row keeps a little state (episode number, step count, return,
-collided flag, its road map and a fixed-size path buffer), never frames. The top-down view is
-drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the road comes from
-``scenes(prompt, seed)`` once per episode.
+collision, its road map, a fixed-size path buffer and the episode's actions), never frames. The
+top-down view is drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the
+road comes from ``scenes(prompt, seed)`` once per episode. An episode's end is one event with
+its cause and final figures, and an :class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the
+summary tab.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
 
 from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.protocol import CHUNK
-from oasis_torchrl.viz.blueprint import default_blueprint
+from oasis_torchrl.viz.blueprint import RowsLayout
 from oasis_torchrl.viz.images import depth_archetype, image_archetype
 from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.palette import signal_key
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
 from oasis_torchrl.viz.records import StepRecord
 from oasis_torchrl.viz.series import SeriesBuffer
+from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
 from oasis_torchrl.viz.topdown import (
     CAR_COLOR,
     CAR_SIZE,
@@ -34,17 +40,29 @@ from oasis_torchrl.viz.topdown import (
     PATH_COLOR,
     PATH_RADIUS,
     ROAD_COLOR,
+    SCALE_COLOR,
+    SCALE_RADIUS,
     Capsules,
     RoadMap,
     Trail,
+    Window,
     car_capsule,
     car_frame,
+    scale_bar,
 )
 
 logger = logging.getLogger(__name__)
 
 ACTION_NAMES = ("throttle", "steering")
 _LAST = CHUNK - 1
+LEVELS = {
+    "collision": "ERROR",
+    "likely collision": "WARN",
+    "terminated": "WARN",
+    "time limit": "INFO",
+    "ended": "INFO",
+}
+"""Event level of each way an episode ends."""
 
 
 @dataclass
@@ -56,15 +74,23 @@ class _RowState:
     step: int = 0
     episode_return: float = 0.0
     collided: bool = False
+    collision: str = ""
+    start_frame: int = 0
+    prompt: str | None = None
+    seed: int | None = None
     road: RoadMap | None = None
+    actions: list[np.ndarray] = field(default_factory=list)
 
 
 class RecordWriter:
-    """Logs step records of env rows under ``env/<row>``; sends the default blueprint as rows,
-    cameras, depth maps and the top-down view appear.
+    """Logs step records of env rows under ``<root>/<row>`` (``env`` by default); sends the
+    default blueprint as rows, cameras, plots, the top-down view and the summary appear.
 
     ``scenes`` (settable) is where the top-down view's road and obstacles come from, e.g. a
     :class:`~oasis_torchrl.client.scenes.SceneSource`; None draws the car and its path only.
+    Each episode's end is one event that names its cause and final figures, and an outcome in
+    ``summary`` (the summary tab); ``send_layout`` replaces the default blueprint (a side-by-side
+    recording lays several writers out together).
 
     Example:
         >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
@@ -77,36 +103,48 @@ class RecordWriter:
         recording: rr.RecordingStream,
         options: LogOptions,
         scenes: SceneLookup | None = None,
+        *,
+        root: str = ENV_ROOT,
+        summary: EpisodeSummary | None = None,
+        send_layout: Callable[[RowsLayout], None] | None = None,
     ) -> None:
         self.recording = recording
         self.options = options
         self.scenes = scenes
+        self.root = root
+        self.summary = summary if summary is not None else EpisodeSummary(recording)
+        self._send_layout = send_layout or self._send_default_blueprint
         self._series = SeriesBuffer(recording, options.fps)
         self._rows: dict[int, _RowState] = {}
         self._cameras: list[str] = []
         self._depth_cameras: list[str] = []
+        self._signals: set[str] = set()
         self._topdown = False
-        self._layout: tuple | None = None
+        self._ended = False
+        self._layout: RowsLayout | None = None
 
     def write(self, record: StepRecord, tick: int) -> None:
         """Log ``record`` as step ``tick`` (frames ``4 * tick`` to ``4 * tick + 3``)."""
-        self._update_blueprint(record)
         first = tick * CHUNK
+        self._note_contents(record)
         for i, row in enumerate(record.rows):
             state = self._rows.setdefault(row, _RowState(Trail(self.options.trail_frames)))
-            paths = RowPaths(ENV_ROOT, row)
+            paths = RowPaths(self.root, row)
             if record.start or state.episode < 0:
                 self._start_episode(paths, state, record, i, first)
             else:
                 state.step += 1
             self._write_series(paths, record, i, first)
-            self._write_frames(paths, state, record, i, first)
+            collision_frame = self._write_frames(paths, state, record, i, first)
             self._at(first + _LAST)
             self._write_depth(paths, record, i)
             self._write_topdown(paths, state, record, i)
             if not record.start:  # a reset observation has no reward (its terms are zeros)
+                if record.actions is not None:
+                    state.actions.append(record.actions[i])
                 self._write_rewards(paths, state, record, i, first + _LAST)
-                self._write_episode_end(paths, state, record, i)
+                self._write_episode_end(paths, state, record, i, collision_frame, first)
+        self._update_blueprint()
 
     def flush(self) -> None:
         """Send the buffered time series (never while a write runs on another thread)."""
@@ -121,24 +159,33 @@ class RecordWriter:
     def _event(self, paths: RowPaths, text: str, level: str) -> None:
         self.recording.log(paths.events, rr.TextLog(text, level=level))
 
+    def _add_series(self, path: str, frames: np.ndarray, values: np.ndarray) -> None:
+        self._signals.add(signal_key(path))
+        self._series.add(path, frames, values)
+
     # -- blueprint ---------------------------------------------------------------------------
 
-    def _update_blueprint(self, record: StepRecord) -> None:
+    def _note_contents(self, record: StepRecord) -> None:
         self._cameras += [c for c in record.images if c not in self._cameras]
         self._depth_cameras += [c for c in record.depth if c not in self._depth_cameras]
         self._topdown |= self.options.topdown and {"x", "y"} <= set(record.truth)
-        rows = sorted({*self._rows, *record.rows})
-        layout = (tuple(rows), tuple(self._cameras), tuple(self._depth_cameras), self._topdown)
+
+    def _update_blueprint(self) -> None:
+        layout = RowsLayout(
+            self.root,
+            tuple(sorted(self._rows)),
+            tuple(self._cameras),
+            tuple(self._depth_cameras),
+            self.options.topdown_window if self._topdown else None,
+            frozenset(self._signals),
+            self._ended,
+        )
         if layout != self._layout:
             self._layout = layout
-            self.recording.send_blueprint(
-                default_blueprint(
-                    rows,
-                    self._cameras,
-                    depth_cameras=self._depth_cameras,
-                    topdown=self.options.topdown_window if self._topdown else None,
-                )
-            )
+            self._send_layout(layout)
+
+    def _send_default_blueprint(self, layout: RowsLayout) -> None:
+        self.recording.send_blueprint(layout.blueprint(self.options.fps))
 
     # -- episodes ----------------------------------------------------------------------------
 
@@ -149,15 +196,23 @@ class RecordWriter:
         state.step = 0
         state.episode_return = 0.0
         state.collided = False
+        state.collision = ""
+        state.start_frame = first
+        state.actions.clear()
         state.trail.clear()
-        prompt = record.prompts[i] if record.prompts else None
-        seed = int(record.seeds[i]) if record.seeds else None
-        state.road = self._road(prompt, seed) if {"x", "y"} <= set(record.truth) else None
+        state.prompt = record.prompts[i] if record.prompts else None
+        state.seed = int(record.seeds[i]) if record.seeds else None
+        has_poses = {"x", "y"} <= set(record.truth)
+        state.road = self._road(state.prompt, state.seed) if has_poses else None
         self._at(first)
-        if prompt is None:
+        if state.prompt is None:
             self._event(paths, f"episode {state.episode} starts (new clip)", "INFO")
         else:
-            self._event(paths, f"episode {state.episode} starts: {prompt!r}, seed {seed}", "INFO")
+            self._event(
+                paths,
+                f"episode {state.episode} starts: {state.prompt!r}, seed {state.seed}",
+                "INFO",
+            )
         if self._topdown:
             empty = rr.LineStrips2D([])
             for layer in ("road", "lanes", "obstacles"):
@@ -175,19 +230,62 @@ class RecordWriter:
         return None if scene is None else RoadMap.from_scene(scene)
 
     def _write_episode_end(
-        self, paths: RowPaths, state: _RowState, record: StepRecord, i: int
+        self,
+        paths: RowPaths,
+        state: _RowState,
+        record: StepRecord,
+        i: int,
+        collision_frame: int | None,
+        first: int,
     ) -> None:
-        terminated = record.terminated is not None and bool(record.terminated[i])
-        truncated = record.truncated is not None and bool(record.truncated[i])
-        if not (terminated or truncated):
+        """One event for the episode's end (at its collision, if it has one in this step) with
+        its cause and final figures; a collision that does not end it is an event of its own."""
+        cause = self._end_cause(state, record, i)
+        if cause is None:
+            if collision_frame is not None:
+                self._at(collision_frame)
+                self._event(paths, f"collision at step {state.step}: {state.collision}", "ERROR")
             return
-        how = "terminated" if terminated else "truncated"
+        distance = record.truth.get("distance")
+        outcome = EpisodeOutcome(
+            self.root,
+            paths.row,
+            state.episode,
+            state.prompt,
+            state.seed,
+            state.start_frame,
+            first + _LAST,
+            state.step,
+            *cause,
+            math.nan if distance is None else float(distance[i, -1]),
+            state.episode_return,
+            np.concatenate(state.actions) if state.actions else np.zeros((0, 2)),
+        )
+        self._at(first + _LAST if collision_frame is None else collision_frame)
         self._event(
             paths,
-            f"episode {state.episode} ends after {state.step} steps ({how}), "
-            f"return {state.episode_return:.3f}",
-            "WARN" if terminated else "INFO",
+            f"episode {state.episode} ends: {outcome.outcome()} after {outcome.figures()}",
+            LEVELS[outcome.cause],
         )
+        self._ended = True
+        self.summary.add(outcome)
+
+    @staticmethod
+    def _end_cause(state: _RowState, record: StepRecord, i: int) -> tuple[str, str] | None:
+        """``(cause, detail)`` if the row's episode ends with this step, else None."""
+        terminated = record.terminated is not None and bool(record.terminated[i])
+        truncated = record.truncated is not None and bool(record.truncated[i])
+        done = record.done is not None and bool(record.done[i])
+        if not (terminated or truncated or done):
+            return None
+        if state.collided:
+            return "collision", state.collision
+        risk = record.terms.get("collision_risk")
+        if terminated and risk is not None and risk[i] >= 1.0:
+            return "likely collision", f"depth risk {float(risk[i]):.2f}"
+        if terminated:
+            return "terminated", ""
+        return ("time limit", "") if truncated else ("ended", "")
 
     # -- per-frame and per-step values -------------------------------------------------------
 
@@ -196,30 +294,33 @@ class RecordWriter:
         frames = np.arange(first, first + CHUNK)
         if record.actions is not None:
             for column, name in enumerate(ACTION_NAMES):
-                self._series.add(paths.scalar("action", name), frames, record.actions[i, :, column])
+                self._add_series(paths.scalar("action", name), frames, record.actions[i, :, column])
         for name in self.options.truth_series:
             if name in record.truth:
-                self._series.add(paths.scalar("truth", name), frames, record.truth[name][i])
+                self._add_series(paths.scalar("truth", name), frames, record.truth[name][i])
 
     def _write_frames(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
-    ) -> None:
-        """Per frame of the chunk: the first collision event and the camera images."""
-        quality = self.options.jpeg_quality
+    ) -> int | None:
+        """Per frame of the chunk: the camera images. Returns the frame of the episode's first
+        collision if it is in this chunk (noted in ``state``)."""
+        quality, width = self.options.jpeg_quality, self.options.display_width
         collided = record.truth.get("collided")
         off_road = record.truth.get("off_road")
+        collision_frame = None
         for k in range(CHUNK):
             self._at(first + k)
             if collided is not None and collided[i, k] > 0.5 and not state.collided:
                 state.collided = True
                 left_road = off_road is not None and off_road[i, k] > 0.5
-                what = "left the road" if left_road else "hit an obstacle"
-                self._event(paths, f"collision at step {state.step}: {what}", "ERROR")
+                state.collision = "left the road" if left_road else "hit an obstacle"
+                collision_frame = first + k
             for camera, frames in record.images.items():
                 every = frames.shape[1] == CHUNK and self.options.all_frames
                 if every or k == _LAST:
                     image = frames[i, k if every else -1]
-                    self.recording.log(paths.camera(camera), image_archetype(image, quality))
+                    self.recording.log(paths.camera(camera), image_archetype(image, quality, width))
+        return collision_frame
 
     def _write_rewards(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, last: int
@@ -227,9 +328,9 @@ class RecordWriter:
         frame = np.array([last])
         if record.reward is not None:
             state.episode_return += float(record.reward[i])
-            self._series.add(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
+            self._add_series(paths.scalar("reward", "total"), frame, record.reward[i : i + 1])
         for name, values in record.terms.items():
-            self._series.add(paths.scalar("reward", name), frame, values[i : i + 1])
+            self._add_series(paths.scalar("reward", name), frame, values[i : i + 1])
 
     def _write_depth(self, paths: RowPaths, record: StepRecord, i: int) -> None:
         for camera, depth in record.depth.items():
@@ -248,6 +349,8 @@ class RecordWriter:
             return
         heading = float(truth["heading"][i, -1]) if "heading" in truth else 0.0
         window = self.options.topdown_window
+        if state.episode == 0 and state.step == 0:
+            self._log_scale(paths, window)
         if state.road is not None:
             self._write_map(paths, state.road, car, heading)
         path = car_frame(state.trail.points(), car, heading)
@@ -264,6 +367,20 @@ class RecordWriter:
         self._log_layer(paths, "road", view.road, [view.road_radius] * len(view.road), [ROAD_COLOR])
         self._log_layer(paths, "lanes", view.markings, view.marking_radii, view.marking_colors)
         self._log_capsules(paths, "obstacles", view.obstacles)
+
+    def _log_scale(self, paths: RowPaths, window: Window) -> None:
+        strip, metres = scale_bar(window)
+        self.recording.log(
+            paths.topdown("scale"),
+            rr.LineStrips2D(
+                [strip],
+                radii=[SCALE_RADIUS],
+                colors=[SCALE_COLOR],
+                labels=[f"{metres} m"],
+                draw_order=DRAW_ORDER["scale"],
+            ),
+            static=True,
+        )
 
     def _log_capsules(self, paths: RowPaths, layer: str, capsules: Capsules) -> None:
         self._log_layer(paths, layer, list(capsules.ends), capsules.radii, capsules.colors)

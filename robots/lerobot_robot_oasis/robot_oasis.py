@@ -7,6 +7,11 @@ Features (the names of the project's datasets, :mod:`oasis_torchrl.data.features
   the previous action (recorded as ``observation.state``);
 - action: ``throttle.vel``, ``steering.vel`` in ``[-1, 1]`` (recorded as ``action``).
 
+LeRobot's rover teleoperators (``--teleop.type=keyboard_rover``) drive it too: their
+``linear_velocity`` (+ forward) is the throttle, and their ``angular_velocity`` (+ turns left,
+counter-clockwise, as ``keyboard_rover``'s A key does) is the steering negated (the world's
+steering + turns right), both clipped to ``[-1, 1]`` (:func:`rover_to_oasis`).
+
 The cameras are virtual: the session produces the frames, so ``robot.cameras`` is empty (as for
 LeRobot's ``earthrover_mini_plus``). LeRobot's tools tick at the dataset's fps, which must be the
 world's 20 (``--dataset.fps=20``). Four ticks make one world-model call, by sample and hold
@@ -39,6 +44,31 @@ from oasis_torchrl.envs.per_frame import FrameStepper
 from oasis_torchrl.protocol import CAMERAS
 
 logger = logging.getLogger(__name__)
+
+ROVER_ACTION_NAMES = ("linear_velocity", "angular_velocity")
+"""The action of LeRobot's rover teleoperators (``keyboard_rover``)."""
+
+
+def rover_to_oasis(action: dict[str, Any]) -> dict[str, Any]:
+    """Add ``throttle.vel`` and ``steering.vel`` to a rover teleoperator's action, in place.
+
+    In place because ``lerobot-record`` builds the dataset row from the very dict it sends to
+    the robot: the row then records the action the world applied. An action that already has
+    the oasis names, or lacks the rover's, is returned untouched.
+
+    Example:
+        >>> rover_to_oasis({"linear_velocity": 1.2, "angular_velocity": 0.6})
+        {'linear_velocity': 1.2, 'angular_velocity': 0.6, 'throttle.vel': 1.0, 'steering.vel': -0.6}
+    """
+    if all(name in action for name in ACTION_NAMES) or not all(
+        name in action for name in ROVER_ACTION_NAMES
+    ):
+        return action
+    linear, angular = (float(action[name]) for name in ROVER_ACTION_NAMES)
+    throttle, steering = ACTION_NAMES
+    action[throttle] = float(np.clip(linear, -1.0, 1.0))
+    action[steering] = float(np.clip(-angular, -1.0, 1.0))
+    return action
 
 
 class OasisRobot(Robot):
@@ -142,16 +172,18 @@ class OasisRobot(Robot):
 
     @check_if_not_connected
     def send_action(self, action: dict[str, Any]) -> dict[str, float]:
-        """Apply one action (clipped to ``[-1, 1]``); returns it as applied.
+        """Apply one action (clipped to ``[-1, 1]``; a rover teleoperator's is mapped by
+        :func:`rover_to_oasis`); returns it as applied.
 
         Raises:
             KeyError: a component is missing, naming what the robot takes.
         """
+        rover_to_oasis(action)
         missing = [name for name in ACTION_NAMES if name not in action]
         if missing:
             raise KeyError(
                 f"the oasis robot takes {list(ACTION_NAMES)}, the action lacks {missing} (got "
-                f"{sorted(action)}): drive it with the oasis teleoperators or map the names"
+                f"{sorted(action)}): drive it with the oasis or rover teleoperators or map names"
             )
         values = np.array([[float(action[name]) for name in ACTION_NAMES]], dtype=np.float32)
         step = self._stepper.step(values)

@@ -1,4 +1,5 @@
-"""One local Ray runtime for all tests of this package (Ray takes seconds to start)."""
+"""One local Ray runtime for the tests of this package that use it (Ray takes seconds to
+start); the cluster tests run their drivers inside network namespaces instead."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ START_ATTEMPTS = 3
 """Starts of the local runtime before the tests error (see :func:`ray_runtime`)."""
 
 
-@pytest.fixture(scope="package", autouse=True)
+@pytest.fixture(scope="package")
 def ray_runtime() -> Iterator[None]:
     """A local Ray runtime (2 CPUs, small object store, no dashboard) for the package."""
     settings = {

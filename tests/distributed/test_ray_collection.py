@@ -24,6 +24,8 @@ from oasis_torchrl.distributed import (  # noqa: E402
     merge_shards,
 )
 
+pytestmark = pytest.mark.usefixtures("ray_runtime")
+
 WORKERS, SESSIONS, STEPS = 2, 2, 2
 FRAMES_PER_BATCH = WORKERS * SESSIONS * STEPS
 HEIGHT, WIDTH = 48, 64

@@ -18,6 +18,8 @@ from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
 from oasis_torchrl.distributed import RayCollectionConfig, env_factory, record_on_ray
 from oasis_torchrl.drivers import DriverSpec, PolicyDriver
 
+pytestmark = pytest.mark.usefixtures("ray_runtime")
+
 EPISODES, SESSIONS, STEPS = 5, 2, 2
 SMALL = ["--width", "96", "--height", "64", "--max-steps", str(STEPS)]
 
@@ -105,6 +107,7 @@ def _kill_a_collector_process() -> None:
 
 
 @pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="finds workers in /proc")
+@pytest.mark.timeout(600)  # two Ray workers start, record, lose one and close: 260 s seen loaded
 def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:

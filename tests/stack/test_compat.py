@@ -22,3 +22,37 @@ def test_an_unknown_release_is_refused_with_both_versions_named(
     message = f"supports lerobot>=0.7,<0.8, found lerobot {installed}"
     with pytest.raises(compat.UnsupportedVersionError, match=message):
         compat.dropped_video_frames(object())  # checked before the dataset is looked at
+
+
+def test_ray_weight_sync_takes_the_node_address_not_the_hostname(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import os
+    import pickle
+    import socket
+
+    import ray
+    from torchrl.weight_update import _ray as ray_weight_sync
+
+    monkeypatch.setattr(ray.util, "get_node_ip_address", lambda: "127.0.0.1")
+    monkeypatch.delenv(compat.GLOO_INTERFACE_VARIABLE, raising=False)
+    seen = {}
+
+    def set_up(scheme: object) -> None:  # what TorchRL's set-up resolves and gloo reads
+        hostname = ray_weight_sync.socket.gethostname()
+        seen["address"] = ray_weight_sync.socket.gethostbyname(hostname)
+        seen["interface"] = os.environ.get(compat.GLOO_INTERFACE_VARIABLE)
+
+    scheme_class = ray_weight_sync.RayWeightSyncScheme
+    monkeypatch.setattr(scheme_class, "_setup_distributed_connection_sender", set_up)
+    monkeypatch.setattr(scheme_class, "_setup_connection_and_weights_on_receiver_impl", set_up)
+    scheme = pickle.loads(pickle.dumps(compat.ray_weight_sync_scheme()))  # as actors get it
+    for side in (
+        scheme._setup_distributed_connection_sender,
+        scheme._setup_connection_and_weights_on_receiver_impl,
+    ):
+        seen.clear()
+        side()
+        assert seen == {"address": "127.0.0.1", "interface": "lo"}
+        assert ray_weight_sync.socket is socket
+        assert compat.GLOO_INTERFACE_VARIABLE not in os.environ

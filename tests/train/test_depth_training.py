@@ -10,7 +10,7 @@ import torch
 
 from oasis_torchrl.cli import main
 from oasis_torchrl.config.training import DepthTrainConfig
-from oasis_torchrl.models.depth import DepthNet, DepthNetConfig
+from oasis_torchrl.models.depth import DepthNet, DepthNetConfig, scale_shift_invariant_loss
 from oasis_torchrl.rewards.depth_net import load_small_depth
 from oasis_torchrl.train.depth import (
     DepthFrames,
@@ -103,3 +103,13 @@ def test_bad_settings_exit_2_naming_them(
 ) -> None:
     assert main(["train", "depth", override]) == 2
     assert named in caplog.text
+
+
+def test_near_weight_makes_errors_on_near_pixels_cost_more() -> None:
+    target = torch.linspace(0, 1, 16).view(1, 4, 4)  # the last pixel is the nearest
+    near_wrong, far_wrong = target.clone(), target.clone()
+    near_wrong[0, 3, 3] -= 0.5
+    far_wrong[0, 0, 1] += 0.5
+    plain = [scale_shift_invariant_loss(p, target) for p in (near_wrong, far_wrong)]
+    weighted = [scale_shift_invariant_loss(p, target, 4.0) for p in (near_wrong, far_wrong)]
+    assert weighted[0] / weighted[1] > 1.5 * plain[0] / plain[1]

@@ -4,6 +4,9 @@
 from __future__ import annotations
 
 import io
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +17,24 @@ try:
     from rerun.experimental import RrdReader
 except ImportError:  # rerun-sdk < 0.32
     RrdReader = None
+
+
+def printed(path: Path) -> str:
+    """The file's every chunk, printed by the rerun CLI."""
+    return subprocess.run(
+        [sys.executable, "-m", "rerun", "rrd", "print", "-vvv", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout
+
+
+def blueprint_views(path: Path) -> set[tuple[str, str, str]]:
+    """(view class, name, origin) of every view in the file's blueprint, via the rerun CLI."""
+    kinds = "2D|TimeSeries|TextLog|BarChart|TextDocument"
+    pattern = rf"\[({kinds})\]\s+┆\s+\[([^\]]*)\]\s+┆\s+\[([^\]]*)\]"
+    return set(re.findall(pattern, printed(path)))
 
 
 class Readback:
@@ -54,6 +75,41 @@ class Readback:
             ]
         kept = dict(sorted((pair for pair in pairs if None not in pair), key=lambda pair: pair[0]))
         return list(kept), list(kept.values())
+
+    def frames(self, prefix: str) -> list[int]:
+        """Every ``frame`` at which anything under entity ``prefix`` was logged, sorted."""
+        if RrdReader is None:
+            view = self.recording.view(index="frame", contents=f"/{prefix}/**")
+            values = view.select("frame").read_all().column("frame").to_pylist()
+        else:
+            values = [
+                value
+                for chunk in self.store.stream()
+                if chunk.entity_path.startswith(f"/{prefix}/")
+                and "frame" in (batch := chunk.to_record_batch()).schema.names
+                for value in batch.column("frame").to_pylist()
+            ]
+        return sorted({value for value in values if value is not None})
+
+    def static(self, entity: str, component: str) -> list:
+        """The value of a component logged statically at ``entity`` (the last one logged)."""
+        if RrdReader is None:
+            name = f"/{entity}:{component}"
+            view = self.recording.view(index="frame", contents=f"/{entity}")
+            values = view.select(name).read_all().column(name).to_pylist()
+        else:
+            values = [
+                value
+                for chunk in self.store.stream()
+                if chunk.entity_path == f"/{entity}"
+                and "frame" not in (batch := chunk.to_record_batch()).schema.names
+                and component in batch.schema.names
+                for value in batch.column(component).to_pylist()
+            ]
+        found = [value for value in values if value is not None]
+        if not found:
+            raise KeyError(f"no static {component} at {entity}")
+        return found[-1]
 
     def scalars(self, entity: str) -> tuple[list[int], list[float]]:
         frames, values = self.column(entity, "Scalars:scalars")

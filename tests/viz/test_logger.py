@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import pickle
-import re
 import signal
 import subprocess
 import sys
@@ -21,7 +20,7 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz import LogOptions, RerunFrameConsumer, RerunTransform, RolloutLogger
 
-from ._readback import Readback
+from ._readback import Readback, blueprint_views, printed
 from ._rollouts import CAMERAS, SIZE, TERMS, action, color, reward, rollout
 
 FPS = 20.0
@@ -41,9 +40,13 @@ def _row_entities(row: int) -> set[str]:
     entities |= {f"{base}/reward/{name}" for name in ("total", *TERMS)}
     truth = set(LogOptions().truth_series) - {"lateral_offset"}  # not in the hand-built truth
     entities |= {f"{base}/truth/{name}" for name in truth}
-    layers = ("road", "lanes", "obstacles", "path", "car")
+    layers = ("road", "lanes", "obstacles", "path", "car", "scale")
     entities |= {f"{base}/topdown/{layer}" for layer in layers}
     return entities | {f"{base}/events"}
+
+
+SUMMARY = {"summary/table", "summary/env"}
+DISPLAYED = (256, 384)  # SIZE upscaled 16 times for display
 
 
 def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
@@ -51,7 +54,7 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
     # takes one tick of its own. Ticks: 0 reset, 1-2 steps, 3 reset of row 1, 4-5 steps.
     readback = _log(tmp_path / "run.rrd", rollout(3, 4, {1: [1]}), rows=(0, 1))
 
-    assert readback.entities() == _row_entities(0) | _row_entities(1)
+    assert readback.entities() == _row_entities(0) | _row_entities(1) | SUMMARY
     assert {"frame", "sim_time"} <= readback.timelines()
     image_frames = {0: [3, 7, 11, 19, 23], 1: [3, 7, 11, 15, 19, 23]}
     image_steps = {0: [(0, True), (0, False), (1, False), (2, False), (3, False)]}
@@ -61,7 +64,7 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
             frames, images = readback.images(f"env/{row}/camera/{camera}")
             assert frames == image_frames[row]
             for image, (t, reset) in zip(images, image_steps[row], strict=True):
-                assert image.shape == (*SIZE, 3)
+                assert image.shape == (*DISPLAYED, 3)
                 error = np.abs(image.astype(int) - color(row, t, index, reset)).max()
                 assert error <= JPEG_TOLERANCE
 
@@ -82,45 +85,41 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
     assert [s.total_seconds() for s in seconds] == pytest.approx([f / FPS for f in [7, 11, 19, 23]])
 
     frames, texts = readback.texts("env/1/events")
-    assert frames == [0, 10, 11, 12]
+    assert frames == [0, 10, 12]  # the end is logged at the collision's frame
     assert texts == [
         "episode 0 starts: 'road 1-0', seed 100",
-        "collision at step 2: hit an obstacle",
-        "episode 0 ends after 2 steps (terminated), return 2.100",
+        "episode 0 ends: collision (hit an obstacle) after 2 steps, return 2.100",
         "episode 1 starts: 'road 1-1', seed 101",
     ]
     colors = readback.column("env/1/topdown/car", "LineStrips2D:colors")[1]
     assert [c[0] for c in colors] == [0xFFFFFFFF] * 2 + [0xFF2828FF] + [0xFFFFFFFF] * 3
 
 
-def _blueprint_views(path: Path) -> set[tuple[str, str, str]]:
-    """(view class, name, origin) of every view in the file's blueprint, via the rerun CLI."""
-    printed = subprocess.run(
-        [sys.executable, "-m", "rerun", "rrd", "print", "-vvv", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    ).stdout
-    pattern = r"\[(2D|TimeSeries|TextLog)\]\s+┆\s+\[([^\]]*)\]\s+┆\s+\[([^\]]*)\]"
-    return set(re.findall(pattern, printed))
-
-
 def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     path = tmp_path / "run.rrd"
-    _log(path, rollout(3, 1), rows=(0, 2))
-    views = _blueprint_views(path)
+    _log(path, rollout(3, 2, {2: [1]}), rows=(0, 2))
+    views = blueprint_views(path)
+    # One unit per plot; a plot only where its signal is known (no lateral offset here)
+    plots = ["actions (-1 to 1)", "reward", "collision risk (depth, 0 to 1)"]
+    plots += ["distance to obstacle (m)", "speed (m/s)"]
     for row in (0, 2):
         assert {("2D", camera, f"env/{row}/camera/{camera}") for camera in CAMERAS} <= views
         assert ("2D", "top-down", f"env/{row}/topdown") in views
         assert ("TextLog", "events", f"env/{row}/events") in views
-        assert ("TimeSeries", "collision risk", f"env/{row}") in views
+        assert {("TimeSeries", plot, f"env/{row}") for plot in plots} <= views
+        assert ("TimeSeries", "lateral offset (m)", f"env/{row}") not in views
     assert not any(origin.startswith("env/1") for _, _, origin in views)
+    # Row 2's episode ended: the summary tab appeared
+    assert ("TextDocument", "episodes", "summary/table") in views
+    assert ("BarChart", "env: distance in m (or return)", "summary/env") in views
+    assert "TimePanelBlueprint:play_state" in printed(path)  # opens at the start, playing
 
 
 def test_all_frames_raw_images_and_depth(tmp_path: Path) -> None:
     td = rollout(1, 2, all_frames=True, depth=True)
-    readback = _log(tmp_path / "raw.rrd", td, jpeg_quality=None, background=False)
+    readback = _log(
+        tmp_path / "raw.rrd", td, jpeg_quality=None, display_width=None, background=False
+    )
 
     frames, buffers = readback.column("env/0/camera/front", "Image:buffer")
     assert frames == list(range(12))  # 3 ticks x 4 frames
@@ -146,7 +145,7 @@ def test_collector_hook_continues_episodes_across_batches(tmp_path: Path) -> Non
             == (whole.images(f"env/{row}/camera/front")[0])
         )
         assert batches.texts(f"env/{row}/events") == whole.texts(f"env/{row}/events")
-    assert batches.texts("env/0/events")[0] == [0, 14, 15, 16]  # start, collision, end, start
+    assert batches.texts("env/0/events")[0] == [0, 14, 16]  # start, end (a collision), start
     assert batches.images("env/1/camera/front")[0] == [3, 7, 11, 15, 23, 27, 31]
 
 
@@ -167,7 +166,7 @@ def test_postproc_hook_of_a_real_collector(tmp_path: Path) -> None:
     for row in (0, 1):
         _, texts = readback.texts(f"env/{row}/events")
         assert sum("starts" in t for t in texts) == 3  # 8 steps, episodes of 3 steps
-        assert sum("(truncated)" in t for t in texts) == 2
+        assert sum("ends: time limit after 3 steps" in t for t in texts) == 2
         frames, rewards = readback.scalars(f"env/{row}/reward/total")
         assert len(frames) == 8
         logged = torch.cat([b["next", "reward"][row].flatten() for b in batches]).numpy()
@@ -195,7 +194,7 @@ def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) ->
         assert len(frames) == 3 + 5  # 3 episode starts, 5 steps
         _, texts = live.texts(f"env/{row}/events")
         assert sum("starts" in t for t in texts) == 3
-        assert sum("(truncated)" in t for t in texts) == 2
+        assert sum("ends: time limit after 2 steps" in t for t in texts) == 2
         assert any(f"'{['urban street', 'rural road'][row]}'" in t for t in texts)
         _, rewards = live.scalars(f"env/{row}/reward/total")
         np.testing.assert_allclose(rewards, td["next", "reward"][row].flatten().numpy(), atol=1e-6)
@@ -213,7 +212,8 @@ def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) ->
 
 
 def test_frame_consumer_of_the_sync_client(tmp_path: Path, local_server: LocalServer) -> None:
-    with RolloutLogger(tmp_path / "client.rrd") as rerun_logger:
+    # Logged at the sent size (display_width=None), to compare pixel by pixel
+    with RolloutLogger(tmp_path / "client.rrd", LogOptions(display_width=None)) as rerun_logger:
         client = A2VClient(
             local_server.endpoint,
             api_key=local_server.api_key,

@@ -108,7 +108,10 @@ def test_saved_rollout_rows_to_rrd(tmp_path: Path) -> None:
     assert main(["view", str(folder), "--rows", "2", "--save", str(out)]) == 0
     readback = Readback(out)
 
-    assert {entity.split("/")[1] for entity in readback.entities()} == {"2"}
+    rows = {entity.split("/")[1] for entity in readback.entities() if entity.startswith("env/")}
+    assert rows == {"2"}
+    table = readback.static("summary/table", "TextDocument:text")[0]
+    assert "| 2 | 0 | road 2-0 | 200 | 0-7 | return 2.00, collision (hit an obstacle) |" in table
     frames, images = readback.images("env/2/camera/front")
     assert frames == [3, 7, 11, 15, 19]  # reset, step 0 (crash), reset, steps 1-2
     resets = [True, False, True, False, False]

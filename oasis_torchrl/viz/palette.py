@@ -1,0 +1,141 @@
+"""Every plotted signal's fixed name and colour, and the plots (one unit each) they go in.
+
+A signal is named by its last two entity components (``action/throttle``, ``reward/total``,
+``truth/speed``), so it looks the same in every row, every episode, every recording and every
+policy of a side-by-side recording. A signal this module does not list (a dataset's state
+names, a custom reward term) still gets a fixed colour: one of :data:`SPARE_COLORS`, chosen by a
+checksum of its name, never by the viewer.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import rerun as rr
+
+Color = tuple[int, int, int]
+
+LINE_WIDTH = 2.0
+"""Width of every plotted line, in UI points."""
+
+
+@dataclass(frozen=True)
+class Signal:
+    """How one signal is drawn: its legend name and colour."""
+
+    name: str
+    color: Color
+
+
+SIGNALS: dict[str, Signal] = {
+    "action/throttle": Signal("throttle", (66, 133, 244)),
+    "action/steering": Signal("steering", (255, 152, 0)),
+    "reward/total": Signal("reward", (240, 240, 240)),
+    "reward/forward": Signal("forward", (76, 175, 80)),
+    "reward/straightness_penalty": Signal("straightness penalty", (233, 30, 99)),
+    "reward/heading": Signal("heading (summed steering)", (121, 85, 72)),
+    "reward/progress_gained": Signal("progress", (139, 195, 74)),
+    "reward/collision": Signal("collision penalty", (244, 67, 54)),
+    "reward/lane_offset": Signal("lane offset penalty", (0, 188, 212)),
+    "reward/clearance": Signal("clearance", (156, 39, 176)),
+    "reward/collision_risk": Signal("collision risk (depth)", (255, 87, 34)),
+    "reward/near_fraction": Signal("near fraction (depth)", (255, 193, 7)),
+    "truth/obstacle_distance": Signal("distance to obstacle", (0, 150, 136)),
+    "truth/speed": Signal("speed", (3, 169, 244)),
+    "truth/lateral_offset": Signal("lateral offset", (205, 220, 57)),
+}
+"""The known signals (the env's actions, every reward module's terms, the plotted truth)."""
+
+SPARE_COLORS: tuple[Color, ...] = (
+    (141, 110, 99),
+    (100, 181, 246),
+    (174, 213, 129),
+    (255, 138, 101),
+    (186, 104, 200),
+    (77, 208, 225),
+    (255, 213, 79),
+    (240, 98, 146),
+)
+"""Colours of signals not in :data:`SIGNALS`."""
+
+
+def signal_key(path: str) -> str:
+    """The palette key of an entity path: its last two components.
+
+    Example:
+        >>> signal_key("env/3/action/throttle")
+        'action/throttle'
+    """
+    return "/".join(path.strip("/").split("/")[-2:])
+
+
+def signal(path: str) -> Signal:
+    """The fixed name and colour of the signal logged at ``path``.
+
+    Example:
+        >>> signal("env/0/truth/speed")
+        Signal(name='speed', color=(3, 169, 244))
+        >>> signal("episode/2/state/x") == signal("env/7/state/x")
+        True
+    """
+    key = signal_key(path)
+    known = SIGNALS.get(key)
+    if known is not None:
+        return known
+    name = key.split("/")[-1]
+    return Signal(name, SPARE_COLORS[zlib.crc32(key.encode()) % len(SPARE_COLORS)])
+
+
+def series_style(path: str) -> rr.SeriesLines:
+    """The ``SeriesLines`` (name, colour, width) to log statically at ``path``.
+
+    Example:
+        >>> type(series_style("env/0/reward/total")).__name__
+        'SeriesLines'
+    """
+    drawn = signal(path)
+    return rr.SeriesLines(colors=[drawn.color], names=[drawn.name], widths=[LINE_WIDTH])
+
+
+@dataclass(frozen=True)
+class Plot:
+    """One time-series plot: its title (with its one unit) and the signal keys it shows
+    (``group/*`` for a whole group), less ``exclude``.
+
+    Example:
+        >>> PLOTS[0].shows("action/steering"), PLOTS[1].shows("reward/collision_risk")
+        (True, False)
+    """
+
+    title: str
+    include: tuple[str, ...]
+    exclude: tuple[str, ...] = ()
+
+    def shows(self, key: str) -> bool:
+        """Whether the signal ``key`` belongs in this plot."""
+        group = key.split("/")[0]
+        wanted = key in self.include or f"{group}/*" in self.include
+        return wanted and key not in self.exclude
+
+    def contents(self) -> list[str]:
+        """Blueprint contents, relative to a row's entity."""
+        included = [key.replace("/*", "/**") for key in self.include]
+        return [f"+ $origin/{key}" for key in included] + [f"- $origin/{k}" for k in self.exclude]
+
+
+DEPTH_INTERNALS = ("reward/heading", "reward/near_fraction")
+"""Depth-reward internals in other units than the reward's: logged, left out of the plots."""
+PLOTS: tuple[Plot, ...] = (
+    Plot("actions (-1 to 1)", ("action/*",)),
+    Plot("state", ("state/*",)),
+    Plot("reward", ("reward/*",), ("reward/collision_risk", *DEPTH_INTERNALS)),
+    Plot("collision risk (depth, 0 to 1)", ("reward/collision_risk",)),
+    Plot("distance to obstacle (m)", ("truth/obstacle_distance",)),
+    Plot("speed (m/s)", ("truth/speed",)),
+    Plot("lateral offset (m)", ("truth/lateral_offset",)),
+)
+"""Every plot, in layout order; a row's layout holds those with at least one signal logged."""
+
+POLICY_COLORS: tuple[Color, ...] = ((66, 133, 244), (255, 152, 0), (76, 175, 80), (233, 30, 99))
+"""Colours of the policies of a summary, in order (repeating after the fourth)."""

@@ -1,0 +1,339 @@
+"""Policies side by side: two or more policies' episodes on the same seeds in one recording.
+
+Each policy logs its rows under a root of its own (``<policy>/<row>/...``, the name made an
+entity name) through its own :class:`~oasis_torchrl.viz.RolloutLogger` sharing one recording
+stream; their episodes start at the same ticks (:meth:`~oasis_torchrl.viz.RolloutLogger.align`),
+so one timeline shows them together. The layout has the summary tab (every episode's outcome and
+distance per policy) and one tab per env row: a line per policy with its cameras, top-down view
+and events, and below them each policy's actions and the ``divergence/<row>`` events: the first
+step of each episode where a policy's actions differ from the first policy's by more than a
+threshold.
+
+``oasis-torchrl view A.rrd B.rrd`` (:func:`align_recordings`) lays out saved recordings the same
+way, copying each under its own root (needs rerun-sdk 0.32 or newer, whose chunk reader this
+uses).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from oasis_torchrl.client.scenes import SceneLookup
+from oasis_torchrl.protocol import CHUNK
+from oasis_torchrl.viz.blueprint import (
+    RowsLayout,
+    camera_views,
+    summary_layout,
+    time_panel,
+    topdown_view,
+)
+from oasis_torchrl.viz.logger import RolloutLogger
+from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.recording import open_recording
+from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
+from oasis_torchrl.viz.topdown import DEFAULT_WINDOW
+from oasis_torchrl.viz.writer import ACTION_NAMES
+
+logger = logging.getLogger(__name__)
+
+DIVERGENCE_ROOT = "divergence"
+"""Root of the divergence events (``divergence/<row>``)."""
+DEFAULT_THRESHOLD = 0.25
+"""Actions further apart than this (throttle or steering) mark a divergence."""
+
+
+def policy_roots(names: Sequence[str]) -> dict[str, str]:
+    """Each policy name made a distinct entity root (letters, digits, ``_`` and ``-``).
+
+    Example:
+        >>> policy_roots(["autopilot", "bc+ppo", "outputs/bc/policy"])
+        {'autopilot': 'autopilot', 'bc+ppo': 'bc_ppo', 'outputs/bc/policy': 'outputs_bc_policy'}
+        >>> policy_roots(["a.b", "a b"])
+        {'a.b': 'a_b', 'a b': 'a_b_2'}
+    """
+    if len(set(names)) != len(names) or len(names) < 2:
+        raise ValueError(f"side by side needs two or more distinct policy names, got {names}")
+    roots: dict[str, str] = {}
+    for name in names:
+        root = re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_") or "policy"
+        if root in (SUMMARY_ROOT, DIVERGENCE_ROOT):
+            root += "_policy"
+        candidate, count = root, 1
+        while candidate in roots.values():
+            count += 1
+            candidate = f"{root}_{count}"
+        roots[name] = candidate
+    return roots
+
+
+def first_divergence(a: np.ndarray, b: np.ndarray, threshold: float) -> tuple[int, float] | None:
+    """The first index where two action series ``[T, ...]`` differ by more than ``threshold``
+    (largest component), and that difference; None if they never do (over their common length).
+
+    Example:
+        >>> a = np.zeros((5, 2)); b = a.copy(); b[3, 1] = 0.5
+        >>> first_divergence(a, b, 0.25)
+        (3, 0.5)
+        >>> first_divergence(a, b, 0.6) is None
+        True
+    """
+    steps = min(len(a), len(b))
+    gaps = np.abs(a[:steps] - b[:steps]).reshape(steps, -1).max(axis=1, initial=0.0)
+    over = np.flatnonzero(np.nan_to_num(gaps) > threshold)
+    return None if not len(over) else (int(over[0]), float(gaps[over[0]]))
+
+
+def side_by_side_blueprint(
+    layouts: Sequence[RowsLayout], fps: float | None = None
+) -> rrb.Blueprint:
+    """The summary tab and a tab per env row, a line per policy (``layouts``, one per root).
+
+    Example:
+        >>> layouts = [RowsLayout(root, (0,), ("front",), (), None, frozenset(), True)
+        ...            for root in ("autopilot", "bc")]
+        >>> type(side_by_side_blueprint(layouts)).__name__
+        'Blueprint'
+    """
+    rows = sorted({row for layout in layouts for row in layout.rows})
+    tabs = [summary_layout([layout.root for layout in layouts])]
+    tabs += [_row_tab(layouts, row) for row in rows]
+    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), time_panel(fps))
+
+
+def _row_tab(layouts: Sequence[RowsLayout], row: int) -> rrb.Vertical:
+    lines, plots = [], []
+    for layout in layouts:
+        paths = RowPaths(layout.root, row)
+        views = [camera_views(paths, layout.cameras)]
+        if layout.topdown is not None:
+            views.append(topdown_view(paths, layout.topdown))
+        views.append(rrb.TextLogView(origin=paths.events, name=f"{layout.root} events"))
+        shares = [3, 1, 1] if layout.topdown is not None else [3, 1]
+        lines.append(rrb.Horizontal(*views, column_shares=shares, name=layout.root))
+        plots.append(
+            rrb.TimeSeriesView(
+                origin=paths.base,
+                contents=["+ $origin/action/**"],
+                name=f"{layout.root} actions (-1 to 1)",
+            )
+        )
+    divergence = rrb.TextLogView(origin=f"{DIVERGENCE_ROOT}/{row}", name="divergence")
+    bottom = rrb.Horizontal(*plots, divergence)
+    return rrb.Vertical(*lines, bottom, row_shares=[3] * len(lines) + [2], name=f"row {row}")
+
+
+class SideBySide:
+    """Records two or more policies' episodes into one recording, side by side.
+
+    Args:
+        target: an ``.rrd`` path, ``"spawn"`` or a viewer URL.
+        names: the policies, in column order; the first is the one the others are compared
+            with for divergences.
+        threshold: actions further apart than this mark a divergence.
+        options: what each policy's logger logs.
+
+    Example:
+        >>> import tempfile, os
+        >>> recording = SideBySide(os.path.join(tempfile.mkdtemp(), "pair.rrd"), ["a", "b"])
+        >>> type(recording.logger("b")).__name__
+        'RolloutLogger'
+        >>> recording.close()
+    """
+
+    def __init__(
+        self,
+        target: str | Path,
+        names: Sequence[str],
+        *,
+        threshold: float = DEFAULT_THRESHOLD,
+        options: LogOptions | None = None,
+    ) -> None:
+        self.roots = policy_roots(list(names))
+        self.threshold = threshold
+        self.options = options if options is not None else LogOptions()
+        self.recording = open_recording(target)
+        self.summary = EpisodeSummary(self.recording, tuple(self.roots.values()))
+        self._layouts: dict[str, RowsLayout] = {}
+
+    def logger(self, name: str, scenes: SceneLookup | None = None) -> RolloutLogger:
+        """A logger for policy ``name``'s episodes (close it when its evaluation is done)."""
+        return RolloutLogger(
+            self.recording,
+            self.options,
+            scenes=scenes,
+            root=self.roots[name],
+            summary=self.summary,
+            send_layout=self._send_layout,
+        )
+
+    def close(self) -> None:
+        """Mark the divergences, then finish the recording."""
+        try:
+            self._log_divergences()
+        finally:
+            self.recording.flush()
+            self.recording.disconnect()
+
+    def _send_layout(self, layout: RowsLayout) -> None:
+        self._layouts[layout.root] = layout
+        ordered = [self._layouts[root] for root in self.roots.values() if root in self._layouts]
+        self.recording.send_blueprint(side_by_side_blueprint(ordered, self.options.fps))
+
+    def _log_divergences(self) -> None:
+        reference, *others = self.roots.values()
+        outcomes = {(o.root, o.scene()): o for o in self.summary.outcomes}
+        for scene in self.summary.scenes():
+            first = outcomes.get((reference, scene))
+            for root in others:
+                other = outcomes.get((root, scene))
+                if first is None or other is None:
+                    continue
+                found = first_divergence(first.actions, other.actions, self.threshold)
+                if found is not None:
+                    index, gap = found  # a frame of the episode's steps (the reset is one tick)
+                    step = index // CHUNK + 1
+                    text = f"step {step}: {root} diverges from {reference} (by {gap:.2f})"
+                    frame = other.start_frame + CHUNK + index
+                    _log_event(self.recording, scene[0], frame, text, self.options.fps)
+
+
+def _log_event(recording: rr.RecordingStream, row: int, frame: int, text: str, fps: float) -> None:
+    recording.set_time(FRAME_TIMELINE, sequence=frame)
+    recording.set_time(TIME_TIMELINE, duration=frame / fps)
+    recording.log(f"{DIVERGENCE_ROOT}/{row}", rr.TextLog(text, level="WARN"))
+
+
+def align_recordings(
+    paths: Sequence[str | Path],
+    target: str | Path,
+    *,
+    threshold: float = DEFAULT_THRESHOLD,
+    fps: float | None = None,
+) -> dict[str, str]:
+    """Copy saved recordings (``env/<row>`` each) into one, each under a root named after its
+    file, laid out side by side on their shared ``frame`` timeline, with the first frame of each
+    row where their actions diverge marked and their summary tables one under the other;
+    returns file -> root.
+
+    Example:
+        >>> align_recordings(["a.rrd", "b.rrd"], "pair.rrd")  # doctest: +SKIP
+        {'a.rrd': 'a', 'b.rrd': 'b'}
+    """
+    try:
+        from rerun.experimental import RrdReader, send_chunks
+    except ImportError:
+        raise ValueError(
+            f"aligning recordings needs rerun-sdk 0.32 or newer (installed: {rr.__version__})"
+        ) from None
+    names = [str(path) for path in paths]
+    roots = dict(zip(names, policy_roots([Path(p).stem for p in names]).values(), strict=True))
+    fps = fps if fps is not None else LogOptions().fps
+    recording = open_recording(target)
+    layouts, actions = [], {}
+    try:
+        tables = []
+        for name, root in roots.items():
+            chunks = list(RrdReader(name).stream())
+            kept = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
+            send_chunks(kept, recording=recording)
+            layouts.append(_layout_of(root, [chunk.entity_path for chunk in chunks]))
+            actions[root] = _actions_by_frame(chunks)
+            tables.append(f"## {root} ({name})\n\n{_table_of(chunks)}")
+        document = rr.TextDocument("\n\n".join(tables), media_type="text/markdown")
+        recording.log(TABLE, document, static=True)
+        recording.send_blueprint(side_by_side_blueprint(layouts, fps))
+        _log_frame_divergences(recording, actions, threshold, fps)
+    finally:
+        recording.flush()
+        recording.disconnect()
+    return roots
+
+
+def _kept(chunk: object) -> bool:
+    path = chunk.entity_path
+    return path.startswith(f"/{ENV_ROOT}/") or path == f"/{chart_path(ENV_ROOT)}"
+
+
+def _table_of(chunks: Sequence[object]) -> str:
+    """The summary table a recording holds (empty if none of its episodes ended)."""
+    texts = [
+        value[0]
+        for chunk in chunks
+        if chunk.entity_path == f"/{TABLE}"
+        for value in chunk.to_record_batch().column("TextDocument:text").to_pylist()
+        if value
+    ]
+    return texts[-1] if texts else "(no episode ended)"
+
+
+def _rerooted(chunk: object, root: str) -> object:
+    path = chunk.entity_path
+    if path.startswith(f"/{SUMMARY_ROOT}/"):
+        return chunk.with_entity_path(f"/{SUMMARY_ROOT}/{root}")
+    return chunk.with_entity_path(f"/{root}/" + path.removeprefix(f"/{ENV_ROOT}/"))
+
+
+def _layout_of(root: str, entity_paths: Iterable[str]) -> RowsLayout:
+    """The layout of one copied recording, from its entity paths."""
+    rows, cameras, topdown = set(), [], False
+    for path in entity_paths:
+        parts = path.strip("/").split("/")
+        if len(parts) < 3 or parts[0] != ENV_ROOT or not parts[1].isdigit():
+            continue
+        rows.add(int(parts[1]))
+        if parts[2] == "camera" and len(parts) > 3 and parts[3] not in cameras:
+            cameras.append(parts[3])
+        topdown |= parts[2] == "topdown"
+    window = DEFAULT_WINDOW if topdown else None
+    return RowsLayout(root, tuple(sorted(rows)), tuple(cameras), (), window, frozenset(), True)
+
+
+def _actions_by_frame(chunks: Sequence[object]) -> dict[int, dict[int, np.ndarray]]:
+    """Row -> frame -> ``[throttle, steering]`` (NaN where missing) of a recording's chunks."""
+    found: dict[int, dict[int, np.ndarray]] = {}
+    for chunk in chunks:
+        parts = chunk.entity_path.strip("/").split("/")
+        if len(parts) != 4 or parts[0] != ENV_ROOT or parts[2] != "action":
+            continue
+        batch = chunk.to_record_batch()
+        if parts[3] not in ACTION_NAMES or FRAME_TIMELINE not in batch.schema.names:
+            continue
+        column = ACTION_NAMES.index(parts[3])
+        frames = batch.column(FRAME_TIMELINE).to_pylist()
+        values = batch.column("Scalars:scalars").to_pylist()
+        row = found.setdefault(int(parts[1]), {})
+        for frame, value in zip(frames, values, strict=True):
+            action = row.setdefault(frame, np.full(2, np.nan))
+            action[column] = value[0] if value else np.nan
+    return found
+
+
+def _log_frame_divergences(
+    recording: rr.RecordingStream,
+    actions: dict[str, dict[int, dict[int, np.ndarray]]],
+    threshold: float,
+    fps: float,
+) -> None:
+    """Per row, the first frame where each recording's actions leave the first's."""
+    reference, *others = actions
+    for root in others:
+        for row, frames in actions[root].items():
+            base = actions[reference].get(row, {})
+            shared = sorted(set(frames) & set(base))
+            found = first_divergence(
+                np.array([base[f] for f in shared]),
+                np.array([frames[f] for f in shared]),
+                threshold,
+            )
+            if found is not None:
+                index, gap = found
+                text = f"frame {shared[index]}: {root} diverges from {reference} (by {gap:.2f})"
+                _log_event(recording, row, shared[index], text, fps)

@@ -1,0 +1,156 @@
+"""The summary tab: every episode's outcome and distance (or return, without ground truth) per
+policy, so a person picks the episode to open.
+
+Each ended episode is an :class:`EpisodeOutcome`; an :class:`EpisodeSummary` rewrites, as
+static data, a table (``summary/table``, a markdown ``TextDocument``: one line per episode, one
+column per policy) and a bar chart per policy (``summary/<policy>``, one bar per episode in the
+table's order), the comparison the main job's ``comparison.png`` draws, episode by episode.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+import rerun as rr
+
+from oasis_torchrl.viz.palette import POLICY_COLORS
+
+SUMMARY_ROOT = "summary"
+"""Root of the summary entities."""
+TABLE = f"{SUMMARY_ROOT}/table"
+"""The summary table (markdown)."""
+
+
+@dataclass(frozen=True)
+class EpisodeOutcome:
+    """How one logged episode ended.
+
+    ``root`` is the entity root of its row (``env``, or the policy's root in a side-by-side
+    recording); ``cause`` is one of ``collision``, ``likely collision``, ``terminated``,
+    ``time limit`` or ``ended``; ``detail`` says more (``hit an obstacle``, the depth risk).
+    ``actions`` are the episode's actions frame by frame (``[4 * steps, 2]``), what side-by-side
+    recordings compare.
+
+    Example:
+        >>> outcome = EpisodeOutcome("env", 0, 0, "urban", 7, 0, 239, 59, "collision",
+        ...                          "hit an obstacle", 118.2, 7.98)
+        >>> outcome.figures()
+        '59 steps, 118.2 m, return 7.980'
+    """
+
+    root: str
+    row: int
+    episode: int
+    prompt: str | None
+    seed: int | None
+    start_frame: int
+    end_frame: int
+    steps: int
+    cause: str
+    detail: str
+    distance: float
+    episode_return: float
+    actions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False, compare=False)
+
+    def figures(self) -> str:
+        """The final figures: steps, distance (when known) and return."""
+        distance = "" if math.isnan(self.distance) else f", {self.distance:.1f} m"
+        return f"{self.steps} steps{distance}, return {self.episode_return:.3f}"
+
+    def outcome(self) -> str:
+        """The cause, with its detail when there is one."""
+        return f"{self.cause} ({self.detail})" if self.detail else self.cause
+
+    def scene(self) -> tuple[int, int, str | None, int | None]:
+        """What pairs episodes across policies: row, episode number, prompt and seed."""
+        return (self.row, self.episode, self.prompt, self.seed)
+
+
+class EpisodeSummary:
+    """Collects episode outcomes (from any thread) and rewrites the summary entities.
+
+    Args:
+        recording: where the summary goes.
+        roots: the policies' roots in column order (others are added as they appear).
+
+    Example:
+        >>> summary = EpisodeSummary(rr.RecordingStream("doc"))
+        >>> summary.add(EpisodeOutcome("env", 0, 0, "urban", 7, 0, 239, 59, "collision",
+        ...                            "hit an obstacle", 118.2, 7.98))
+        >>> print(summary.table().splitlines()[-1])
+        | 0 | 0 | urban | 7 | 0-239 | 118.2 m, collision (hit an obstacle) |
+    """
+
+    def __init__(self, recording: rr.RecordingStream, roots: tuple[str, ...] = ()) -> None:
+        self.recording = recording
+        self.roots = list(roots)
+        self.outcomes: list[EpisodeOutcome] = []
+        self._lock = threading.Lock()
+
+    def add(self, outcome: EpisodeOutcome) -> None:
+        """Record ``outcome`` and rewrite the table and the bar charts."""
+        with self._lock:
+            self.outcomes.append(outcome)
+            if outcome.root not in self.roots:
+                self.roots.append(outcome.root)
+            self._write()
+
+    def scenes(self) -> list[tuple[int, int, str | None, int | None]]:
+        """The episodes' scenes, in table order (row, then episode)."""
+        return sorted({outcome.scene() for outcome in self.outcomes}, key=lambda s: s[:2])
+
+    def table(self) -> str:
+        """The markdown table: one line per scene, one column per root."""
+        cells = {(o.root, o.scene()): o for o in self.outcomes}
+        lines = [
+            "| row | episode | prompt | seed | frames | " + " | ".join(self.roots) + " |",
+            "|" + "---|" * (5 + len(self.roots)),
+        ]
+        for scene in self.scenes():
+            found = [cells.get((root, scene)) for root in self.roots]
+            first = next(outcome for outcome in found if outcome is not None)
+            row, episode, prompt, seed = scene
+            frames = f"{first.start_frame}-{first.end_frame}"
+            results = " | ".join(_cell(outcome) for outcome in found)
+            lines.append(f"| {row} | {episode} | {prompt} | {seed} | {frames} | {results} |")
+        return "\n".join(lines)
+
+    def _write(self) -> None:
+        self.recording.log(
+            TABLE, rr.TextDocument(self.table(), media_type="text/markdown"), static=True
+        )
+        cells = {(o.root, o.scene()): o for o in self.outcomes}
+        scenes = self.scenes()
+        for index, root in enumerate(self.roots):
+            found = [cells.get((root, scene)) for scene in scenes]
+            values = np.array([_bar(outcome) for outcome in found], dtype=np.float64)
+            color = POLICY_COLORS[index % len(POLICY_COLORS)]
+            self.recording.log(chart_path(root), rr.BarChart(values, color=color), static=True)
+
+
+def chart_path(root: str) -> str:
+    """The bar chart entity of one root's episodes.
+
+    Example:
+        >>> chart_path("env")
+        'summary/env'
+    """
+    return f"{SUMMARY_ROOT}/{root}"
+
+
+def _bar(outcome: EpisodeOutcome | None) -> float:
+    """A bar: the distance, else the return (no ground truth), else 0 (no such episode)."""
+    if outcome is None:
+        return 0.0
+    return outcome.episode_return if math.isnan(outcome.distance) else outcome.distance
+
+
+def _cell(outcome: EpisodeOutcome | None) -> str:
+    if outcome is None:
+        return "-"
+    if math.isnan(outcome.distance):
+        return f"return {outcome.episode_return:.2f}, {outcome.outcome()}"
+    return f"{outcome.distance:.1f} m, {outcome.outcome()}"

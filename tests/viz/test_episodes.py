@@ -1,0 +1,132 @@
+"""Episodes end where they end, and every signal keeps its name and colour: recordings of an
+evaluation-like drive (finished rows keep being stepped until every row is done), read back."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from oasis_torchrl.viz import LogOptions, RolloutLogger
+from oasis_torchrl.viz.palette import SIGNALS
+
+from ._readback import Readback
+from ._rollouts import observation
+
+STEPS = 6
+ENDS = {0: (1, "collision"), 1: (3, "depth"), 2: (5, "time")}
+"""Row -> (the step its episode ends at, how): a collision (ground truth), the depth risk
+reaching 1 (terminated, no collision), the time limit (truncated)."""
+
+
+def _step(t: int, truth: bool) -> tuple[TensorDict, torch.Tensor]:
+    """The ``"next"`` observation of step ``t`` and its action; a row that ended stays done."""
+    rows = len(ENDS)
+    collided = [ENDS[r] == (t, "collision") for r in range(rows)]
+    nxt = observation(t, [0] * rows, reset=False, collided=collided)
+    risk = [1.0 if ENDS[r] == (t, "depth") else 0.5 for r in range(rows)]
+    nxt["reward_terms", "collision_risk"] = torch.tensor(risk)[:, None]
+    nxt["truth", "distance"] = (2.0 * t + torch.arange(4.0)).expand(rows, 4).clone()
+    ended = torch.tensor([t >= ENDS[r][0] for r in range(rows)])[:, None]
+    truncated = torch.tensor([t >= ENDS[r][0] and ENDS[r][1] == "time" for r in range(rows)])
+    nxt["reward"] = torch.ones(rows, 1)
+    nxt["terminated"] = ended & ~truncated[:, None]
+    nxt["truncated"] = truncated[:, None]
+    nxt["done"] = ended
+    if not truth:
+        nxt = nxt.exclude("truth")
+    return nxt, torch.full((rows, 4, 2), 0.5)
+
+
+def _record(path: Path, truth: bool = True, **options: object) -> Readback:
+    reset = observation(0, [0] * len(ENDS), reset=True)
+    with RolloutLogger(path, LogOptions(**options)) as rerun_logger:
+        rerun_logger.log_reset(reset if truth else reset.exclude("truth"))
+        for t in range(STEPS):
+            rerun_logger.log_step(*_step(t, truth))
+    return Readback(path)
+
+
+def _saved_evaluation() -> TensorDict:
+    """The same drive as a rollout ``[N, T]`` (what ``rollout_episodes`` returns): a finished
+    row's root observation is its last one, still ``done``."""
+    root = observation(0, [0] * len(ENDS), reset=True)
+    root["done"] = torch.zeros(len(ENDS), 1, dtype=torch.bool)
+    root["truth", "distance"] = torch.zeros(len(ENDS), 4)
+    steps = []
+    for t in range(STEPS):
+        nxt, action = _step(t, truth=True)
+        steps.append(root.clone().update({"action": action, "next": nxt}))
+        root = nxt.exclude("reward", "terminated", "truncated")
+    return torch.stack(steps, dim=1)
+
+
+def _last_frame(end: int) -> int:
+    return 4 * (end + 1) + 3  # tick 0 is the reset; step t is tick t + 1
+
+
+@pytest.mark.parametrize("way_in", ["steps", "saved rollout"])
+def test_nothing_is_logged_for_a_row_after_its_episode_ends(tmp_path: Path, way_in: str) -> None:
+    if way_in == "steps":  # an evaluation's recorder
+        readback = _record(tmp_path / "eval.rrd")
+    else:  # oasis-torchrl view of a saved evaluation
+        with RolloutLogger(tmp_path / "eval.rrd") as rerun_logger:
+            rerun_logger.log_rollout(_saved_evaluation())
+        readback = Readback(tmp_path / "eval.rrd")
+
+    expected = {
+        0: ("ERROR", 10, "collision (hit an obstacle) after 2 steps, 5.0 m, return 2.000"),
+        1: ("WARN", 19, "likely collision (depth risk 1.00) after 4 steps, 9.0 m, return 4.000"),
+        2: ("INFO", 27, "time limit after 6 steps, 13.0 m, return 6.000"),
+    }
+    for row, (level, end_frame, text) in expected.items():
+        end = ENDS[row][0]
+        assert readback.frames(f"env/{row}")[-1] == _last_frame(end)
+        assert readback.scalars(f"env/{row}/action/throttle")[0][-1] == _last_frame(end)
+        assert readback.scalars(f"env/{row}/reward/total")[0][-1] == _last_frame(end)
+        frames, texts = readback.texts(f"env/{row}/events")
+        assert texts == [
+            f"episode 0 starts: 'road {row}-0', seed {100 * row}",
+            f"episode 0 ends: {text}",
+        ]
+        assert frames == [0, end_frame]  # a collision's end sits at the collision's frame
+        assert readback.column(f"env/{row}/events", "TextLog:level")[1][-1] == [level]
+    table = readback.static("summary/table", "TextDocument:text")[0]
+    assert "| 1 | 0 | road 1-0 | 100 | 0-19 | 9.0 m, likely collision (depth risk 1.00) |" in table
+    assert readback.static("summary/env", "BarChart:values") is not None
+
+
+def test_every_signal_has_its_fixed_name_and_colour(tmp_path: Path) -> None:
+    first = _record(tmp_path / "first.rrd")
+    second = _record(tmp_path / "second.rrd", rows=(2,))
+
+    keys = ("action/throttle", "action/steering", "reward/total", "reward/collision_risk")
+    keys += ("truth/speed", "truth/obstacle_distance")
+    colors = set()
+    for key in keys:
+        signal = SIGNALS[key]
+        packed = int.from_bytes(bytes([*signal.color, 255]), "big")
+        for readback, row in ((first, 0), (first, 2), (second, 2)):
+            entity = f"env/{row}/{key}"
+            assert readback.static(entity, "SeriesLines:names") == [signal.name]
+            assert readback.static(entity, "SeriesLines:colors") == [packed]
+        colors.add(packed)
+    assert len(colors) == len(keys)  # no two signals share a colour
+    assert first.static("env/0/topdown/scale", "LineStrips2D:labels") == ["10 m"]
+
+
+def test_frames_only_recordings_have_no_truth_and_still_end(tmp_path: Path) -> None:
+    readback = _record(tmp_path / "hosted.rrd", truth=False)
+
+    assert not any("/topdown/" in e or "/truth/" in e for e in readback.entities())
+    assert readback.frames("env/1")[-1] == _last_frame(ENDS[1][0])
+    ends = [readback.texts(f"env/{row}/events")[1][-1] for row in ENDS]
+    assert ends == [
+        "episode 0 ends: terminated after 2 steps, return 2.000",
+        "episode 0 ends: likely collision (depth risk 1.00) after 4 steps, return 4.000",
+        "episode 0 ends: time limit after 6 steps, return 6.000",
+    ]
+    table = readback.static("summary/table", "TextDocument:text")[0]
+    assert "| 0 | 0 | road 0-0 | 0 | 0-11 | return 2.00, terminated |" in table
