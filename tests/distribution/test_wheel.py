@@ -77,6 +77,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     presets = {f"oasis_torchrl/configs/{path.name}" for path in (ROOT / "configs").glob("*.yaml")}
     assert presets and presets <= names
     assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
+    page = {f"oasis_torchrl/web/static/{name}" for name in ("index.html", "drive.js", "drive.css")}
+    assert page <= names  # the drive page's assets
 
     venv = scratch / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)

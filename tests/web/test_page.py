@@ -25,6 +25,16 @@ REGENERATE = os.environ.get("OASIS_REGENERATE_ASSETS") == "1"
 WAIT_S = 120.0  # a busy CI machine; the checks themselves do not depend on timing
 
 
+FAKE_GAMEPAD = """
+const [throttle, steering, pressed] = arguments;
+const buttons = Array.from({length: 17}, (_, i) => ({
+  pressed: pressed.includes(i) || (i === 7 && throttle > 0), value: i === 7 ? throttle : 0}));
+navigator.getGamepads = () => [{axes: [steering, 0, 0, 0], buttons}];
+"""
+"""Replaces the browser's gamepads with one whose right trigger, left stick and buttons are
+given (a headless browser has none)."""
+
+
 def wait_until(check: Callable[[], Any], what: str, timeout: float = WAIT_S) -> Any:
     """Poll ``check`` until it returns something true (fail naming ``what`` otherwise)."""
     deadline = time.monotonic() + timeout
@@ -134,6 +144,15 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
         chunks_later(browser, 3)
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         browser.save_screenshot(str(SCREENSHOT))
+
+    # A gamepad (the browser's Gamepad API, here a stand-in): analog trigger and stick drive,
+    # buttons command.
+    browser.execute_script(FAKE_GAMEPAD, 0.7, -0.5, [])
+    chunks_later(browser, 3)
+    assert page.session.last["action"][0, 0].tolist() == pytest.approx([0.7, -0.5])
+    browser.execute_script(FAKE_GAMEPAD, 0.0, 0.0, [3])  # Y: take over (there is no policy)
+    wait_until(lambda: "no_policy" in page_state(browser)["errors"], "the takeover refused")
+    browser.execute_script(FAKE_GAMEPAD, 0.0, 0.0, [])
 
 
 @pytest.mark.timeout(900)
