@@ -653,7 +653,7 @@ class Evaluator:
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:
         """Run one batch of episodes per seed (``seeds``, default ``eval.seeds``); the report
         holds all of them."""
-        report = EvalReport(ground_truth=bool(self.env.base_env.ground_truth))
+        report = EvalReport(ground_truth=not self.frames_only)
         seeds = [int(seed) for seed in (self.cfg.seeds if seeds is None else seeds)]
         if not seeds:
             raise ValueError("evaluate needs at least one seed")

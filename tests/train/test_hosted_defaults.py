@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.envs import OasisEnv, capabilities
 from oasis_torchrl.sim.config import ServerConfig
 
 from .conftest import TINY_ENV, tiny_ppo
@@ -37,8 +37,9 @@ def test_hosted_like_env_sends_frames_and_scores_them_with_the_depth_reward() ->
 
 
 def test_train_eval_record_defaults_run_on_frames_alone(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    monkeypatch.setattr(capabilities, "_found", {})  # found once per process: forget earlier tests
     caplog.set_level(logging.INFO)
     assert main(["train", "ppo", *tiny_ppo(tmp_path / "ppo", 16, *HOSTED)]) == 0
     assert caplog.text.count("sends frames only") == 1
