@@ -45,6 +45,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.envs.gym_adapter",
             "oasis_torchrl.envs.gym_vector",
             "oasis_torchrl.envs.per_frame",
+            "oasis_torchrl.envs.capabilities",
         ),
     ),
     "rewards": ApiPage(
@@ -56,6 +57,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.rewards.depth_collision",
             "oasis_torchrl.rewards.depth_sources",
             "oasis_torchrl.rewards.depth_net",
+            "oasis_torchrl.rewards.depth_models",
             "oasis_torchrl.rewards.ground_truth",
             "oasis_torchrl.rewards.shaping",
         ),
