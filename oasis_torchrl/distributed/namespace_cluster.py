@@ -21,6 +21,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -34,6 +35,8 @@ HEAD_ADDRESS = "10.77.0.1"
 WORKER_ADDRESS = "10.77.0.2"
 PREFIX_LENGTH = 24
 RAY_PORT = 6379
+RAY_CLI = str(Path(sys.executable).parent / "ray")
+"""Ray's command line of this interpreter's environment (a virtualenv need not be on PATH)."""
 COMMAND_TIMEOUT_S = 180.0
 """Bound of every set-up command (``ip``, ``ray start``)."""
 START_ATTEMPTS = 3
@@ -158,7 +161,7 @@ class NamespaceCluster:
         if node:
             join = [f"--address={self.address}"]
         command = [
-            "ray",
+            RAY_CLI,
             "start",
             *join,
             f"--node-ip-address={self.addresses[node]}",
