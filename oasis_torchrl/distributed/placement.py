@@ -8,6 +8,7 @@ the nodes), so a cluster that cannot host all of them is known before any actor 
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import socket
 import time
@@ -75,9 +76,26 @@ def describe_cluster() -> str:
         >>> describe_cluster()  # doctest: +SKIP
         '2 alive nodes: 10.77.0.1 {CPU: 1, memory: 2.1e+09}, 10.77.0.2 {CPU: 1, memory: 2.0e+09}'
     """
-    nodes = [node for node in ray.nodes() if node["Alive"]]
+    nodes = sorted(
+        (node for node in ray.nodes() if node["Alive"]),
+        key=lambda node: _address_order(node["NodeManagerAddress"]),
+    )
     shown = [f"{node['NodeManagerAddress']} {_resources(node['Resources'])}" for node in nodes]
     return f"{len(nodes)} alive node{'s' * (len(nodes) != 1)}: " + ", ".join(shown)
+
+
+def _address_order(address: str) -> tuple[int, int, str]:
+    """Sort key of a node's address: IP addresses in numeric order, then host names.
+
+    Example:
+        >>> sorted(["10.77.0.10", "host", "10.77.0.2"], key=_address_order)
+        ['10.77.0.2', '10.77.0.10', 'host']
+    """
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        return (99, 0, address)
+    return (ip.version, int(ip), address)
 
 
 def _resources(resources: dict[str, float]) -> str:

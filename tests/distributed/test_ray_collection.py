@@ -24,6 +24,8 @@ from oasis_torchrl.distributed import (  # noqa: E402
     merge_shards,
 )
 
+from ._settings import smoke_ppo  # noqa: E402
+
 pytestmark = pytest.mark.usefixtures("ray_runtime")
 
 WORKERS, SESSIONS, STEPS = 2, 2, 2
@@ -144,26 +146,7 @@ def test_ppo_trains_on_ray_workers(tmp_path: Path) -> None:
     from oasis_torchrl.models.checkpoint import load_checkpoint
     from oasis_torchrl.train.ppo import PPOTrainer
 
-    cfg = load_config(
-        "ppo",
-        [
-            "env.image_size=[32,48]",
-            "env.server.width=48",
-            "env.server.height=32",
-            "env.max_steps=6",
-            f"output_dir={tmp_path}",
-            "collector.frames_per_batch=16",
-            "collector.total_frames=32",
-            "optim.mini_batch_size=8",
-            "optim.epochs=1",
-            "eval.every=0",
-            "eval.episodes=0",
-            "progress=false",
-            "ray.enabled=true",
-            "ray.num_collectors=2",
-            "ray.sessions_per_env=2",
-        ],
-    )
+    cfg = load_config("ppo", smoke_ppo(tmp_path))
     result = PPOTrainer(cfg).run()
     state = load_checkpoint(result.checkpoint)
     # two batches of 16 env steps, each gathered from both Ray workers, each followed by an update

@@ -26,6 +26,8 @@ from oasis_torchrl.distributed.namespace_cluster import (
     unavailable_reason,
 )
 
+from ._settings import smoke_ppo
+
 REASON = unavailable_reason()
 pytestmark = [
     pytest.mark.cluster,
@@ -94,24 +96,7 @@ def test_ppo_weight_sync_reaches_collectors_on_both_nodes(
     from oasis_torchrl.models.checkpoint import LATEST, load_checkpoint
 
     cluster.revive()
-    settings = [
-        "env.image_size=[32,48]",
-        "env.server.width=48",
-        "env.server.height=32",
-        "env.max_steps=6",
-        f"output_dir={tmp_path}",
-        "collector.frames_per_batch=16",
-        "collector.total_frames=32",
-        "optim.mini_batch_size=8",
-        "optim.epochs=1",
-        "eval.every=0",
-        "eval.episodes=0",
-        "progress=false",
-        "ray.enabled=true",
-        f"ray.address={cluster.address}",
-        "ray.num_collectors=2",
-        "ray.sessions_per_env=2",
-    ]
+    settings = [*smoke_ppo(tmp_path), f"ray.address={cluster.address}"]
     run = cluster.run(oasis("train", "ppo", *settings), timeout=RUN_TIMEOUT_S)
     assert run.returncode == 0, run.stdout[-4000:]
     assert sorted(placement(run.stdout).values()) == [HEAD_ADDRESS, WORKER_ADDRESS]
