@@ -26,8 +26,19 @@ ACTION_DIM = 2
 ACTION_NAMES: tuple[str, ...] = ("throttle", "steering")
 """The action's components, in wire order."""
 
-CAMERAS: tuple[str, ...] = ("left_forward", "front", "right_forward")
+FRONT = "front"
+"""The forward-facing stream."""
+
+CAMERAS: tuple[str, ...] = ("left_forward", FRONT, "right_forward")
 """The streams the hosted model advertises, left to right."""
+
+FRONT_CROP = "front_crop"
+"""A camera the client derives, not a stream: the centre of the ``front`` stream, cut from its
+full-size frame and resized to the other cameras' size (``env.front_crop``), a narrow forward
+camera for what is far ahead."""
+
+POLICY_CAMERAS: tuple[str, ...] = (*CAMERAS, FRONT_CROP)
+"""Every camera an env, a dataset or a policy may carry, in their conventional order."""
 
 HOSTED_FRAME_SIZE = (512, 768)
 """``(height, width)`` of the hosted model's frames (it advertises 768 wide, 512 high)."""

@@ -49,6 +49,10 @@ class FrameDecoder(Protocol):
         """Decode ``packet`` into ``out`` (uint8 ``[H, W, 3]``), scaling to ``out``'s size."""
         ...
 
+    def decode_full(self, packet: bytes) -> np.ndarray:
+        """Decode ``packet`` to a uint8 ``[H, W, 3]`` image at the stream's own size."""
+        ...
+
     def skip(self, packet: bytes) -> None:
         """Consume ``packet`` to keep the stream in sync, without producing RGB."""
         ...
@@ -97,6 +101,11 @@ class Vp9Decoder:
             interpolation=RESIZE_INTERPOLATION if scaled else None,
         )
         np.copyto(out, rgb.to_ndarray())
+
+    def decode_full(self, packet: bytes) -> np.ndarray:
+        """Decode one VP9 packet to RGB at the stream's size."""
+        frame = self._decode(packet)
+        return self._reformatter.reformat(frame, format="rgb24").to_ndarray()
 
     def skip(self, packet: bytes) -> None:
         """Decode ``packet`` (the stream state advances) but skip the RGB conversion."""
@@ -158,6 +167,14 @@ class JpegDecoder:
         except (OSError, ValueError) as error:
             raise DecodeError(self.stream, f"invalid JPEG image: {error}") from error
 
+    def decode_full(self, packet: bytes) -> np.ndarray:
+        """Decode one JPEG image at its own size."""
+        try:
+            with Image.open(io.BytesIO(packet)) as image:
+                return np.asarray(image.convert("RGB"))
+        except (OSError, ValueError) as error:
+            raise DecodeError(self.stream, f"invalid JPEG image: {error}") from error
+
 
 class RawRgbDecoder:
     """Uncompressed RGB frames (``FrameFormat.RAW_RGB24``) of one stream of a known size: one
@@ -175,7 +192,7 @@ class RawRgbDecoder:
     def __init__(self, stream: str, size: tuple[int, int]) -> None:
         self.stream = stream
         self.size = size
-        self._reformatter = VideoReformatter()
+        self._resizer = RgbResizer()
 
     def reset(self) -> None:
         """Raw frames are independent: nothing to reset."""
@@ -185,24 +202,102 @@ class RawRgbDecoder:
 
     def decode_into(self, packet: bytes, out: np.ndarray) -> None:
         """Copy (or scale) one frame into ``out``."""
+        self._resizer.resize_into(self.decode_full(packet), out)
+
+    def decode_full(self, packet: bytes) -> np.ndarray:
+        """The frame itself, as an array over ``packet`` (no copy)."""
         height, width = self.size
         if len(packet) != height * width * 3:
             raise DecodeError(
                 self.stream,
                 f"raw RGB frame of {len(packet)} bytes, expected {height}x{width}x3",
             )
-        frame = np.frombuffer(packet, np.uint8).reshape(height, width, 3)
-        if out.shape[:2] == (height, width):
-            np.copyto(out, frame)
+        return np.frombuffer(packet, np.uint8).reshape(height, width, 3)
+
+
+class RgbResizer:
+    """Resizes RGB images into caller-owned arrays: a copy at the same size, else one swscale
+    pass (:data:`RESIZE_INTERPOLATION`); its swscale context is kept between calls, so give
+    each output size a resizer of its own.
+
+    >>> import numpy as np
+    >>> out = np.empty((2, 2, 3), np.uint8)
+    >>> RgbResizer().resize_into(np.full((4, 4, 3), 7, np.uint8), out)
+    >>> out.min(), out.max()
+    (np.uint8(7), np.uint8(7))
+    """
+
+    def __init__(self) -> None:
+        self._reformatter = VideoReformatter()
+
+    def resize_into(self, rgb: np.ndarray, out: np.ndarray) -> None:
+        """Write ``rgb`` (uint8 ``[h, w, 3]``, any strides) into ``out`` at ``out``'s size."""
+        if rgb.shape == out.shape:
+            np.copyto(out, rgb)
             return
         scaled = self._reformatter.reformat(
-            av.VideoFrame.from_ndarray(frame, format="rgb24"),
+            av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24"),
             width=out.shape[1],
             height=out.shape[0],
             format="rgb24",
             interpolation=RESIZE_INTERPOLATION,
         )
         np.copyto(out, scaled.to_ndarray())
+
+
+class FrontCrop:
+    """A narrow forward camera cut from a wide one: the centre ``fraction`` of a frame's height
+    and width. One frame is decoded once at full size, then resized into the wide camera's
+    output and, cropped, into the narrow one's (in swscale, no per-pixel Python).
+
+    Keeps swscale contexts: one per stream decoder (a session's ``front``).
+
+    >>> FrontCrop(0.25).box(512, 768)
+    (192, 288, 128, 192)
+    >>> FrontCrop(0)
+    Traceback (most recent call last):
+    ...
+    ValueError: front_crop must be a fraction in (0, 1], got 0
+    """
+
+    def __init__(self, fraction: float) -> None:
+        self.fraction = validate_front_crop(fraction)
+        self._wide = RgbResizer()
+        self._narrow = RgbResizer()
+
+    def box(self, height: int, width: int) -> tuple[int, int, int, int]:
+        """``(top, left, height, width)`` of the centre crop of a ``height x width`` frame."""
+        crop_h = max(1, round(height * self.fraction))
+        crop_w = max(1, round(width * self.fraction))
+        return (height - crop_h) // 2, (width - crop_w) // 2, crop_h, crop_w
+
+    def cut(self, full: np.ndarray) -> np.ndarray:
+        """The centre crop of ``full`` (a view, no copy)."""
+        top, left, height, width = self.box(*full.shape[:2])
+        return full[top : top + height, left : left + width]
+
+    def decode_into(
+        self, decoder: FrameDecoder, packet: bytes, wide: np.ndarray, narrow: np.ndarray
+    ) -> None:
+        """Decode ``packet`` once at full size into ``wide`` and its centre into ``narrow``."""
+        full = decoder.decode_full(packet)
+        self._wide.resize_into(full, wide)
+        self._narrow.resize_into(self.cut(full), narrow)
+
+
+def validate_front_crop(fraction: float | None) -> float | None:
+    """Check ``env.front_crop``: None (no crop) or a fraction in ``(0, 1]``.
+
+    >>> validate_front_crop(0.25), validate_front_crop(None)
+    (0.25, None)
+    """
+    if fraction is None:
+        return None
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)):
+        raise ValueError(f"front_crop must be a fraction in (0, 1], got {fraction!r}")
+    if not 0 < fraction <= 1:
+        raise ValueError(f"front_crop must be a fraction in (0, 1], got {fraction!r}")
+    return float(fraction)
 
 
 DECODABLE_FORMATS: tuple[FrameFormat, ...] = (
@@ -232,11 +327,17 @@ def make_decoder(
 
 
 def decode_chunk(
-    decoder: FrameDecoder, packets: Sequence[bytes], out: np.ndarray, chunk: int | None = None
+    decoder: FrameDecoder,
+    packets: Sequence[bytes],
+    out: np.ndarray,
+    chunk: int | None = None,
+    crop: tuple[FrontCrop, np.ndarray] | None = None,
 ) -> None:
     """Decode a chunk of ``chunk`` packets in order; ``out`` (uint8 ``[k, H, W, 3]``) receives
     its last ``k`` frames. Earlier frames are still decoded, keeping a stateful stream in sync,
-    but never converted to RGB (the conversion is most of the cost).
+    but never converted to RGB (the conversion is most of the cost). With ``crop`` (a
+    :class:`FrontCrop` and its ``[k, h, w, 3]`` output) each kept frame is decoded at full size
+    once and its centre crop written beside it.
 
     >>> import numpy as np
     >>> decode_chunk(JpegDecoder("front"), [], np.empty((1, 8, 8, 3), np.uint8), chunk=4)
@@ -250,8 +351,13 @@ def decode_chunk(
     skipped = len(packets) - len(out)
     for packet in packets[:skipped]:
         decoder.skip(packet)
-    for packet, slot in zip(packets[skipped:], out, strict=True):
-        decoder.decode_into(packet, slot)
+    if crop is None:
+        for packet, slot in zip(packets[skipped:], out, strict=True):
+            decoder.decode_into(packet, slot)
+        return
+    front_crop, narrow = crop
+    for packet, slot, narrow_slot in zip(packets[skipped:], out, narrow, strict=True):
+        front_crop.decode_into(decoder, packet, slot, narrow_slot)
 
 
 def validate_resize(resize: tuple[int, int] | None) -> tuple[int, int] | None:

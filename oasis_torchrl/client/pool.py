@@ -49,7 +49,12 @@ from grpc_health.v1 import health_pb2_grpc
 from oasis_torchrl.client import health, wire
 from oasis_torchrl.client.background import EventLoopThread
 from oasis_torchrl.client.channel import TlsSetting, create_aio_channel, parse_endpoint
-from oasis_torchrl.client.decoding import decode_chunk, validate_resize
+from oasis_torchrl.client.decoding import (
+    FrontCrop,
+    decode_chunk,
+    validate_front_crop,
+    validate_resize,
+)
 from oasis_torchrl.client.errors import (
     DecartRoboticsError,
     DecodeError,
@@ -74,7 +79,7 @@ from oasis_torchrl.client.types import (
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
-from oasis_torchrl.protocol import ACTION_DIM, API_KEY_ENV_VAR, CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, API_KEY_ENV_VAR, CAMERAS, CHUNK, FRONT, FRONT_CROP
 
 logger = logging.getLogger(__name__)
 
@@ -200,7 +205,11 @@ class _PoolSession:
         """Decode every selected stream into its slot: on the decode threads, concurrently,
         or right here when decoding is a mere copy (raw frames)."""
         decoders, chunk = self.state.decoders, self.state.info.frames_per_chunk
-        jobs = [(decoders[name], packets.get(name, ()), out, chunk) for name, out in slots.items()]
+        jobs = [
+            (decoders[name], packets.get(name, ()), out, chunk, self._crop_of(name, slots))
+            for name, out in slots.items()
+            if name != FRONT_CROP
+        ]
         if not any(decoder.threaded for decoder, *_ in jobs):
             for job in jobs:
                 decode_chunk(*job)
@@ -211,6 +220,13 @@ class _PoolSession:
         _raise_any(
             await _gather([loop.run_in_executor(self.executor, decode_chunk, *job) for job in jobs])
         )
+
+    def _crop_of(self, stream: str, slots: RowSlots) -> tuple[FrontCrop, np.ndarray] | None:
+        """The crop the ``stream`` decode also writes: ``front``'s, where the pool has one."""
+        front_crop = self.state.front_crop
+        if stream != FRONT or front_crop is None:
+            return None
+        return front_crop, slots[FRONT_CROP]
 
     async def depth(self) -> dict[str, np.ndarray]:
         """Depth maps of the last frame of each stream (SimService)."""
@@ -274,7 +290,9 @@ class SessionPool:
     raw frames, so the others are never drawn nor sent); from other servers the other three are
     still decoded, so the streams stay in sync, but never converted to RGB. ``expert=True``
     asks every Prompt for the embedded server's expert, whose next chunk each step returns
-    (``PoolStep.expert``, NaN without it).
+    (``PoolStep.expert``, NaN without it). ``front_crop`` (a fraction) adds a derived camera,
+    ``"front_crop"``: the centre of each ``front`` frame decoded at the stream's full size, at
+    the other cameras' size (:class:`~oasis_torchrl.client.decoding.FrontCrop`).
 
     ``endpoint`` is an A2V endpoint URL, or a :class:`ServerHandle` (such as the embedded
     server's launcher): the pool starts that server when it starts, takes its endpoint and key,
@@ -305,6 +323,7 @@ class SessionPool:
         client_sdk_version: str = DEFAULT_SDK_VERSION,
         frames: str = "all",
         expert: bool = False,
+        front_crop: float | None = None,
     ) -> None:
         if frames not in FRAME_SELECTIONS:
             raise ValueError(f"frames must be one of {sorted(FRAME_SELECTIONS)}, got {frames!r}")
@@ -323,6 +342,13 @@ class SessionPool:
         self.accepted_formats = wire.accepted_format_list(accepted_formats, self.endpoint)
         self.resize = validate_resize(resize)
         self.required_streams = tuple(required_streams)
+        self.front_crop = validate_front_crop(front_crop)
+        cut = self.front_crop is not None and self.required_streams
+        if cut and FRONT not in self.required_streams:
+            raise ValueError(
+                f"front_crop cuts the '{FRONT}' stream: add it to required_streams "
+                f"{list(self.required_streams)}"
+            )
         self.decode_threads = decode_threads
         self.client_sdk_version = client_sdk_version
         self.frames = frames
@@ -349,6 +375,13 @@ class SessionPool:
     def stream_names(self) -> tuple[str, ...]:
         """Names of the streams each step returns, in order (empty before start)."""
         return tuple(stream.name for stream in self._streams)
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """Names of the cameras each step returns: the streams, then ``"front_crop"`` with a
+        crop (empty before start)."""
+        crop = (FRONT_CROP,) if self.front_crop is not None and self._streams else ()
+        return (*self.stream_names, *crop)
 
     @property
     def frame_size(self) -> tuple[int, int]:
@@ -618,7 +651,7 @@ class SessionPool:
         kept = FRAME_SELECTIONS[self.frames]
         frames = {
             name: np.empty((len(rows), kept, height, width, 3), np.uint8)
-            for name in self.stream_names
+            for name in self.camera_names
         }
         coroutines = [
             row_step(runtime.sessions[row], j, {name: out[j] for name, out in frames.items()})
@@ -668,6 +701,7 @@ class SessionPool:
             decoder_threads=1,  # the pool decodes many streams in parallel
             last_frame_only=self.frames == "last",
             expert=self.expert,
+            front_crop=self.front_crop,
         )
 
     def _require_started(self) -> _Runtime:

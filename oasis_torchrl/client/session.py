@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oasis_torchrl.client import wire
-from oasis_torchrl.client.decoding import FrameDecoder, make_decoder
+from oasis_torchrl.client.decoding import FrameDecoder, FrontCrop, make_decoder
 from oasis_torchrl.client.errors import DecartRoboticsError
 from oasis_torchrl.client.ground_truth import parse_truth
 from oasis_torchrl.client.types import FrameFormat
@@ -72,6 +72,8 @@ class SessionState:
             server that does not grant it sends all 4.
         expert: Ask every Prompt for the embedded server's expert (``x-oasis-expert``), whose
             next chunk then comes with the ground truth of every Infer.
+        front_crop: The fraction of the ``front`` frame a derived narrow camera reads
+            (:class:`~oasis_torchrl.client.decoding.FrontCrop`; None: none).
 
     >>> state = SessionState("k", sdk_version="0.0.2", accepted_formats=[FrameFormat.VP9],
     ...                      required_streams=["front"])
@@ -94,8 +96,10 @@ class SessionState:
         decoder_threads: int = 0,
         last_frame_only: bool = False,
         expert: bool = False,
+        front_crop: float | None = None,
     ) -> None:
         self.api_key = api_key
+        self.front_crop = None if front_crop is None else FrontCrop(front_crop)
         self.last_frame_only = last_frame_only
         self.expert = expert
         self.sdk_version = sdk_version

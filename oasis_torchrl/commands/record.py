@@ -86,6 +86,7 @@ def _make_env(cfg: RecordConfig, driver: Driver) -> TransformedEnv:
         all_frames=cfg.rows == "frame",
         frame_stack=driver.frame_stack,
         expert=driver.needs_expert,
+        front_crop=driver.front_crop,
     )
     env.set_seed(cfg.seed)
     return env

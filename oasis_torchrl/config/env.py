@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from oasis_torchrl.client.decoding import validate_front_crop
 from oasis_torchrl.options import option
 from oasis_torchrl.protocol import FPS
 
@@ -76,6 +77,13 @@ class EnvConfig:
         help="[height, width] the frames are decoded to, the policy's input size (null: the "
         "server's size)",
     )
+    front_crop: float | None = option(
+        None,
+        help="add a narrow forward camera, front_crop: the centre of the front camera, this "
+        "fraction of its height and width, cut from the front frame at the server's full size "
+        "and resized to image_size (an embedded server then renders large enough for it); "
+        "null: off",
+    )
     server: EmbeddedServerConfig = option(
         default_factory=EmbeddedServerConfig, help="the embedded server of endpoint 'local'"
     )
@@ -84,6 +92,7 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if not self.prompts:
             raise ValueError("env.prompts must hold at least one prompt")
+        validate_front_crop(self.front_crop)
         if self.num_envs < 1 or self.max_steps < 1:
             raise ValueError(
                 f"env.num_envs and env.max_steps must be >= 1, got {self.num_envs}, "

@@ -343,6 +343,12 @@ class BCPolicyConfig(NetworkArchitectureConfig):
     takes as its own."""
 
     image_size: list[int] = option(default_factory=lambda: [64, 96], help="[height, width]")
+    front_crop: float | None = option(
+        None,
+        help="the fraction of the front frame the dataset's front_crop camera shows (its "
+        "env.front_crop); the policy then reads that camera and its envs get the crop; null: "
+        "no crop",
+    )
     use_state: bool = option(
         False, help="the previous action as an input (off: a clone would copy it)"
     )
@@ -399,6 +405,10 @@ class DatasetConfig:
     root: str | None = option(None, help="the dataset folder (required)")
     repo_id: str | None = option(None, help="default local/<folder name>")
     episodes: list[int] | None = option(None, help="episode indices, default all")
+    cameras: list[str] | None = option(
+        None,
+        help="the cameras the policy reads, e.g. [left_forward,front,right_forward] (null: all)",
+    )
     cache: bool = option(True, help="decode the videos once into memory (much faster epochs)")
 
 

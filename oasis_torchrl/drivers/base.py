@@ -32,6 +32,9 @@ class Driver(ABC):
     frame_stack: int = POLICY_FRAMES
     """Frames one chunk apart the driver reads per camera (``("frame_stack", <camera>)``):
     build its env with that stack depth."""
+    front_crop: float | None = None
+    """The fraction of the front frame the driver's ``front_crop`` camera shows (None: it reads
+    no crop): build its env with ``env.front_crop`` set to it."""
     needs_expert: bool = False
     """Whether the driver drives with the embedded server's expert: build its env with
     ``expert=True``."""

@@ -18,7 +18,7 @@ from oasis_torchrl.models import DrivingNet, make_deterministic_actor, observati
 from oasis_torchrl.models.actor_critic import FRAME_STACK
 from oasis_torchrl.models.checkpoint import load_checkpoint, net_from_checkpoint
 from oasis_torchrl.models.config import POLICY_FRAMES
-from oasis_torchrl.protocol import CAMERAS, CHUNK
+from oasis_torchrl.protocol import CAMERAS, CHUNK, FRONT_CROP
 from oasis_torchrl.remote import RemotePolicy
 
 
@@ -80,6 +80,7 @@ class PolicyDriver(Driver):
         image_size: see :attr:`Driver.image_size`.
         frame_stack: see :attr:`Driver.frame_stack`.
         observation_spec: see :attr:`Driver.observation_spec`.
+        front_crop: see :attr:`Driver.front_crop`.
         chunk_actions: see :class:`Driver`.
 
     Example:
@@ -100,9 +101,11 @@ class PolicyDriver(Driver):
         image_size: tuple[int, int] | None = None,
         frame_stack: int = POLICY_FRAMES,
         observation_spec: Composite | None = None,
+        front_crop: float | None = None,
         chunk_actions: bool = True,
     ) -> None:
         super().__init__(chunk_actions=chunk_actions)
+        self.front_crop = front_crop
         self.module = module.eval()
         self.in_keys = list(in_keys) if in_keys is not None else None
         self.image_size = image_size
@@ -126,6 +129,7 @@ class PolicyDriver(Driver):
             image_size=tuple(net.config.image_size),
             frame_stack=net.config.frames,
             observation_spec=observation_spec(net),
+            front_crop=net.config.front_crop,
             **kwargs,
         )
 
@@ -161,6 +165,12 @@ class PolicyDriver(Driver):
     def _check_frame_stack(self, td: TensorDictBase) -> None:
         """Name the missing frame stack (a bare ``OasisEnv``) instead of a bare KeyError."""
         missing = [key for key in self._stack_keys if key not in td.keys(True)]
+        if (FRAME_STACK, FRONT_CROP) in missing:
+            raise ValueError(
+                f"the policy reads the front crop (a fraction {self.front_crop} of the front "
+                f"frame), which the env does not give: build it with env.front_crop="
+                f"{self.front_crop}"
+            )
         if missing:
             raise ValueError(
                 f"the policy reads {missing[0]} (frames one chunk apart), which the env does not "

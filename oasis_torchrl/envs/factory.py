@@ -20,6 +20,7 @@ it, and ``env.reward.kind: auto`` follows it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -70,6 +71,52 @@ def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardMo
     return ClearanceShaping(reward, cfg.clearance_weight, cfg.clearance_horizon)
 
 
+def env_front_crop(cfg: Settings, required: float | None) -> float | None:
+    """The front crop of the env: ``required`` (a policy's), else ``env.front_crop``.
+
+    Example:
+        >>> env_front_crop(EnvConfig(), 0.25), env_front_crop(EnvConfig(front_crop=0.5), None)
+        (0.25, 0.5)
+        >>> env_front_crop(EnvConfig(front_crop=0.5), 0.25)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: the policy reads a front crop of 0.25 ..., env.front_crop is 0.5: set ...
+    """
+    configured = cfg.front_crop
+    if required is None or configured is None or float(configured) == float(required):
+        return required if required is not None else configured
+    raise ValueError(
+        f"the policy reads a front crop of {required} of the front frame, env.front_crop is "
+        f"{configured}: set env.front_crop={required} or null"
+    )
+
+
+def render_size(
+    server: tuple[int, int], frame_size: tuple[int, int] | None, front_crop: float | None
+) -> tuple[int, int]:
+    """``(height, width)`` an embedded server renders at: its own size, or, with a front crop,
+    at least the size whose centre crop holds ``frame_size`` pixels (rounded up to even), so
+    the crop shows detail the cameras' frames lack. Rendering larger is the cheapest correct
+    way: the crop is then cut exactly as from the hosted service's 768x512 frames, and the
+    client decodes every camera to ``frame_size`` anyway.
+
+    Example:
+        >>> render_size((64, 96), (64, 96), 0.25)
+        (256, 384)
+        >>> render_size((64, 96), (64, 96), None), render_size((512, 768), (64, 96), 0.25)
+        ((64, 96), (512, 768))
+    """
+    if front_crop is None or frame_size is None:
+        return server
+    needed = (_even(math.ceil(side / front_crop)) for side in frame_size)
+    height, width = (max(own, need) for own, need in zip(server, needed, strict=True))
+    return height, width
+
+
+def _even(value: int) -> int:
+    return value + value % 2
+
+
 def make_env(
     cfg: Settings,
     *,
@@ -80,6 +127,7 @@ def make_env(
     all_frames: bool = True,
     frame_stack: int | None = POLICY_FRAMES,
     privileged: bool = False,
+    front_crop: float | None = None,
     **env_kwargs: Any,
 ) -> TransformedEnv:
     """The :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` settings section, transformed.
@@ -95,6 +143,8 @@ def make_env(
             no stack (append a :class:`ChunkFrameStack` later, e.g. once the network is known).
         privileged: add :class:`~oasis_torchrl.envs.transforms.PrivilegedState` (needs ground
             truth: an error on an endpoint that sends frames only).
+        front_crop: the front crop a policy reads (its fraction): the env gets it whatever
+            ``env.front_crop`` says (another fraction there is an error); None: the section's.
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -119,16 +169,20 @@ def make_env(
             "take demonstrations from a person, a recordings folder or a policy",
         )
     size = image_size if image_size is not None else cfg.image_size
+    frame_size = None if size is None else (int(size[0]), int(size[1]))
+    crop = env_front_crop(cfg, front_crop)
     server = cfg.server
+    height, width = render_size((server.height, server.width), frame_size, crop)
     env_kwargs.setdefault("ground_truth", found.ground_truth)
     env = OasisEnv(
         cfg.endpoint,
         num_envs or cfg.num_envs,
         prompts if prompts is not None else episode_prompts(cfg.prompts),
         server=ServerConfig(
-            width=server.width, height=server.height, fps=float(server.fps), hosted=server.hosted
+            width=width, height=height, fps=float(server.fps), hosted=server.hosted
         ),
-        frame_size=None if size is None else (int(size[0]), int(size[1])),
+        frame_size=frame_size,
+        front_crop=crop,
         all_frames=all_frames,
         max_steps=max_steps or cfg.max_steps,
         reward=make_reward(cfg.reward, found),

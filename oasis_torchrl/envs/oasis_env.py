@@ -50,7 +50,14 @@ from oasis_torchrl.envs.specs import (
     build_observation_spec,
     build_reward_spec,
 )
-from oasis_torchrl.protocol import CAMERAS, CHUNK, FORMAT_NAMES, FPS, HOSTED_FRAME_SIZE
+from oasis_torchrl.protocol import (
+    CAMERAS,
+    CHUNK,
+    FORMAT_NAMES,
+    FPS,
+    FRONT_CROP,
+    HOSTED_FRAME_SIZE,
+)
 from oasis_torchrl.rewards import (
     DepthCollisionReward,
     GroundTruthReward,
@@ -190,9 +197,10 @@ class OasisWrapper(_EnvWrapper):
         return env
 
     def _make_specs(self, env: SessionPool) -> None:
+        crop = (FRONT_CROP,) if env.front_crop is not None else ()
         self.layout = EnvLayout(
             num_envs=self.num_envs,
-            cameras=self.streams.cameras,
+            cameras=(*self.streams.cameras, *crop),
             frame_size=self.streams.frame_size,
             all_frames=self.all_frames,
             chunk_actions=self.chunk_actions,
@@ -392,8 +400,9 @@ class OasisEnv(OasisWrapper):
     | `("truth", field)` | `Unbounded` | `[N, 4]` | `float32` |
     | `("reward_terms", term)` | `Unbounded` | `[N, 1]` | `float32` |
 
-    ``camera`` is each of the three cameras and ``H x W`` the decoded size (the hosted model's
-    512 x 768 unless ``frame_size`` or the embedded server's size says otherwise); the pixels are
+    ``camera`` is each of the three cameras (and ``front_crop`` with ``front_crop`` set) and
+    ``H x W`` the decoded size (the hosted model's 512 x 768 unless ``frame_size`` or the
+    embedded server's size says otherwise); the pixels are
     the last frame of the chunk, all four (``[N, 4, H, W, 3]``) with ``all_frames=True``.
     ``"state"`` is the previous action (zeros after a reset); ``"prompt"`` (text) is the row's
     prompt. ``("truth", field)`` (the embedded server only: each frame's position, speed,
@@ -452,6 +461,11 @@ class OasisEnv(OasisWrapper):
         expert: run the embedded server's expert beside every episode and expose its next
             chunk as ``"expert_action"`` (what :class:`~oasis_torchrl.drivers.Autopilot` drives
             with, and demonstrations label with); off, the server spends nothing on it.
+        front_crop: add a fourth camera, ``("pixels", "front_crop")``: the centre of the front
+            camera, this fraction of its height and width, cut from the front frame decoded at
+            the server's full size and resized to ``frame_size`` (a narrow forward camera; the
+            detail it shows is what the server's size holds: an embedded server needs a larger
+            size than ``frame_size`` for it, which :func:`~oasis_torchrl.envs.make_env` sets).
         retry: transient-failure policy of the session pool.
         timeout: per-call deadline in seconds.
         **kwargs: the other :class:`OasisWrapper` arguments (``chunk_actions``, ``max_steps``,
@@ -487,6 +501,7 @@ class OasisEnv(OasisWrapper):
         all_frames: bool = False,
         ground_truth: bool | None = None,
         expert: bool = False,
+        front_crop: float | None = None,
         retry: RetryPolicy | None = None,
         timeout: float = 120.0,
         **kwargs: Any,
@@ -517,6 +532,7 @@ class OasisEnv(OasisWrapper):
             resize=frame_size,
             frames="all" if all_frames else "last",
             expert=expert,
+            front_crop=front_crop,
             **formats,
         )
         super().__init__(

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from oasis_torchrl.config.training import NetworkArchitectureConfig
-from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, FRONT_CROP
 
 POLICY_IMAGE_SIZE: tuple[int, int] = (64, 96)
 """Default ``(height, width)`` the network sees."""
@@ -84,6 +84,9 @@ class DrivingNetConfig:
             action number (repeated over the chunk and the components): ``(0.5, 0.1)``
             explores throttle widely and steering by a tenth of a lane change, not a whole one.
         min_scale: lower bound of that scale.
+        front_crop: the fraction of the front frame the ``front_crop`` camera shows (the
+            ``env.front_crop`` its env must have); set exactly when ``cameras`` holds
+            ``front_crop``.
 
     Example:
         >>> config = DrivingNetConfig(shared_encoder=False)
@@ -112,10 +115,17 @@ class DrivingNetConfig:
     init_spread: tuple[float, ...] = (0.0, 0.3)
     init_scale: tuple[float, ...] = (0.5, 0.1)
     min_scale: float = 1e-3
+    front_crop: float | None = None
 
     def __post_init__(self) -> None:
         if not self.cameras:
             raise ValueError("DrivingNetConfig.cameras must name at least one camera")
+        if (FRONT_CROP in self.cameras) != (self.front_crop is not None):
+            raise ValueError(
+                f"DrivingNetConfig.front_crop ({self.front_crop}) is the fraction the "
+                f"'{FRONT_CROP}' camera shows: set it exactly when cameras {list(self.cameras)} "
+                f"hold '{FRONT_CROP}'"
+            )
         if len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"DrivingNetConfig.cameras has duplicates: {list(self.cameras)}")
         if self.head not in HEADS:

@@ -14,7 +14,7 @@ and as a PPO warm start (``init_from``). Config: :class:`~oasis_torchrl.config.B
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -30,6 +30,7 @@ from oasis_torchrl.config import save_config
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
+from oasis_torchrl.protocol import FRONT_CROP
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.shift import random_shift
@@ -82,6 +83,48 @@ def open_dataset(cfg: DictConfig, policy_config: Any) -> Any:
     )
 
 
+def policy_inputs(
+    features: dict[str, dict[str, Any]], cameras: Sequence[str] | None, front_crop: float | None
+) -> dict[str, Any]:
+    """The policy's input features from a dataset's ``features``: every one but the action,
+    with only ``cameras``' images where given; a ``front_crop`` camera needs its fraction.
+
+    Example:
+        >>> video = {"dtype": "video", "shape": (64, 96, 3), "names": ["height", "width", "c"]}
+        >>> features = {f"{IMAGE_PREFIX}{c}": video for c in ("front", "front_crop")}
+        >>> sorted(policy_inputs(features, ["front"], None))
+        ['observation.images.front']
+        >>> policy_inputs(features, None, None)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: the dataset's cameras include 'front_crop': set policy.front_crop to ...
+    """
+    from lerobot.configs import FeatureType
+    from lerobot.utils.feature_utils import dataset_to_policy_features
+
+    inputs = {
+        key: feature
+        for key, feature in dataset_to_policy_features(features).items()
+        if feature.type is not FeatureType.ACTION
+    }
+    if cameras is not None:
+        known = [key.removeprefix(IMAGE_PREFIX) for key in inputs if key.startswith(IMAGE_PREFIX)]
+        unknown = sorted(set(cameras) - set(known))
+        if unknown:
+            raise ValueError(f"dataset.cameras {unknown} are not in the dataset (it has {known})")
+        inputs = {
+            key: feature
+            for key, feature in inputs.items()
+            if not key.startswith(IMAGE_PREFIX) or key.removeprefix(IMAGE_PREFIX) in cameras
+        }
+    if f"{IMAGE_PREFIX}{FRONT_CROP}" in inputs and front_crop is None:
+        raise ValueError(
+            f"the dataset's cameras include '{FRONT_CROP}': set policy.front_crop to the "
+            "env.front_crop it was recorded with, or leave it out with dataset.cameras"
+        )
+    return inputs
+
+
 def _batches(loader: DataLoader) -> Iterator[dict[str, Any]]:
     while True:
         yield from loader
@@ -112,6 +155,9 @@ class BCTrainer:
         }
         self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
         dataset = open_dataset(cfg.dataset, self.policy_config)
+        self.policy_config.input_features = policy_inputs(
+            dataset.meta.features, cfg.dataset.cameras, cfg.policy.front_crop
+        )
         self.policy = make_policy(self.policy_config, ds_meta=dataset.meta)
         if cfg.init_from:  # fine-tune (e.g. a DAgger round) instead of starting afresh
             self.policy.model.warm_start(load_net(cfg.init_from))
@@ -123,7 +169,11 @@ class BCTrainer:
         if cfg.dataset.cache:  # frames kept at the policy's size: no resize per batch
             size = tuple(self.policy_config.image_size)
             cached = InMemoryBCDataset(
-                dataset, image_size=size, progress=cfg.progress, frame_transform=shift
+                dataset,
+                image_size=size,
+                progress=cfg.progress,
+                frame_transform=shift,
+                camera_keys=list(self.policy_config.image_features),
             )
         # The cache shifts the frames while they are bytes; LeRobot's dataset gives floats.
         self.shift_in_loop = shift if cached is None else None
@@ -210,6 +260,7 @@ class BCTrainer:
             self.cfg.eval,
             image_size=image_size,
             frame_stack=net.config.frames,
+            front_crop=net.config.front_crop,
             progress=self.cfg.progress,
         ) as evaluator:
             report = evaluator.evaluate(make_actor_critic(net).policy)

@@ -19,7 +19,7 @@ the same transform on the floats.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import closing
 from pathlib import Path
 from typing import Any
@@ -53,6 +53,7 @@ class InMemoryBCDataset(Dataset):
         frame_transform: applied to each camera's frames of a batch, uint8
             ``[B, ..., 3, H, W]``, before their conversion to float (augmentation such as
             :func:`~oasis_torchrl.train.shift.random_shift`; ``None``: none).
+        camera_keys: the cameras' features to keep (``None``: every stored camera).
 
     Example:
         >>> cached = InMemoryBCDataset(open_for_bc("drives"))  # doctest: +SKIP
@@ -67,12 +68,14 @@ class InMemoryBCDataset(Dataset):
         image_size: tuple[int, int] | None = None,
         progress: bool = True,
         frame_transform: Callable[[torch.Tensor], torch.Tensor] | None = None,
+        camera_keys: Sequence[str] | None = None,
     ) -> None:
         if not dataset.delta_timestamps or ACTION not in dataset.delta_timestamps:
             raise ValueError(
                 "open the dataset with delta_timestamps for 'action' (an action chunk)"
             )
-        self.camera_keys = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
+        stored = list(dataset.meta.video_keys) + list(dataset.meta.image_keys)
+        self.camera_keys = stored if camera_keys is None else list(camera_keys)
         delta_indices = get_delta_indices(dataset.delta_timestamps, dataset.fps)
         self.deltas = {key: torch.tensor(d) for key, d in delta_indices.items()}
         # The privileged state, where recorded, is the auxiliary head's target.

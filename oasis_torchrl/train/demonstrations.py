@@ -135,8 +135,13 @@ def record_demonstrations(
     # the main job's first recording having run; the writer keeps it quiet from then on.
     quiet_dataset_libraries()
     expert = Autopilot() if labeller is None else labeller
-    frame_stack = (learner or labeller or expert).frame_stack
-    env = make_env(env_cfg, frame_stack=frame_stack, expert=expert.needs_expert)
+    driver = learner or labeller or expert
+    env = make_env(
+        env_cfg,
+        frame_stack=driver.frame_stack,
+        expert=expert.needs_expert,
+        front_crop=driver.front_crop,
+    )
     env.set_seed(seed)
     rows = int(env.batch_size[0])
     process = NoiseProcess(noise, rows, seed)

@@ -563,6 +563,8 @@ class Evaluator:
         image_size: policy image size (default: ``env_cfg.image_size``).
         expert: run the embedded server's expert (for a policy that drives with it, see
             :attr:`~oasis_torchrl.drivers.Driver.needs_expert`).
+        front_crop: the front crop a policy reads (see
+            :attr:`~oasis_torchrl.drivers.Driver.front_crop`; None: ``env.front_crop``).
         progress: show a progress bar per evaluation.
         rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s (a
             policy's logger of a side-by-side recording).
@@ -585,6 +587,7 @@ class Evaluator:
         image_size: tuple[int, int] | None = None,
         frame_stack: int = POLICY_FRAMES,
         expert: bool = False,
+        front_crop: float | None = None,
         progress: bool = True,
         rerun_logger: RolloutLogger | None = None,
     ) -> None:
@@ -604,6 +607,7 @@ class Evaluator:
             all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger),
             frame_stack=frame_stack,
             expert=expert,
+            front_crop=front_crop,
         )
         self.recorders = EpisodeRecorders(
             rerun_logger or eval_cfg.get("rerun"),
@@ -629,7 +633,7 @@ class Evaluator:
         rerun_logger: RolloutLogger | None = None,
     ) -> Evaluator:
         """An evaluator whose env serves what ``driver`` reads: its image size, its frame
-        stack and, if it drives with it, the embedded server's expert.
+        stack, its front crop and, if it drives with it, the embedded server's expert.
 
         Example:
             >>> from oasis_torchrl.drivers import load_driver
@@ -646,6 +650,7 @@ class Evaluator:
             image_size=driver.image_size,
             frame_stack=driver.frame_stack,
             expert=driver.needs_expert,
+            front_crop=driver.front_crop,
             progress=progress,
             rerun_logger=rerun_logger,
         )

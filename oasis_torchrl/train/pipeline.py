@@ -241,7 +241,7 @@ def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
         "output_dir": str(round_folder(cfg, round_)),
         "dataset": {"root": str(dataset)},
         "eval": {"episodes": 0},
-        "policy": {"image_size": list(cfg.env.image_size)},
+        "policy": {"image_size": list(cfg.env.image_size), "front_crop": cfg.env.front_crop},
     }
     if round_:
         values["init_from"] = str(previous_clone(cfg, round_))

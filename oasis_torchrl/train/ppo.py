@@ -47,6 +47,7 @@ from oasis_torchrl.models.checkpoint import (
     net_from_checkpoint,
     save_checkpoint,
 )
+from oasis_torchrl.protocol import FRONT_CROP
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
@@ -90,7 +91,8 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
         logger.info("warm start from %s (scale %s)", cfg.init_from, cfg.warm_start_scale)
     else:
         network = OmegaConf.to_container(cfg.network)
-        config = {"cameras": cameras, "image_size": image_size, **network}
+        crop = {"front_crop": cfg.env.front_crop} if FRONT_CROP in cameras else {}
+        config = {"cameras": cameras, "image_size": image_size, **crop, **network}
         net = DrivingNet(DrivingNetConfig.from_dict(config))
     critic_inputs = len(PRIVILEGED_FIELDS) if cfg.privileged_critic else 0
     aux_outputs = len(PRIVILEGED_FIELDS) if cfg.loss.aux_coeff else 0
@@ -99,7 +101,8 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
     if net.config.cameras != cameras or tuple(net.config.image_size) != image_size:
         raise ValueError(
             f"the network reads cameras {net.config.cameras} at {net.config.image_size}, the env "
-            f"gives {cameras} at {image_size}: set env.image_size to the network's size"
+            f"gives {cameras} at {image_size}: set env.image_size to the network's size (and "
+            f"env.front_crop to its front_crop, {net.config.front_crop})"
         )
     return net
 
@@ -480,6 +483,7 @@ class PPOTrainer:
                 self.cfg.env,
                 self.cfg.eval,
                 frame_stack=self.net.config.frames,
+                front_crop=self.net.config.front_crop,
                 progress=self.cfg.progress,
             )
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy

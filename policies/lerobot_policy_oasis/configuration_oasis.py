@@ -33,9 +33,9 @@ from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from oasis_torchrl.config.training import BCPolicyConfig
-from oasis_torchrl.models import CAMERAS, DrivingNetConfig
+from oasis_torchrl.models import DrivingNetConfig
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
-from oasis_torchrl.protocol import ACTION_DIM, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK, POLICY_CAMERAS
 
 POLICY_TYPE = "oasis"
 FRAME_SPACING = CHUNK
@@ -56,6 +56,7 @@ NETWORK_FIELDS = (
     "init_spread",
     "init_scale",
     "min_scale",
+    "front_crop",
 )
 """The :class:`DrivingNetConfig` fields a LeRobot config sets as its own. The others come from
 LeRobot's fields (``frames``: ``n_obs_steps``, ``chunk``: ``chunk_size``, ``cameras`` and
@@ -103,7 +104,7 @@ class OasisConfig(PreTrainedConfig, OasisPolicyFields):
     The network's fields (:data:`NETWORK_FIELDS`: ``image_size``, ``shared_encoder``,
     ``encoder_channels``, ``encoder_strides``, ``pool_grid``, ``camera_features``,
     ``hidden_dim``, ``use_state``, ``head``, ``components``, ``init_action``, ``init_spread``,
-    ``init_scale``, ``min_scale``)
+    ``init_scale``, ``min_scale``, ``front_crop``)
     are :class:`oasis_torchrl.models.DrivingNetConfig`'s, with its types and meaning
     (:meth:`net_config` builds it), so a LeRobot checkpoint loads into TorchRL PPO unchanged.
     ``image_size`` is also the size the preprocessor resizes frames to. Their defaults, and
@@ -168,7 +169,7 @@ class OasisConfig(PreTrainedConfig, OasisPolicyFields):
         """Camera names of the image inputs, the world model's order first."""
         prefix = f"{OBS_IMAGES}."
         names = [key.removeprefix(prefix) for key in self.image_features]
-        known = [camera for camera in CAMERAS if camera in names]
+        known = [camera for camera in POLICY_CAMERAS if camera in names]
         return (*known, *sorted(set(names) - set(known)))
 
     def net_config(self) -> DrivingNetConfig:
