@@ -150,16 +150,36 @@ class EvalReport:
             "episodes": float(len(self.episodes)),
         }
 
+    def per_prompt(self) -> dict[str, EvalReport]:
+        """The episodes of each prompt (scene) as a report of their own, in the order the
+        prompts first appear.
+
+        Example:
+            >>> report = EvalReport([EpisodeResult("urban", 1, 10.0, True, 0.0, 7),
+            ...                      EpisodeResult("highway", 1, 30.0, False, 0.0, 20)])
+            >>> {prompt: part.mean_distance for prompt, part in report.per_prompt().items()}
+            {'urban': 10.0, 'highway': 30.0}
+        """
+        reports: dict[str, EvalReport] = {}
+        for episode in self.episodes:
+            part = reports.setdefault(episode.prompt, EvalReport(ground_truth=self.ground_truth))
+            part.episodes.append(episode)
+        return reports
+
     def to_dict(self, **extra: Any) -> dict[str, Any]:
-        """``extra`` items, the aggregates and every episode, JSON-ready; a frames-only report
-        says what its figures are."""
+        """``extra`` items, the aggregates (and, over several prompts, each prompt's under
+        ``per_prompt``) and every episode, JSON-ready; a frames-only report says what its
+        figures are."""
         labels = {"ground_truth": self.ground_truth}
         if not self.ground_truth:
             labels["note"] = FRAMES_ONLY_NOTE
+        parts = self.per_prompt()
+        scenes = {prompt: part.summary() for prompt, part in parts.items()}
         return {
             **extra,
             **labels,
             **self.summary(),
+            **({"per_prompt": scenes} if len(parts) > 1 else {}),
             "per_episode": [asdict(e) for e in self.episodes],
         }
 

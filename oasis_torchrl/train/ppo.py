@@ -184,6 +184,9 @@ class PPOTrainer:
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
+        # Wall time over every session of the run (resumes add theirs): a shipped policy's card
+        # states what it took to train.
+        self._started = time.perf_counter() - resumed.get("wall_seconds", 0.0)
         # The evaluation (on the selection seeds) of the policy kept so far, episodes included.
         self.kept_selection: dict[str, Any] | None = resumed.get("kept_selection")
         # The last frame of each chunk is all the policy reads: the server sends only that.
@@ -522,6 +525,7 @@ class PPOTrainer:
             best_selection=self.best_selection,
             kept_selection=self.kept_selection,
             config=OmegaConf.to_container(self.cfg),
+            wall_seconds=time.perf_counter() - self._started,
         )
 
     def _export(self, net: DrivingNet) -> Path | None:
