@@ -18,6 +18,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.config.scenes import HELD_OUT_SCENES
 from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
+from oasis_torchrl.envs import capabilities
 from oasis_torchrl.train import pipeline
 
 from .conftest import TINY_ENV, tiny_ppo
@@ -35,9 +36,9 @@ TINY_CARD = [
 
 @pytest.fixture(scope="module")
 def ppo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A smoke PPO run (32 env steps, evaluated every iteration): its folder."""
+    """A smoke PPO run (16 env steps, evaluated every iteration): its folder."""
     run = tmp_path_factory.mktemp("run") / "ppo"
-    overrides = tiny_ppo(run, 32, "eval.every=1", "checkpoint.keep_evaluated=true")
+    overrides = tiny_ppo(run, 16, "eval.every=1", "checkpoint.keep_evaluated=true")
     assert main(["train", "ppo", *overrides]) == 0
     return run
 
@@ -67,7 +68,7 @@ def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path) -> N
     assert card["kind"] == "ppo" and card["commit"] == "abc123"
     assert card["command"].startswith("oasis-torchrl train ppo --config ")
     assert card["wall_seconds"] > 0 and "cores" in card["machine"]
-    assert card["budget"] == "32 env steps"
+    assert card["budget"] == "16 env steps"
     scenes = [row["scene"] for row in card["figures"]]
     assert scenes == ["urban", *HELD_OUT_SCENES]  # the report, then each held-out scene
     assert all(row["episodes"] == 1 and row["baseline_distance"] > 0 for row in card["figures"])
@@ -154,7 +155,7 @@ def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
     table = result.table().splitlines()
     assert table[4].split() == ["bc+ppo", "not", "kept"]  # not the clone's row again
     assert table[5].startswith("This run learned in 1 min: bc drives ")
-    assert "pretrained:tiny 32 env steps, 0.0 h on " in table[5]
+    assert "pretrained:tiny 16 env steps, 0.0 h on " in table[5]
     assert result.to_dict()["fine_tune_kept"] is False
 
 
@@ -170,3 +171,23 @@ def test_the_best_learned_policy_is_recorded(tmp_path: Path) -> None:
     rerun.unlink()
     pipeline.record_best(cfg, dict(reversed(policies.items())), result.rows())
     assert not rerun.exists()  # the last one is the best: evaluate_all recorded it already
+
+
+def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_ground_truth(
+    registry: Path,
+    ppo_run: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(capabilities, "_found", {})  # found once per process: forget earlier tests
+    hosted = [*TINY_ENV, "env.server.hosted=true"]
+    evaluate = ["eval", "policy=pretrained:tiny", "episodes=1", "max_steps=2", *hosted]
+    assert main(evaluate) == 0  # a camera policy: frames are all it reads
+    assert json.loads(capsys.readouterr().out)["ground_truth"] is False
+    command = ["pretrained", "ship", str(ppo_run / "policy"), "hosted", f"output={tmp_path}"]
+    with caplog.at_level(logging.ERROR):
+        assert main([*command, *TINY_CARD, "env.server.hosted=true"]) == 2
+    assert "need the embedded server's ground truth" in caplog.text
+    assert not (tmp_path / "hosted").exists()
