@@ -187,9 +187,11 @@ def matching_preset(kind: str, settings: DictConfig) -> str | None:
         plain = OmegaConf.to_container(cfg)
         return {key: value for key, value in plain.items() if key not in RUN_ONLY_KEYS}
 
+    # Paths made from the output folder (the main job's eval.rerun) follow the run's.
+    where = [("output_dir", settings.output_dir)]
     for name in preset_names():
         try:
-            preset = load_config(kind, file=name)
+            preset = load_config(kind, file=name, values=where)
         except ValueError:  # a preset of another command
             continue
         if comparable(settings, preset) == comparable(preset, preset):

@@ -13,6 +13,7 @@ from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train import pipeline
+from oasis_torchrl.train.cards import TrainingRun
 
 from .conftest import TINY_ENV
 
@@ -74,6 +75,16 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     assert any("front" in entity for entity in recording.entities())
     _, roads = recording.column("env/0/topdown/road", "LineStrips2D:strips")
     assert any(roads)  # the evaluator's env handed its scenes to the top-down view
+    run = TrainingRun.of(paths["bc_policy"])  # what a card of the clone reads from the run
+    assert (run.kind, run.root, run.budget) == (
+        "demo",
+        tmp_path,
+        "2 demonstrations, 1 DAgger rounds",
+    )
+    assert run.wall_seconds == summary["seconds"]["record"] + summary["seconds"]["bc"]
+    assert list(run.curve) == ["round 0", "round 1"] and all(run.curve.values())
+    assert run.curve["round 1"][0][0] > run.curve["round 0"][-1][0]  # one axis of steps
+    assert run.command() == f"oasis-torchrl demo --config {tmp_path / 'config.yaml'}"
 
 
 def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(

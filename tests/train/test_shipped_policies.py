@@ -20,6 +20,7 @@ from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
 from oasis_torchrl.envs import capabilities
 from oasis_torchrl.train import pipeline
+from oasis_torchrl.train.cards import matching_preset
 
 from .conftest import TINY_ENV, tiny_ppo
 
@@ -191,3 +192,13 @@ def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_groun
         assert main([*command, *TINY_CARD, "env.server.hosted=true"]) == 2
     assert "need the embedded server's ground truth" in caplog.text
     assert not (tmp_path / "hosted").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "preset"), [("ppo", "pretrained_ppo_scratch"), ("demo", "pretrained_clone")]
+)
+def test_a_run_of_a_preset_names_the_preset_on_its_card(command: str, preset: str) -> None:
+    saved = load_config(command, ["output_dir=elsewhere", "progress=false"], file=preset)
+    assert matching_preset(command, saved) == preset
+    changed = load_config(command, ["seed=7"], file=preset)
+    assert matching_preset(command, changed) is None  # the card then names the saved settings
