@@ -451,7 +451,7 @@ def shipped_specs(names: list[str] | None) -> dict[str, str]:
     names = list(shipped_policies()) if names is None else [str(name) for name in names]
     specs = [f"{PRETRAINED}{name.removeprefix(PRETRAINED)}" for name in names]
     for spec in specs:
-        pretrained_path(spec)  # an unknown name fails here, before any evaluation
+        pretrained_path(spec)  # an unknown name fails here, before any stage
     return {spec: spec for spec in specs}
 
 
@@ -522,6 +522,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     """
     from oasis_torchrl.viz.recording import describe_target
 
+    shipped = shipped_specs(cfg.eval.get("pretrained"))  # an unknown name fails first
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
@@ -536,7 +537,6 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
     if not env_capabilities(cfg.env).ground_truth:  # the autopilot drives with ground truth
         references.pop(AUTOPILOT, None)
-    shipped = shipped_specs(cfg.eval.get("pretrained"))
     policies: dict[str, Any] = {**references, **shipped, "bc": str(bc_policy)}
     # A fine-tuning that kept its warm start left the clone: its row reads "not kept".
     kept = ppo.policy_frames > 0
