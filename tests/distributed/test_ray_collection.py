@@ -26,7 +26,9 @@ from oasis_torchrl.distributed import (  # noqa: E402
 
 from ._settings import smoke_ppo  # noqa: E402
 
-pytestmark = pytest.mark.usefixtures("ray_runtime")
+# The module's shared run is set up in whichever test first needs it: past 300 s on a loaded
+# 2-core machine.
+pytestmark = [pytest.mark.usefixtures("ray_runtime"), pytest.mark.timeout(600)]
 
 WORKERS, SESSIONS, STEPS = 2, 2, 2
 FRAMES_PER_BATCH = WORKERS * SESSIONS * STEPS
