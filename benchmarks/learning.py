@@ -59,7 +59,8 @@ from oasis_torchrl.allocator import keep_batches_in_heap
 from oasis_torchrl.config import DemoConfig, load_config
 from oasis_torchrl.config.arguments import add_config_arguments, flag_values, split_overrides
 from oasis_torchrl.config.presets import preset_file
-from oasis_torchrl.train.evaluate import paired_difference
+from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
+from oasis_torchrl.train.evaluate import paired_difference, selection_figure
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,
@@ -79,9 +80,6 @@ REFERENCES = {
     **{f"constant {t}": f"constant:throttle={t},steering=0.0" for t in CONSTANT_THROTTLES},
 }
 """The reference policies: the privileged expert and straight drives at constant throttles."""
-HELD_OUT_PROMPTS = ("urban street at night", "highway", "rural road", "urban street in the rain")
-HELD_OUT_SEED = 7919
-"""Scenes no stage trains or selects on: other prompts, and a seed no config uses."""
 # PPO iterations between evaluations: 20 x 512 env steps (an evaluation of 32 episodes of up to
 # 150 chunks costs about as many env steps as 10 iterations).
 EVAL_EVERY = 20
@@ -180,9 +178,9 @@ def benchmark_config(args: argparse.Namespace, overrides: list[str]) -> DictConf
 def held_out_config(cfg: DictConfig, episodes_per_prompt: int) -> DictConfig:
     """``cfg`` evaluating on the held-out prompts and seed instead."""
     scenes = {
-        "prompts": list(HELD_OUT_PROMPTS),
+        "prompts": list(LEARNING_HELD_OUT_PROMPTS),
         "episodes": episodes_per_prompt,
-        "seeds": [HELD_OUT_SEED],
+        "seeds": [LEARNING_HELD_OUT_SEED],
     }
     return OmegaConf.merge(cfg, {"eval": scenes})
 
@@ -223,12 +221,13 @@ def scratch_recipe() -> DictConfig:
 def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, Any]:
     """The periodic evaluation (on the selection seeds) that rates best among the policies
     trained for at most ``budget`` env steps (the first of equals, as the trainer keeps with
-    ``eval.selection_margin`` 0, the default PPO from scratch runs with)."""
+    ``eval.selection_margin`` 0, the default PPO from scratch runs with): by distance, or by
+    return where the PPO stage ran on a frames-only endpoint."""
     *periodic, _ = history
     within = [entry for entry in periodic if entry["policy_frames"] <= budget]
     if not within:
         raise ValueError(f"no PPO evaluation within {budget} env steps")
-    return max(within, key=lambda entry: entry["mean_distance"])
+    return max(within, key=selection_figure)
 
 
 def main() -> None:

@@ -49,8 +49,9 @@ class EvalConfig(EvaluationConfig):
     policy: str = option(
         "autopilot",
         help="the driver: autopilot | scripted:<script> (or constant:throttle=1.0,steering=0.0) "
-        "| a saved policy (a LeRobot policy folder of any type, a PPO checkpoint, a TorchScript "
-        "or torch.save file) | a policy server (grpc://host:port; key in OASIS_POLICY_API_KEY)",
+        "| a shipped policy (pretrained:<name>) | a saved policy (a LeRobot policy folder of any "
+        "type, a PPO checkpoint, a TorchScript or torch.save file) | a policy server "
+        "(grpc://host:port; key in OASIS_POLICY_API_KEY)",
     )
     output: str | None = option(None, help="JSON file (the report is also printed)")
     baseline: str | None = option(

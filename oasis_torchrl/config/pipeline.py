@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
+from oasis_torchrl.config.scenes import TRAINING_PROMPTS
 from oasis_torchrl.config.training import (
     BCPolicyConfig,
     BCSettings,
@@ -107,6 +108,11 @@ class PipelineEvaluationConfig(EvaluationConfig):
         default_factory=lambda: ["autopilot", "constant:throttle=1.0,steering=0.0"],
         help="driver specs evaluated for comparison",
     )
+    pretrained: list[str] | None = option(
+        None,
+        help="shipped policies evaluated beside this run's, by name (null: every shipped one; "
+        "[]: none; oasis-torchrl pretrained list)",
+    )
 
 
 def _demo_bc() -> BCSettings:
@@ -135,19 +141,6 @@ def _demo_ppo() -> PPOSettings:
             every=4, episodes=16, selection_seeds=[2000], selection_margin=2.0
         ),
     )
-
-
-TRAINING_PROMPTS = (
-    "urban",
-    "urban street at sunset",
-    "urban street in snow",
-    "highway at sunset",
-    "rural road in fog",
-)
-"""The scenes the main job learns on: every layout, two lightings, three weathers, and none of the
-held-out scenes the learning benchmark judges on (night, rain, a plain highway or rural road).
-Clones of urban demonstrations alone drive poorly on the other layouts
-(docs/experiments/2026-11-28-main-job.md compares the two sets)."""
 
 
 @dataclass

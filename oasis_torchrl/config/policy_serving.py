@@ -75,8 +75,8 @@ class ServePolicyConfig(PolicyServerConfig):
 
     policy: str = option(
         REQUIRED,
-        help="the policy: a LeRobot policy folder, a PPO checkpoint, a TorchScript or "
-        "torch.save file",
+        help="the policy: a shipped policy (pretrained:<name>), a LeRobot policy folder, a PPO "
+        "checkpoint, a TorchScript or torch.save file",
         positional=True,
     )
     inputs: tuple[str, ...] = option(

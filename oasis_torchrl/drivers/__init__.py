@@ -10,6 +10,8 @@ grammar that names them (:func:`load_driver`).
   (``grpc://host:port``, :class:`~oasis_torchrl.remote.RemotePolicy`).
 - :class:`~oasis_torchrl.drivers.lerobot.LeRobotDriver`: any other LeRobot policy folder (``act``,
   ``diffusion``, plugins, ...) with its saved processors, four ``select_action`` calls per chunk.
+- ``pretrained:NAME``: a policy the package ships (:func:`shipped_policies`,
+  :func:`pretrained_path`), loaded as its LeRobot policy folder.
 - :class:`DriverSpec`: any of them named by a spec string, picklable, built where it drives
   (e.g. in a Ray worker: a loaded TorchScript policy does not pickle, its file name does).
 
@@ -23,6 +25,7 @@ from oasis_torchrl.drivers.folders import export_lerobot, load_net, net_from_ler
 from oasis_torchrl.drivers.lerobot import LeRobotDriver
 from oasis_torchrl.drivers.loading import AUTOPILOT, GRAMMAR, SCRIPTED, DriverSpec, load_driver
 from oasis_torchrl.drivers.policy import PolicyDriver, load_module
+from oasis_torchrl.drivers.pretrained import pretrained_path, shipped_policies
 from oasis_torchrl.drivers.scripted import ScriptedDriver
 
 __all__ = [
@@ -42,4 +45,6 @@ __all__ = [
     "load_module",
     "load_net",
     "net_from_lerobot",
+    "pretrained_path",
+    "shipped_policies",
 ]

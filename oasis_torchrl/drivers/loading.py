@@ -11,6 +11,7 @@ from oasis_torchrl.drivers.autopilot import Autopilot
 from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.drivers.lerobot import LeRobotDriver, policy_type
 from oasis_torchrl.drivers.policy import PolicyDriver
+from oasis_torchrl.drivers.pretrained import resolve_pretrained
 from oasis_torchrl.drivers.scripted import ScriptedDriver
 from oasis_torchrl.remote import is_policy_url
 
@@ -18,9 +19,10 @@ AUTOPILOT = "autopilot"
 SCRIPTED = ("scripted:", "constant:")
 GRAMMAR = (
     "'autopilot', 'scripted:<script>' (or 'constant:<script>', e.g. "
-    "'constant:throttle=1.0,steering=0.0'), the path of a saved policy (a LeRobot policy "
-    "folder of any type LeRobot loads, a PPO checkpoint, a TorchScript or torch.save file), or "
-    "a policy server ('grpc://host:port', 'grpcs://host:port' with TLS)"
+    "'constant:throttle=1.0,steering=0.0'), a shipped policy ('pretrained:<name>', e.g. "
+    "'pretrained:ppo-scratch'), the path of a saved policy (a LeRobot policy folder of any "
+    "type LeRobot loads, a PPO checkpoint, a TorchScript or torch.save file), or a policy "
+    "server ('grpc://host:port', 'grpcs://host:port' with TLS)"
 )
 NETWORK_POLICY_TYPE = "oasis"
 """The LeRobot policy type whose folders load as the driving network itself."""
@@ -32,8 +34,9 @@ def load_driver(
     """The driver a spec names (:data:`GRAMMAR`), everywhere a driver or policy is named:
     ``oasis-torchrl eval policy=``, ``record --driver``, the pipeline's references and learners.
 
-    A LeRobot policy folder of type ``oasis`` loads as the driving network
-    (:class:`PolicyDriver`, the TorchRL actor); any other type through LeRobot's factory and
+    ``pretrained:NAME`` is the shipped policy's folder (:mod:`~oasis_torchrl.drivers.pretrained`).
+    A LeRobot policy folder of type ``oasis`` loads as the driving network (:class:`PolicyDriver`,
+    the TorchRL actor); any other type through LeRobot's factory and
     the processors saved with it (:class:`~oasis_torchrl.drivers.lerobot.LeRobotDriver`).
 
     Args:
@@ -48,7 +51,7 @@ def load_driver(
         ...
         ValueError: driver 'nowhere.pt' is none of 'autopilot', 'scripted:<script>' ...
     """
-    text = str(spec)
+    text = resolve_pretrained(str(spec))
     if text == AUTOPILOT:
         return Autopilot()
     for prefix in SCRIPTED:

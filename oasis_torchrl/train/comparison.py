@@ -20,6 +20,11 @@ from typing import Any
 AUTOPILOT_COLOR = "0.25"
 CONSTANT_COLOR = "0.65"
 LEARNED_COLOR = "tab:blue"
+SHIPPED_COLOR = "tab:green"
+NOT_KEPT = "not kept"
+"""The kind of a row whose policy a run did not keep (a fine-tuning that did not beat its warm
+start): it has no figures of its own."""
+LEARNED_KINDS = ("learned", "shipped")
 
 
 @dataclass(frozen=True)
@@ -40,8 +45,20 @@ class PolicyRow:
     vs_autopilot: float | None = None
     vs_constant: float | None = None
     kind: str = "learned"
+    """``autopilot``, ``constant``, ``learned`` (this run's), ``shipped`` (a shipped policy) or
+    :data:`NOT_KEPT`."""
     unit: str = "m"
     """What ``mean_distance`` holds: metres, or ``return`` (frames only: the mean return)."""
+
+    @classmethod
+    def not_kept(cls, name: str) -> PolicyRow:
+        """The row of a policy the run did not keep.
+
+        Example:
+            >>> PolicyRow.not_kept("bc+ppo").kind
+            'not kept'
+        """
+        return cls(name, math.nan, math.nan, math.nan, 0, kind=NOT_KEPT)
 
 
 FRAMES_ONLY_UNIT = "return"
@@ -81,9 +98,11 @@ def comparison(
     *,
     autopilot: str | None,
     constants: Sequence[str] = (),
+    shipped: Sequence[str] = (),
 ) -> list[PolicyRow]:
     """The rows of ``evaluations``, in their order, with ratios to the ``autopilot`` entry and to
-    the furthest-driving of the ``constants`` entries (either may be absent: no ratio).
+    the furthest-driving of the ``constants`` entries (either may be absent: no ratio); the
+    ``shipped`` entries are shipped policies.
 
     Example:
         >>> evaluations = {
@@ -102,6 +121,7 @@ def comparison(
         key, unit = compared_value(evaluation)
         distance = evaluation["mean_distance" if unit == "m" else "mean_return"]
         kind = "autopilot" if name == autopilot else "constant" if name in present else "learned"
+        kind = "shipped" if name in shipped else kind
         rows.append(
             PolicyRow(
                 name,
@@ -118,6 +138,19 @@ def comparison(
     return rows
 
 
+def best_learned(rows: Sequence[PolicyRow]) -> PolicyRow | None:
+    """The learned or shipped row with the highest figure (None: there is none).
+
+    Example:
+        >>> rows = [PolicyRow("autopilot", 300.0, 2.0, 0.0, 16, kind="autopilot"),
+        ...         PolicyRow("bc", 240.0, 12.5, 0.25, 16), PolicyRow.not_kept("bc+ppo")]
+        >>> best_learned(rows).name
+        'bc'
+    """
+    learned = [row for row in rows if row.kind in LEARNED_KINDS]
+    return max(learned, key=lambda row: row.mean_distance, default=None)
+
+
 def format_table(rows: Sequence[PolicyRow]) -> str:
     """A fixed-width text table of the rows.
 
@@ -130,7 +163,9 @@ def format_table(rows: Sequence[PolicyRow]) -> str:
     measure = "mean return (frames only)" if frames_only else "mean distance"
     header = ("policy", measure, "collision rate", "vs autopilot", "vs best constant")
     lines = [
-        (
+        (row.name, NOT_KEPT, "", "", "")
+        if row.kind == NOT_KEPT
+        else (
             row.name,
             f"{row.mean_distance:.1f} ± {row.distance_stderr:.1f} {row.unit}",
             f"{row.collision_rate:.2f} ({round(row.collision_rate * row.episodes)}/{row.episodes})",
@@ -162,18 +197,21 @@ def plot_comparison(rows: Sequence[PolicyRow], path: str | Path, title: str) -> 
     """
     from matplotlib.figure import Figure
 
-    colors = {"autopilot": AUTOPILOT_COLOR, "constant": CONSTANT_COLOR}
+    colors = {"autopilot": AUTOPILOT_COLOR, "constant": CONSTANT_COLOR, "shipped": SHIPPED_COLOR}
     figure = Figure(figsize=(8, 1.2 + 0.6 * len(rows)), layout="constrained")
     axes = figure.add_subplot()
     positions = list(range(len(rows)))[::-1]  # the first row on top
     axes.barh(
         positions,
-        [row.mean_distance for row in rows],
+        [0.0 if row.kind == NOT_KEPT else row.mean_distance for row in rows],
         xerr=[0.0 if math.isnan(row.distance_stderr) else row.distance_stderr for row in rows],
         color=[colors.get(row.kind, LEARNED_COLOR) for row in rows],
         capsize=3,
     )
     for position, row in zip(positions, rows, strict=True):
+        if row.kind == NOT_KEPT:
+            axes.annotate(f" {NOT_KEPT}", (0.0, position), va="center", fontsize=9)
+            continue
         axes.annotate(
             f" {row.mean_distance:.1f} {row.unit}, collisions {row.collision_rate:.0%}",
             (row.mean_distance + (row.distance_stderr if row.distance_stderr > 0 else 0), position),
@@ -187,7 +225,7 @@ def plot_comparison(rows: Sequence[PolicyRow], path: str | Path, title: str) -> 
         if frames_only
         else "mean distance before collision (m), ± standard error"
     )
-    values = [row.mean_distance for row in rows]
+    values = [row.mean_distance for row in rows if row.kind != NOT_KEPT]
     axes.set_xlim(1.35 * min([0.0, *values]), 1.35 * max([0.0, *values]) or 1.0)
     axes.set_title(title)
     path = Path(path)

@@ -8,8 +8,10 @@
    by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
    :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
-4. ``eval``: the reference drivers, the cloned and the fine-tuned policy on the same fixed
-   prompts and seeds; the fine-tuned policy's episodes go to rerun (``eval.rerun``, by default
+4. ``eval``: the reference drivers, the shipped policies (``eval.pretrained``, by default every
+   one the package ships), the cloned and the fine-tuned policy on the same fixed prompts and
+   seeds (a fine-tuning that did not beat the clone is "not kept": no row of its own); the
+   best learned policy's episodes go to rerun (``eval.rerun``, by default
    ``<output_dir>/eval.rrd``) and to a LeRobot dataset if ``eval.lerobot`` is set.
 
 On an endpoint that sends frames only (the hosted service, a hosted-like server) there is no
@@ -45,16 +47,32 @@ from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.config import load_config, save_config
 from oasis_torchrl.config.env import AUTO
-from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, Driver, load_driver
+from oasis_torchrl.drivers import (
+    AUTOPILOT,
+    SCRIPTED,
+    Driver,
+    load_driver,
+    pretrained_path,
+    shipped_policies,
+)
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
+from oasis_torchrl.drivers.pretrained import PREFIX as PRETRAINED
 from oasis_torchrl.envs.capabilities import env_capabilities
-from oasis_torchrl.train.comparison import PolicyRow, comparison, format_table, plot_comparison
+from oasis_torchrl.train.cards import hours, load_card
+from oasis_torchrl.train.comparison import (
+    PolicyRow,
+    best_learned,
+    comparison,
+    format_table,
+    plot_comparison,
+)
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, side_by_side_for
 
 logger = logging.getLogger(__name__)
 
 REFERENCE_KEY = "reference"
+FINE_TUNE = "bc+ppo"
 SHARED_EVAL_KEYS = ("prompts", "seeds", "max_steps")
 """``eval`` keys PPO's own evaluations take from the pipeline's (how many and how often stay
 the ``ppo.eval`` settings')."""
@@ -79,18 +97,64 @@ class PipelineResult:
     plot_path: Path
     evaluations: dict[str, dict[str, Any]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+    fine_tune_kept: bool = True
+    """Whether PPO fine-tuning beat the clone (else its row reads "not kept")."""
+    cards: dict[str, dict[str, Any] | None] = field(default_factory=dict)
+    """The evaluated shipped policies' card facts by row name (None: a policy without one)."""
 
     def rows(self) -> list[PolicyRow]:
-        """The evaluations compared with the autopilot and the best constant action."""
+        """The evaluations compared with the autopilot and the best constant action; a
+        fine-tuning not kept is a "not kept" row."""
         constants = [name for name in self.evaluations if name.startswith(SCRIPTED)]
-        return comparison(self.evaluations, autopilot=AUTOPILOT, constants=constants)
+        rows = comparison(
+            self.evaluations, autopilot=AUTOPILOT, constants=constants, shipped=list(self.cards)
+        )
+        return rows if self.fine_tune_kept else [*rows, PolicyRow.not_kept(FINE_TUNE)]
 
     def table(self) -> str:
-        """The comparison as a text table, and where the files are."""
+        """The comparison as a text table, what learning took (with shipped policies), and where
+        the files are."""
         total = sum(self.seconds.values())
+        learned = self.learning_line()
         return (
-            f"{format_table(self.rows())}\n\n"
-            f"{total / 60:.1f} min; summary {self.summary_path}, plot {self.plot_path}"
+            f"{format_table(self.rows())}\n"
+            + (f"{learned}\n" if learned else "")
+            + f"\n{total / 60:.1f} min; summary {self.summary_path}, plot {self.plot_path}"
+        )
+
+    def learning_line(self) -> str | None:
+        """One plain line: what this run learned in its minutes, and what the shipped policies
+        took to train (from their cards); None without shipped policies.
+
+        Example:
+            >>> result = PipelineResult(*[Path()] * 7, seconds={"bc": 600.0},
+            ...     evaluations={"constant:throttle=1.0": {"mean_distance": 100.0,
+            ...     "collision_rate": 1.0, "episodes": 16}, "bc": {"mean_distance": 90.0,
+            ...     "collision_rate": 0.5, "episodes": 16}},
+            ...     cards={"pretrained:ppo-scratch": {"budget": "204,800 env steps",
+            ...     "wall_seconds": 18000.0, "machine": "2 cores"}})
+            >>> print(result.learning_line())
+            This run learned in 10 min: bc drives 0.90x the best constant. The shipped policies \
+took: pretrained:ppo-scratch 204,800 env steps, 5.0 h on 2 cores.
+        """
+        if not self.cards:
+            return None
+        own = [row for row in self.rows() if row.kind == "learned"]
+        best = best_learned(own)
+        minutes = sum(self.seconds.values()) / 60
+        learned = (
+            f"{best.name} drives {best.vs_constant:.2f}x the best constant"
+            if best is not None and best.vs_constant is not None
+            else "no comparable policy"
+        )
+        took = "; ".join(
+            f"{name} {card['budget']}, {hours(card['wall_seconds'])} on {card['machine']}"
+            if card
+            else f"{name} (no card)"
+            for name, card in self.cards.items()
+        )
+        return (
+            f"This run learned in {minutes:.0f} min: {learned}. The shipped policies took: {took}."
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -107,6 +171,7 @@ class PipelineResult:
         return {
             "paths": {name: None if path is None else str(path) for name, path in paths.items()},
             "evaluations": self.evaluations,
+            "fine_tune_kept": self.fine_tune_kept,
             "seconds": self.seconds,
         }
 
@@ -372,6 +437,42 @@ def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[st
     return results
 
 
+def shipped_specs(names: list[str] | None) -> dict[str, str]:
+    """The shipped policies the comparison lists, as row names and driver specs
+    (``pretrained:NAME``): those ``names`` (null: every shipped one).
+
+    Raises:
+        ValueError: a name that is not shipped (with those that are).
+
+    Example:
+        >>> shipped_specs([])
+        {}
+    """
+    names = list(shipped_policies()) if names is None else [str(name) for name in names]
+    specs = [f"{PRETRAINED}{name.removeprefix(PRETRAINED)}" for name in names]
+    for spec in specs:
+        pretrained_path(spec)  # an unknown name fails here, before any stage
+    return {spec: spec for spec in specs}
+
+
+def record_best(cfg: DictConfig, policies: dict[str, str], rows: list[PolicyRow]) -> None:
+    """Record the best learned policy's episodes (``eval.rerun``, ``eval.lerobot``), side by
+    side with ``eval.compare``'s, when :func:`evaluate_all` recorded another (the last one):
+    evaluations are deterministic, so the recording shows the table's episodes.
+
+    Example:
+        >>> record_best(load_config("demo"), {"bc": "out/bc"}, [])  # nothing learned to record
+    """
+    best = best_learned(rows)
+    specs = list(policies.values())
+    if best is None or not (cfg.eval.rerun or cfg.eval.lerobot) or policies[best.name] == specs[-1]:
+        return
+    logger.info("recording %s, the best learned policy", best.name)
+    compared = {str(spec) for spec in cfg.eval.compare}
+    others = {name: spec for name, spec in policies.items() if spec in compared}
+    evaluate_all(cfg, {**others, best.name: policies[best.name]})
+
+
 @dataclass
 class PPOStage:
     """A finished (or reused) PPO stage: its policy folder, the checkpoint of that policy, the
@@ -421,6 +522,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     """
     from oasis_torchrl.viz.recording import describe_target
 
+    shipped = shipped_specs(cfg.eval.get("pretrained"))  # an unknown name fails first
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
@@ -435,24 +537,30 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     references = {str(spec): str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])}
     if not env_capabilities(cfg.env).ground_truth:  # the autopilot drives with ground truth
         references.pop(AUTOPILOT, None)
-    # A fine-tuning that kept its warm start left the clone: one evaluation serves both rows.
-    fine_tuned = bc_policy if ppo.policy_frames == 0 else ppo.policy_dir
-    policies: dict[str, Any] = {**references, "bc": str(bc_policy), "bc+ppo": str(fine_tuned)}
-    with timed_stage(seconds, "eval"):
-        evaluations = evaluate_all(cfg, policies)
+    policies: dict[str, Any] = {**references, **shipped, "bc": str(bc_policy)}
+    # A fine-tuning that kept its warm start left the clone: its row reads "not kept".
+    kept = ppo.policy_frames > 0
+    if kept:
+        policies[FINE_TUNE] = str(ppo.policy_dir)
     rerun = cfg.eval.rerun
     recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
-    result = PipelineResult(
-        dataset,
-        bc_policy,
-        ppo.policy_dir,
-        ppo.checkpoint,
-        recording,
-        out / "summary.json",
-        out / "comparison.png",
-        evaluations,
-        seconds,
-    )
+    cards = {name: load_card(pretrained_path(name)) for name in shipped}
+    with timed_stage(seconds, "eval"):
+        evaluations = evaluate_all(cfg, policies)
+        result = PipelineResult(
+            dataset,
+            bc_policy,
+            ppo.policy_dir,
+            ppo.checkpoint,
+            recording,
+            out / "summary.json",
+            out / "comparison.png",
+            evaluations,
+            seconds,
+            kept,
+            cards,
+        )
+        record_best(cfg, policies, result.rows())
     result.summary_path.write_text(json.dumps(result.to_dict(), indent=2))
     seeds = ", ".join(str(seed) for seed in cfg.eval.seeds)
     title = (

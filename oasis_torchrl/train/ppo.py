@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -184,6 +185,9 @@ class PPOTrainer:
         self.iteration = resumed.get("iteration", 0)
         self.frames = resumed.get("frames", 0)
         self.history: list[dict[str, Any]] = resumed.get("history", [])
+        # Wall time over every session of the run (resumes add theirs): a shipped policy's card
+        # states what it took to train.
+        self._started = time.perf_counter() - resumed.get("wall_seconds", 0.0)
         # The evaluation (on the selection seeds) of the policy kept so far, episodes included.
         self.kept_selection: dict[str, Any] | None = resumed.get("kept_selection")
         # The last frame of each chunk is all the policy reads: the server sends only that.
@@ -522,6 +526,7 @@ class PPOTrainer:
             best_selection=self.best_selection,
             kept_selection=self.kept_selection,
             config=OmegaConf.to_container(self.cfg),
+            wall_seconds=time.perf_counter() - self._started,
         )
 
     def _export(self, net: DrivingNet) -> Path | None:
@@ -563,12 +568,25 @@ def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
 
 
 def _postfix(metrics: dict[str, float]) -> dict[str, str]:
+    """The progress bar's figures; the evaluation's distance where the endpoint sends ground
+    truth, else its return (a frames-only endpoint's distance is NaN).
+
+    >>> _postfix({"eval/mean_distance": float("nan"), "eval/mean_return": 41.0})
+    {'eval_ret': '41.0'}
+    """
     shown = {
         "dist": "train/episode_distance",
         "ret": "train/episode_reward",
         "eval": "eval/mean_distance",
+        "eval_ret": "eval/mean_return",
     }
-    return {name: f"{metrics[key]:.1f}" for name, key in shown.items() if key in metrics}
+    if math.isfinite(metrics.get("eval/mean_distance", math.nan)):
+        del shown["eval_ret"]
+    return {
+        name: f"{metrics[key]:.1f}"
+        for name, key in shown.items()
+        if key in metrics and math.isfinite(metrics[key])
+    }
 
 
 def train_ppo(cfg: DictConfig) -> PPOResult:

@@ -17,6 +17,8 @@ COMMANDS = {
     "demo": ("demo", []),
     "hosted": ("eval", []),
     "ppo_scratch": ("ppo", []),
+    "pretrained_clone": ("demo", []),
+    "pretrained_ppo_scratch": ("ppo", []),
     "serve": ("serve", []),
     "serve_policy": ("serve-policy", ["policy=policy.pt"]),
 }
@@ -53,6 +55,19 @@ def test_the_scratch_recipe_turns_on_the_warmup_and_the_replay() -> None:
     cfg = load_config("ppo", file="ppo_scratch")
     assert cfg.warmup.frames > 0 and cfg.aux_replay.capacity > 0
     assert cfg.warmup.driver.startswith("constant:")
+
+
+@pytest.mark.parametrize(
+    ("name", "recipe", "command"),
+    [("pretrained_ppo_scratch", "ppo_scratch", "ppo"), ("pretrained_clone", "clone_256", "demo")],
+)
+def test_a_shipped_policys_preset_is_its_recipe_on_the_broad_mix(
+    name: str, recipe: str, command: str
+) -> None:
+    cfg = load_config(command, file=name)
+    assert OmegaConf.merge(cfg, OmegaConf.load(presets()[recipe])) == cfg  # the recipe holds
+    if command == "ppo":
+        assert cfg.collector.total_frames == 204800 and cfg.checkpoint.keep_evaluated
 
 
 def test_an_unknown_name_is_one_line_listing_the_names(caplog: pytest.LogCaptureFixture) -> None:

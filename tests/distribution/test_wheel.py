@@ -27,6 +27,8 @@ SHIPPED_FOLDERS = ("configs", "protos")
 """Top-level folders the wheel carries inside the package (setup.py)."""
 
 PROTOS = ("a2v", "common", "policy", "sim")
+SHIPPED_POLICY = ("config.json", "model.safetensors", "README.md", "curve.png", "card.json")
+"""The files of a shipped policy's folder (a placeholder one is added to the built copy)."""
 
 CHECK_INSTALLED = """
 import sys
@@ -35,6 +37,7 @@ from pathlib import Path
 import oasis_torchrl
 from oasis_torchrl.config import config_names, load_config, to_object
 from oasis_torchrl.config.presets import presets
+from oasis_torchrl.drivers.pretrained import shipped_policies
 from oasis_torchrl.proto import proto_sources
 
 REQUIRED = {"import-recordings": ["source=in", "root=out"], "record": ["root=out"],
@@ -49,6 +52,9 @@ for name in config_names():
 for name, path in presets().items():
     assert Path(path).is_relative_to(sys.prefix), path
     print("preset", name)
+for name, path in shipped_policies().items():
+    assert Path(path).is_relative_to(sys.prefix), path
+    print("policy", name)
 """
 
 
@@ -66,6 +72,10 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
         shutil.copy2(ROOT / name, source / name)
     for name in SHIPPED_FOLDERS:
         shutil.copytree(ROOT / name, source / name)
+    placeholder = source / "oasis_torchrl" / "assets" / "policies" / "placeholder"
+    placeholder.mkdir(parents=True, exist_ok=True)
+    for name in SHIPPED_POLICY:
+        (placeholder / name).write_text("placeholder\n")
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
     dist = scratch / "dist"
     build = [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", str(dist), str(source)]
@@ -79,6 +89,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
     page = {f"oasis_torchrl/web/static/{name}" for name in ("index.html", "drive.js", "drive.css")}
     assert page <= names  # the drive page's assets
+    policy = {f"oasis_torchrl/assets/policies/placeholder/{name}" for name in SHIPPED_POLICY}
+    assert policy <= names  # a shipped policy's folder, its card included
 
     venv = scratch / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
@@ -124,6 +136,7 @@ def test_every_named_config_and_the_protos_load_from_the_wheel(
     assert f"version {version}" in lines  # the wheel's metadata, not a source tree's fallback
     protos = [f"oasis_torchrl/proto/{name}.proto" for name in PROTOS]
     assert f"protos {' '.join(protos)}" in lines
+    assert "policy placeholder" in lines  # pretrained:placeholder, found in the installed package
     shipped = {line.split()[1] for line in lines if line.startswith("preset ")}
     assert shipped == {path.stem for path in (ROOT / "configs").glob("*.yaml")}
     loaded = {line.split()[1] for line in lines if line.startswith("config ")}

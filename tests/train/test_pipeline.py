@@ -13,6 +13,7 @@ from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train import pipeline
+from oasis_torchrl.train.cards import TrainingRun
 
 from .conftest import TINY_ENV
 
@@ -35,6 +36,7 @@ TINY_PIPELINE = [
     "eval.episodes=1",
     "eval.max_steps=2",
     "eval.reference=[constant:throttle=1.0]",
+    "eval.pretrained=[]",  # the shipped policies have their own tests
     "progress=false",
 ]
 
@@ -46,11 +48,16 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     assert "Map" not in printed.err  # no bar of `datasets` per saved episode, DAgger's included
     summary = json.loads((tmp_path / "summary.json").read_text())
     paths = {name: Path(path) for name, path in summary["paths"].items()}
-    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    kept = load_checkpoint(paths["ppo_checkpoint"])
+    fine_tuned = ["bc+ppo"] if kept["frames"] else []  # a fine-tuning not kept has no evaluation
+    assert list(summary["evaluations"]) == ["constant:throttle=1.0", "bc", *fine_tuned]
+    assert summary["fine_tune_kept"] == bool(kept["frames"])
     assert len(summary["evaluations"]["bc"]["per_episode"]) == 1
     assert set(summary["seconds"]) == {"record", "bc", "ppo", "eval"}
     assert table[0].startswith("policy") and table[0].endswith("vs best constant")
-    assert [line.split()[0] for line in table[1:4]] == list(summary["evaluations"])
+    assert [line.split()[0] for line in table[1:4]] == ["constant:throttle=1.0", "bc", "bc+ppo"]
+    if not kept["frames"]:
+        assert table[3].split() == ["bc+ppo", "not", "kept"]  # not the clone's row again
     assert table[1].endswith("1.00x")  # the constant is the best constant
     assert str(paths["plot"]) in table[-1] and paths["plot"].stat().st_size > 0
     assert paths["bc_policy"] == tmp_path / "bc" / "round_1" / "policy"
@@ -58,20 +65,26 @@ def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
     assert dataset.num_episodes == 4  # 2 demonstrations + 2 DAgger episodes
     assert (paths["ppo_policy"] / "model.safetensors").exists()
     # the fine-tuned policy is kept only if it beats the clone on the selection seeds
-    kept = load_checkpoint(paths["ppo_checkpoint"])
     assert paths["ppo_checkpoint"].name == "best.pt" and kept["frames"] in (0, 12)
     latest = load_checkpoint(paths["ppo_checkpoint"].with_name("latest.pt"))
     assert latest["frames"] == 12
     # PPO evaluated on its selection seeds only: the eval stage is the final evaluation
     assert {tuple(entry["seeds"]) for entry in latest["history"]} == {(2000,)}
-    evaluations = summary["evaluations"]
-    if kept["frames"] == 0:  # the clone kept: its one evaluation is both rows
-        assert evaluations["bc+ppo"] == evaluations["bc"]
     assert paths["recording"] == tmp_path / "eval.rrd"
     recording = Readback(paths["recording"])
     assert any("front" in entity for entity in recording.entities())
     _, roads = recording.column("env/0/topdown/road", "LineStrips2D:strips")
     assert any(roads)  # the evaluator's env handed its scenes to the top-down view
+    run = TrainingRun.of(paths["bc_policy"])  # what a card of the clone reads from the run
+    assert (run.kind, run.root, run.budget) == (
+        "demo",
+        tmp_path,
+        "2 demonstrations, 1 DAgger rounds",
+    )
+    assert run.wall_seconds == summary["seconds"]["record"] + summary["seconds"]["bc"]
+    assert list(run.curve) == ["round 0", "round 1"] and all(run.curve.values())
+    assert run.curve["round 1"][0][0] > run.curve["round 0"][-1][0]  # one axis of steps
+    assert run.command() == f"oasis-torchrl demo --config {tmp_path / 'config.yaml'}"
 
 
 def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(

@@ -1,0 +1,205 @@
+"""Shipped policies end to end, tiny: a smoke PPO run's policy shipped with its card into a
+temporary folder of shipped policies (``OASIS_PRETRAINED_POLICIES``), then loaded as
+``pretrained:NAME`` by eval, record, the pipeline's comparison and ``pretrained path``; unknown
+names and incomplete runs are one-line errors."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from pathlib import Path
+
+import pytest
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from oasis_torchrl.cli import main
+from oasis_torchrl.config import load_config
+from oasis_torchrl.config.scenes import HELD_OUT_SCENES
+from oasis_torchrl.drivers import PolicyDriver, load_driver
+from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
+from oasis_torchrl.envs import capabilities
+from oasis_torchrl.train import pipeline
+from oasis_torchrl.train.cards import matching_preset
+
+from .conftest import TINY_ENV, tiny_ppo
+
+TINY_CARD = [
+    *TINY_ENV,
+    "episodes=1",
+    "max_steps=2",
+    "held_out_seeds=[4241]",
+    "commit=abc123",
+    "progress=false",
+]
+"""Overrides of ``pretrained ship`` on the tiny env: one 2-chunk episode per prompt and seed."""
+
+
+@pytest.fixture(scope="module")
+def ppo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A smoke PPO run (16 env steps, evaluated every iteration): its folder."""
+    run = tmp_path_factory.mktemp("run") / "ppo"
+    overrides = tiny_ppo(run, 16, "eval.every=1", "checkpoint.keep_evaluated=true")
+    assert main(["train", "ppo", *overrides]) == 0
+    return run
+
+
+@pytest.fixture(scope="module")
+def shipped(ppo_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder of shipped policies holding the smoke run's policy as ``tiny``."""
+    folder = tmp_path_factory.mktemp("policies")
+    command = ["pretrained", "ship", str(ppo_run / "policy"), "tiny", f"output={folder}"]
+    assert main([*command, *TINY_CARD]) == 0
+    return folder
+
+
+@pytest.fixture
+def registry(shipped: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv(POLICIES_ENV_VAR, str(shipped))
+    return shipped
+
+
+def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path) -> None:
+    folder = shipped / "tiny"
+    assert {"config.json", "model.safetensors", "README.md", "curve.png", "card.json"} <= {
+        path.name for path in folder.iterdir()
+    }
+    assert not list(shipped.glob(".*partial"))
+    card = json.loads((folder / "card.json").read_text())
+    assert card["kind"] == "ppo" and card["commit"] == "abc123"
+    assert card["command"].startswith("oasis-torchrl train ppo --config ")
+    assert card["wall_seconds"] > 0 and "cores" in card["machine"]
+    assert card["budget"] == "16 env steps"
+    scenes = [row["scene"] for row in card["figures"]]
+    assert scenes == ["urban", *HELD_OUT_SCENES]  # the report, then each held-out scene
+    assert all(row["episodes"] == 1 and row["baseline_distance"] > 0 for row in card["figures"])
+    readme = (folder / "README.md").read_text()
+    assert "# pretrained:tiny" in readme and card["command"] in readme
+    assert "held out: highway at night in the rain | 4241 | 1 |" in readme
+    assert "![training curve](curve.png)" in readme and (folder / "curve.png").stat().st_size
+    assert "ground truth" in readme  # distances need the embedded server, said plainly
+
+
+def test_shipping_again_or_from_an_incomplete_run_is_a_one_line_error(
+    ppo_run: Path, shipped: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    again = ["pretrained", "ship", str(ppo_run / "policy"), "tiny", f"output={shipped}"]
+    assert main([*again, *TINY_CARD]) == 2
+    incomplete = tmp_path / "ppo"
+    shutil.copytree(ppo_run, incomplete, ignore=shutil.ignore_patterns("checkpoints"))
+    command = ["pretrained", "ship", str(incomplete / "policy"), "other", f"output={tmp_path}"]
+    with caplog.at_level(logging.ERROR):
+        assert main([*command, *TINY_CARD]) == 2
+    errors = [record.getMessage() for record in caplog.records if record.levelno == logging.ERROR]
+    assert "delete it" in errors[0]
+    assert errors[1].endswith(
+        f"the run lacks {incomplete}/checkpoints/latest.pt, which the card needs"
+    )
+    assert not (tmp_path / "other").exists()
+
+
+def test_a_shipped_policy_loads_by_name_in_eval_record_and_path(
+    registry: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    assert isinstance(load_driver("pretrained:tiny"), PolicyDriver)
+    assert main(["pretrained", "list"]) == 0
+    assert capsys.readouterr().out == "tiny\n"
+    assert main(["pretrained", "path", "tiny"]) == 0
+    assert capsys.readouterr().out == f"{registry / 'tiny'}\n"
+    evaluate = ["eval", "policy=pretrained:tiny", "episodes=1", "max_steps=2", *TINY_ENV]
+    assert main([*evaluate, "prompts=[urban,highway]"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["policy"] == "pretrained:tiny"
+    assert set(report["per_prompt"]) == {"urban", "highway"}  # each scene on its own
+    root = tmp_path / "drives"
+    record = ["record", f"root={root}", "driver=policy", "policy=pretrained:tiny", "episodes=1"]
+    assert main([*record, "env.num_envs=1", "env.max_steps=2", *TINY_ENV]) == 0
+    assert LeRobotDataset("local/drives", root=root, video_backend="pyav").num_episodes == 1
+
+
+def test_unknown_names_are_one_line_errors_listing_the_shipped(
+    registry: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with pytest.raises(ValueError, match=r"^no shipped policy named 'nope' \(shipped: tiny\)$"):
+        load_driver("pretrained:nope")
+    with caplog.at_level(logging.ERROR):
+        assert main(["pretrained", "path", "nope"]) == 2
+        assert main(["eval", "policy=pretrained:nope"]) == 2
+        assert main(["serve-policy", "pretrained:nope", "--api-key", "k"]) == 2
+        # the main job fails before its first stage
+        assert main(["demo", f"output_dir={tmp_path / 'demo'}", "eval.pretrained=[nope]"]) == 2
+    assert not (tmp_path / "demo").exists()
+    errors = [record.getMessage() for record in caplog.records if record.levelno == logging.ERROR]
+    assert len(errors) == 4 and all("no shipped policy named 'nope'" in e for e in errors)
+    assert all("\n" not in error for error in errors)
+
+
+def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
+    registry: Path, ppo_run: Path
+) -> None:
+    assert pipeline.shipped_specs(None) == {"pretrained:tiny": "pretrained:tiny"}
+    cfg = load_config("demo", [*TINY_ENV, "eval.episodes=1", "eval.max_steps=2", "progress=false"])
+    policies = {
+        "constant:throttle=1.0": "constant:throttle=1.0",
+        "pretrained:tiny": "pretrained:tiny",
+    }
+    evaluations = pipeline.evaluate_all(cfg, {**policies, "bc": str(ppo_run / "policy")})
+    cards = {"pretrained:tiny": json.loads((registry / "tiny" / "card.json").read_text())}
+    paths = [Path()] * 7
+    result = pipeline.PipelineResult(*paths, evaluations, {"bc": 60.0}, False, cards)
+    rows = result.rows()
+    assert [(row.name, row.kind) for row in rows] == [
+        ("constant:throttle=1.0", "constant"),
+        ("pretrained:tiny", "shipped"),
+        ("bc", "learned"),
+        ("bc+ppo", "not kept"),
+    ]
+    table = result.table().splitlines()
+    assert table[4].split() == ["bc+ppo", "not", "kept"]  # not the clone's row again
+    assert table[5].startswith("This run learned in 1 min: bc drives ")
+    assert "pretrained:tiny 16 env steps, 0.0 h on " in table[5]
+    assert result.to_dict()["fine_tune_kept"] is False
+
+
+def test_the_best_learned_policy_is_recorded(tmp_path: Path) -> None:
+    rerun = tmp_path / "eval.rrd"
+    overrides = [*TINY_ENV, "eval.episodes=1", "eval.max_steps=2", "progress=false"]
+    cfg = load_config("demo", [*overrides, f"eval.rerun={rerun}", "eval.compare=[]"])
+    plain = load_config("demo", overrides)
+    policies = {"fast": "constant:throttle=1.0", "slow": "constant:throttle=0.2"}
+    result = pipeline.PipelineResult(*[Path()] * 7, pipeline.evaluate_all(plain, policies))
+    pipeline.record_best(cfg, policies, result.rows())
+    assert rerun.stat().st_size > 0  # "fast" drives farther: recorded although not last
+    rerun.unlink()
+    pipeline.record_best(cfg, dict(reversed(policies.items())), result.rows())
+    assert not rerun.exists()  # the last one is the best: evaluate_all recorded it already
+
+
+def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_ground_truth(
+    registry: Path,
+    ppo_run: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(capabilities, "_found", {})  # found once per process: forget earlier tests
+    hosted = [*TINY_ENV, "env.server.hosted=true"]
+    evaluate = ["eval", "policy=pretrained:tiny", "episodes=1", "max_steps=2", *hosted]
+    assert main(evaluate) == 0  # a camera policy: frames are all it reads
+    assert json.loads(capsys.readouterr().out)["ground_truth"] is False
+    command = ["pretrained", "ship", str(ppo_run / "policy"), "hosted", f"output={tmp_path}"]
+    with caplog.at_level(logging.ERROR):
+        assert main([*command, *TINY_CARD, "env.server.hosted=true"]) == 2
+    assert "need the embedded server's ground truth" in caplog.text
+    assert not (tmp_path / "hosted").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "preset"), [("ppo", "pretrained_ppo_scratch"), ("demo", "pretrained_clone")]
+)
+def test_a_run_of_a_preset_names_the_preset_on_its_card(command: str, preset: str) -> None:
+    saved = load_config(command, ["output_dir=elsewhere", "progress=false"], file=preset)
+    assert matching_preset(command, saved) == preset
+    changed = load_config(command, ["seed=7"], file=preset)
+    assert matching_preset(command, changed) is None  # the card then names the saved settings
