@@ -132,8 +132,8 @@ class _Worker:
         """Which worker died, and how."""
         return f"server worker process {self.index} (pid {self.process.pid}) {self._death}"
 
-    def close(self) -> None:
-        """Ask the worker to exit, reap it (killing it if it lingers), close the pipe."""
+    def ask_to_exit(self) -> None:
+        """Tell the worker to exit (idempotent); :meth:`close` waits for it."""
         with self._lock:
             was_alive, self._alive = self._alive, False
             if was_alive:
@@ -141,6 +141,10 @@ class _Worker:
                 self._death_known.set()
                 with contextlib.suppress(OSError):  # already gone
                     self._connection.send(None)
+
+    def close(self) -> None:
+        """Ask the worker to exit, reap it (killing it if it lingers), close the pipe."""
+        self.ask_to_exit()
         try:
             self.process.wait(EXIT_TIMEOUT_S)
         except subprocess.TimeoutExpired:
@@ -320,6 +324,9 @@ class WorkerPool:
         with self._lock:
             self._closing = True
             workers = list(self._workers)
+        # All at once: each worker's interpreter takes a while to exit.
+        for worker in workers:
+            worker.ask_to_exit()
         for worker in workers:
             worker.close()
         _RUNNING.discard(self)

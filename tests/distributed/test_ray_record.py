@@ -137,7 +137,9 @@ def test_a_lost_worker_stops_the_run_keeping_its_finalized_shards(
     # One batch (an episode per row) from both workers, then the survivor's next batch, which
     # it records while the lost one fails; each batch is a finalized shard part.
     assert killed == [2 * SESSIONS]
+    # The collection raised WorkerLostError (the run stopped), naming the lost worker.
     assert result.stopped and len(result.lost_workers) == 1
+    assert f"worker(s) {result.lost_workers} lost" in caplog.text
     dataset = LeRobotDataset("local/drives", root=result.output, video_backend="pyav")
     assert result.episodes == dataset.meta.total_episodes == 3 * SESSIONS
     episode_index = torch.as_tensor(dataset.hf_dataset["episode_index"]).unique()

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import functools
-import time
 
+import grpc
 import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector, MultiSyncCollector
 
 from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.proto import a2v_pb2, a2v_pb2_grpc
 from oasis_torchrl.sim.config import ServerConfig
 
 SMALL = ServerConfig(width=64, height=48)
@@ -49,22 +50,26 @@ def test_two_worker_multiprocess_collector() -> None:
     assert shapes == [(48, 64, 3)] * 2
 
 
+def _forget_on_the_server(env: OasisEnv, row: int) -> None:
+    """Finish ``row``'s session behind the env's back: the server no longer knows it, as after
+    an idle expiry (without waiting for one)."""
+    state = env.pool._runtime.sessions[row].state
+    with grpc.insecure_channel(env.pool._target) as channel:
+        response = a2v_pb2_grpc.A2VServiceStub(channel).Finish(
+            a2v_pb2.FinishRequest(session_id=state.info.session_id),
+            metadata=state.metadata,
+            timeout=30,
+        )
+    assert not response.HasField("error"), response.error
+
+
 def test_lost_session_is_reopened_for_its_row_only() -> None:
-    env = OasisEnv(
-        "local",
-        num_envs=2,
-        server=ServerConfig(width=64, height=48, idle_timeout_s=0.5),
-        max_steps=50,
-    )
+    env = OasisEnv("local", num_envs=2, server=SMALL, max_steps=50)
     try:
         env.reset()
         action = TensorDict(action=torch.full((2, 4, 2), 0.0), batch_size=[2])
         env.step(action)
-        # let row 1's session expire on the server while row 0 keeps being used
-        deadline = time.monotonic() + 1.5
-        while time.monotonic() < deadline:
-            env.pool.infer(torch.zeros(1, 4, 2).numpy(), indices=[0])
-            time.sleep(0.1)
+        _forget_on_the_server(env, row=1)
         out = env.step(action)["next"]
         assert out["truncated"].flatten().tolist() == [False, True]
         assert out["info", "session_restarts"].flatten().tolist() == [0, 1]

@@ -1,10 +1,10 @@
-"""The LeRobot plugin: registration, the action queue, save/load, the loss, lerobot-train."""
+"""The LeRobot plugin: registration, the action queue, save/load, the loss, its defaults.
+
+That ``lerobot-train --policy.type=oasis`` and ``oasis-torchrl train bc`` build the same policy
+is checked in ``tests/lerobot_tools/test_eval_train.py``, on that module's ``lerobot-train`` run."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,13 +16,11 @@ from lerobot_policy_oasis import OasisConfig, OasisPolicy
 from lerobot_policy_oasis.configuration_oasis import NETWORK_FIELDS, TRAINING_FIELDS
 from omegaconf import OmegaConf
 
-from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 
 CAMERAS = ("left_forward", "front", "right_forward")
 SIZE = (32, 48)
-VENV_BIN = Path(sys.executable).parent
 
 
 def _config(action_dim: int = 2, **overrides: object) -> OasisConfig:
@@ -185,27 +183,6 @@ def test_bad_features_are_named() -> None:
         _config(head="gmm").net_config()
 
 
-def _record(root: Path) -> None:
-    """A tiny dataset through the ``oasis-torchrl record`` command (frame rows)."""
-    command = [
-        str(VENV_BIN / "oasis-torchrl"),
-        "record",
-        "--root",
-        str(root),
-        "--episodes",
-        "2",
-        "--num-envs",
-        "2",
-        "--max-steps",
-        "3",
-        "--width",
-        "48",
-        "--height",
-        "32",
-    ]
-    subprocess.run(command, check=True, capture_output=True, timeout=120)
-
-
 def test_the_policys_defaults_are_behaviour_clonings() -> None:
     cloning = OmegaConf.to_container(load_config("bc").policy)
     config = OasisConfig(device="cpu")
@@ -214,44 +191,3 @@ def test_the_policys_defaults_are_behaviour_clonings() -> None:
         expected = tuple(value) if isinstance(value, list) else value
         assert getattr(config, name) == expected, name
     assert config.use_state is False and config.loss == "nll"
-
-
-def _policy_settings(config: OasisConfig) -> dict[str, object]:
-    """What a trained policy's config says about the policy (not where it ran)."""
-    names = (*NETWORK_FIELDS, *TRAINING_FIELDS, "n_obs_steps", "chunk_size", "n_action_steps")
-    settings = {name: getattr(config, name) for name in names}
-    settings["features"] = (config.input_features, config.output_features)
-    settings["normalization"] = config.normalization_mapping
-    return settings
-
-
-def test_lerobot_train_and_train_bc_build_the_same_policy(tmp_path: Path) -> None:
-    root = tmp_path / "drives"
-    _record(root)
-    output = tmp_path / "train"
-    command = [
-        str(VENV_BIN / "lerobot-train"),
-        "--policy.type=oasis",
-        "--dataset.repo_id=local/drives",
-        f"--dataset.root={root}",
-        "--policy.image_size=[32,48]",
-        "--policy.components=2",  # a network field, taken from DrivingNetConfig
-        "--steps=2",
-        "--batch_size=4",
-        "--num_workers=0",
-        "--save_freq=2",
-        f"--output_dir={output}",
-    ]
-    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    done = subprocess.run(command, capture_output=True, text=True, timeout=180, env=env)
-    assert done.returncode == 0, done.stderr[-3000:]
-    folder = output / "checkpoints" / "last" / "pretrained_model"
-    loaded = OasisPolicy.from_pretrained(folder)
-    assert loaded.config.image_size == SIZE and loaded.model.config.components == 2
-    assert (folder / "policy_preprocessor.json").exists()
-
-    bc = ["train", "bc", f"--dataset.root={root}", f"output_dir={tmp_path / 'bc'}"]
-    bc += ["policy.image_size=[32,48]", "policy.components=2", "train.steps=2", "eval.episodes=0"]
-    assert main([*bc, "train.batch_size=4", "progress=false"]) == 0
-    cloned = OasisPolicy.from_pretrained(tmp_path / "bc" / "policy").config
-    assert _policy_settings(cloned) == _policy_settings(loaded.config)
