@@ -28,6 +28,7 @@ from lerobot.datasets.utils import INFO_PATH
 from oasis_torchrl.compat import (
     count_image_statistics,
     dropped_video_frames,
+    embed_only_image_tables,
     wait_for_encoder_room,
 )
 from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
@@ -122,6 +123,7 @@ def open_dataset(
     # without this, every episode prints the encoder's banner and statistics.
     av.logging.set_libav_level(av.logging.ERROR)
     count_image_statistics()
+    embed_only_image_tables()
     if (root / INFO_PATH).exists():
         if not append:
             raise FileExistsError(f"{root} already holds a LeRobot dataset; append to add episodes")
