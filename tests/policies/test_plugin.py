@@ -255,3 +255,26 @@ def test_lerobot_train_and_train_bc_build_the_same_policy(tmp_path: Path) -> Non
     assert main([*bc, "train.batch_size=4", "progress=false"]) == 0
     cloned = OasisPolicy.from_pretrained(tmp_path / "bc" / "policy").config
     assert _policy_settings(cloned) == _policy_settings(loaded.config)
+
+
+def test_a_folder_saved_with_removed_settings_loads_naming_them(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    import json
+
+    from oasis_torchrl.drivers.folders import export_lerobot
+    from oasis_torchrl.models import DrivingNet
+
+    folder = export_lerobot(DrivingNet(), tmp_path / "policy")
+    config_file = folder / "config.json"
+    saved = json.loads(config_file.read_text())
+    removed = {"manoeuvre_weight": 20.0, "scheduler_name": "cosine"}
+    config_file.write_text(json.dumps({**saved, **removed}))
+    policy = OasisPolicy.from_pretrained(str(folder))
+    assert policy.config.hidden_dim == saved["hidden_dim"]
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert any("manoeuvre_weight, scheduler_name" in message for message in warned)
+    # a setting of the policy with a bad value is still an error
+    config_file.write_text(json.dumps({**saved, "hidden_dim": "wide"}))
+    with pytest.raises(Exception, match="hidden_dim"):
+        OasisPolicy.from_pretrained(str(folder))
