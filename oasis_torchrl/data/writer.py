@@ -48,6 +48,13 @@ CRF_RANGES: dict[str, tuple[int, int]] = {"h264": (0, 51), "hevc": (0, 51), "lib
 only at the first frame."""
 
 
+VIDEO_FILE_MB = 4
+"""Size (MB) at which a camera's video file is closed and the next episode starts a new one.
+LeRobot appends each saved episode by remuxing the whole current file, so the cost of an
+episode grows with the file: LeRobot's 200 MB default made recording 80 episodes at 96x64
+quadratic. A new dataset stores the size in its ``info.json``; appends keep it."""
+
+
 def camera_encoder(vcodec: str, crf: float = DEFAULT_CRF) -> RGBEncoderConfig:
     """LeRobot's encoder settings for the cameras: ``vcodec`` at quality ``crf``, LeRobot's
     defaults otherwise.
@@ -152,6 +159,7 @@ def open_dataset(
         video_backend=default_video_backend(),
         rgb_encoder=encoder,
         streaming_encoding=True,
+        video_files_size_in_mb=VIDEO_FILE_MB,
     )
 
 
