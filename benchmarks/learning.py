@@ -59,7 +59,7 @@ from oasis_torchrl.allocator import keep_batches_in_heap
 from oasis_torchrl.config import DemoConfig, load_config
 from oasis_torchrl.config.arguments import add_config_arguments, flag_values, split_overrides
 from oasis_torchrl.config.presets import preset_file
-from oasis_torchrl.train.evaluate import paired_difference
+from oasis_torchrl.train.evaluate import paired_difference, selection_figure
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,
@@ -223,12 +223,13 @@ def scratch_recipe() -> DictConfig:
 def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, Any]:
     """The periodic evaluation (on the selection seeds) that rates best among the policies
     trained for at most ``budget`` env steps (the first of equals, as the trainer keeps with
-    ``eval.selection_margin`` 0, the default PPO from scratch runs with)."""
+    ``eval.selection_margin`` 0, the default PPO from scratch runs with): by distance, or by
+    return where the PPO stage ran on a frames-only endpoint."""
     *periodic, _ = history
     within = [entry for entry in periodic if entry["policy_frames"] <= budget]
     if not within:
         raise ValueError(f"no PPO evaluation within {budget} env steps")
-    return max(within, key=lambda entry: entry["mean_distance"])
+    return max(within, key=selection_figure)
 
 
 def main() -> None:

@@ -135,6 +135,16 @@ class EvalReport:
         """Fraction of episodes the reward ended (the depth reward's likely collisions)."""
         return _mean([float(episode.likely_collision) for episode in self.episodes])
 
+    def progress_figure(self) -> dict[str, str]:
+        """The progress bar's figure: the distance with ground truth, else the return.
+
+        >>> EvalReport([EpisodeResult("urban", 1, 10.0, True, -5.0, 7)]).progress_figure()
+        {'distance': '10.0'}
+        """
+        if self.ground_truth and math.isfinite(self.mean_distance):
+            return {"distance": f"{self.mean_distance:.1f}"}
+        return {"return": f"{self.mean_return:.1f}"}
+
     def summary(self) -> dict[str, float]:
         """The aggregates (for loggers and progress bars; ``mean_progress`` under the
         reference reward only)."""
@@ -293,6 +303,16 @@ def load_report(path: str | Path) -> dict[str, Any]:
     return report
 
 
+def selection_figure(report: dict[str, Any]) -> float:
+    """What a selection compares in an evaluation (:meth:`EvalReport.to_dict`): the mean
+    distance where the endpoint sent ground truth, else the mean return.
+
+    >>> selection_figure({"mean_distance": float("nan"), "mean_return": 3.0, "ground_truth": False})
+    3.0
+    """
+    return report["mean_distance" if report.get("ground_truth", True) else "mean_return"]
+
+
 def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float) -> bool:
     """Whether an evaluation (:meth:`EvalReport.to_dict`) should replace the kept one: with
     ``margin`` 0, any higher mean distance; otherwise a paired gain of more than ``margin``
@@ -311,8 +331,7 @@ def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float)
     if kept is None:
         return True
     if not margin:
-        key = "mean_distance" if kept.get("ground_truth", True) else "mean_return"
-        return candidate[key] > kept[key]
+        return selection_figure(candidate) > selection_figure(kept)
     if len(kept["per_episode"]) < 2:
         raise ValueError(
             f"a selection margin ({margin} standard errors) needs at least 2 evaluation "
@@ -688,7 +707,7 @@ class Evaluator:
                 self.recorders.write_episodes(rollout, results)
                 report.episodes.extend(results)
                 bar.update((index + 1) * self.cfg.max_steps - bar.n)
-                bar.set_postfix(distance=f"{report.mean_distance:.1f}")
+                bar.set_postfix(report.progress_figure())
         return report
 
     @property

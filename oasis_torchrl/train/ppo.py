@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -563,12 +564,25 @@ def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:
 
 
 def _postfix(metrics: dict[str, float]) -> dict[str, str]:
+    """The progress bar's figures; the evaluation's distance where the endpoint sends ground
+    truth, else its return (a frames-only endpoint's distance is NaN).
+
+    >>> _postfix({"eval/mean_distance": float("nan"), "eval/mean_return": 41.0})
+    {'eval_ret': '41.0'}
+    """
     shown = {
         "dist": "train/episode_distance",
         "ret": "train/episode_reward",
         "eval": "eval/mean_distance",
+        "eval_ret": "eval/mean_return",
     }
-    return {name: f"{metrics[key]:.1f}" for name, key in shown.items() if key in metrics}
+    if math.isfinite(metrics.get("eval/mean_distance", math.nan)):
+        del shown["eval_ret"]
+    return {
+        name: f"{metrics[key]:.1f}"
+        for name, key in shown.items()
+        if key in metrics and math.isfinite(metrics[key])
+    }
 
 
 def train_ppo(cfg: DictConfig) -> PPOResult:
