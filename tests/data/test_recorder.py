@@ -102,7 +102,7 @@ def test_append_adds_episodes_and_checks_features(tmp_path: Path) -> None:
     dataset = open_dataset(root)
     assert [len(range(e.start, e.stop)) for e in episodes(dataset)] == [4, 8, 8]
     # small video files: LeRobot remuxes the current file at every saved episode
-    assert dataset.meta.info["video_files_size_in_mb"] == VIDEO_FILE_MB
+    assert dataset.meta.info.video_files_size_in_mb == VIDEO_FILE_MB
     assert dataset[16]["episode_index"].item() == 2 and dataset[16]["task"] == "road 1-0"
     with pytest.raises(
         ValueError,
