@@ -15,6 +15,12 @@ misbehaving on a layout it does not know). What is used, and why no public API d
   costs more than encoding the frame. For 8-bit frames :class:`CountedImageStats` derives the
   same statistics from one count of each channel's 256 levels; the encoder thread creates its
   tracker from LeRobot's module, so the writer puts that class there.
+- LeRobot's episode table (:func:`embed_only_image_tables`): ``save_episode`` runs the
+  ``datasets`` library's ``map`` over every row of the episode to embed image files into the
+  table, even when no column holds images (camera frames go to videos), and that row-by-row map
+  cost about a third of recording a demonstration. The writer module's ``embed_images`` is
+  replaced by one that returns a table without image columns unchanged (what the map would
+  give) and hands any other to LeRobot's.
 - TorchRL's ``RayCollector`` (:func:`drop_ray_collectors`): it can add remote collectors but not
   remove one, so after a worker died the survivors are kept by rewriting its actor list and
   those of its weight senders.
@@ -240,6 +246,36 @@ def count_image_statistics() -> None:
     from lerobot.datasets import compute_stats
 
     compute_stats.RunningQuantileStats = _counted_image_stats()
+
+
+def _embeds_images(features: Any) -> bool:
+    """Whether a ``datasets`` features dict has a column whose storage LeRobot's
+    ``embed_images`` rewrites (images, audio, also nested)."""
+    from datasets.features.features import require_storage_embed
+
+    return any(require_storage_embed(feature) for feature in features.values())
+
+
+def embed_only_image_tables() -> None:
+    """Make LeRobot's ``save_episode`` skip its row-by-row image embedding for an episode
+    table without image columns (the table is already what the embedding would give).
+
+    Idempotent; replaces ``embed_images`` in LeRobot's ``dataset_writer`` module.
+
+    Example:
+        >>> from lerobot.datasets import dataset_writer
+        >>> embed_only_image_tables()
+        >>> dataset_writer.embed_images.__name__
+        'embed_images_if_any'
+    """
+    require("lerobot")
+    from lerobot.datasets import dataset_writer
+    from lerobot.datasets.io_utils import embed_images
+
+    def embed_images_if_any(dataset: Any) -> Any:
+        return embed_images(dataset) if _embeds_images(dataset.features) else dataset
+
+    dataset_writer.embed_images = embed_images_if_any
 
 
 def __getattr__(name: str) -> Any:

@@ -37,8 +37,12 @@ def run(cfg: DictConfig) -> int:
         >>> run(load_config("demo", ["record.episodes=0", fresh]))
         2
     """
+    import torch
+
     from oasis_torchrl.train.pipeline import run_pipeline
 
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
     try:
         result = run_pipeline(cfg)
     except (ValueError, FileNotFoundError, ImportError) as error:

@@ -11,6 +11,7 @@ Any setting can be given as ``key=value``, e.g.
 from __future__ import annotations
 
 import logging
+import sys
 
 from omegaconf import DictConfig
 
@@ -26,9 +27,21 @@ HELP = (
 CONFIG = {"ppo": PPOConfig, "bc": BCConfig, "depth": DepthTrainConfig}
 
 
+def lost_worker(error: BaseException) -> bool:
+    """Whether ``error`` is a Ray collector worker's death
+    (:class:`~oasis_torchrl.distributed.WorkerLostError`; Ray, an extra, is loaded if so).
+
+    Example:
+        >>> lost_worker(RuntimeError("anything else"))
+        False
+    """
+    collection = sys.modules.get("oasis_torchrl.distributed.ray_collection")
+    return collection is not None and isinstance(error, collection.WorkerLostError)
+
+
 def run(cfg: DictConfig, algorithm: str) -> int:
-    """Train, then log where the results are; exit code 2 on bad settings, 130 when
-    interrupted.
+    """Train, then log where the results are; exit code 2 on bad settings, 1 when a Ray
+    collector worker died (one line: what died and how to go on), 130 when interrupted.
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -57,6 +70,15 @@ def run(cfg: DictConfig, algorithm: str) -> int:
     except KeyboardInterrupt:
         logger.warning("interrupted (PPO resumes with resume=latest)")
         return 130
+    except RuntimeError as error:
+        if not lost_worker(error):
+            raise
+        logger.error(
+            "cannot train: %s; resume=latest continues from the last checkpoint, "
+            "ray.on_failure=continue carries on without a lost worker",
+            error,
+        )
+        return 1
     if result.final_eval is not None:
         logger.info("evaluation: %s", result.final_eval.summary())
     return 0

@@ -20,6 +20,7 @@ from oasis_torchrl.config.training import (
     PPOSettings,
 )
 from oasis_torchrl.options import option
+from oasis_torchrl.sim.config import require_int
 
 
 @dataclass
@@ -179,3 +180,12 @@ class DemoConfig:
         "the autopilot's)",
     )
     progress: bool = option(True, help="tqdm progress bars")
+    # Two OpenMP threads on a 2-core machine shared with the embedded server's processes wait
+    # on each other: a behaviour-cloning step took about 5x the CPU time of one thread's
+    # (docs/experiments/2026-11-28-depth-network.md measured the same for the depth network).
+    threads: int = option(
+        1, help="threads of this process's torch operations (intra-op; 0: torch's default)"
+    )
+
+    def __post_init__(self) -> None:
+        require_int("threads", self.threads, 0, 1024)

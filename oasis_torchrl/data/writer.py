@@ -28,6 +28,7 @@ from lerobot.datasets.utils import INFO_PATH
 from oasis_torchrl.compat import (
     count_image_statistics,
     dropped_video_frames,
+    embed_only_image_tables,
     wait_for_encoder_room,
 )
 from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
@@ -45,6 +46,13 @@ recordings and the project's datasets can be merged (LeRobot merges only equal r
 CRF_RANGES: dict[str, tuple[int, int]] = {"h264": (0, 51), "hevc": (0, 51), "libsvtav1": (0, 63)}
 """The ``crf`` each codec accepts; LeRobot does not check it, and its encoder threads would fail
 only at the first frame."""
+
+
+VIDEO_FILE_MB = 4
+"""Size (MB) at which a camera's video file is closed and the next episode starts a new one.
+LeRobot appends each saved episode by remuxing the whole current file, so the cost of an
+episode grows with the file: LeRobot's 200 MB default made recording 80 episodes at 96x64
+quadratic. A new dataset stores the size in its ``info.json``; appends keep it."""
 
 
 def camera_encoder(vcodec: str, crf: float = DEFAULT_CRF) -> RGBEncoderConfig:
@@ -122,6 +130,7 @@ def open_dataset(
     # without this, every episode prints the encoder's banner and statistics.
     av.logging.set_libav_level(av.logging.ERROR)
     count_image_statistics()
+    embed_only_image_tables()
     if (root / INFO_PATH).exists():
         if not append:
             raise FileExistsError(f"{root} already holds a LeRobot dataset; append to add episodes")
@@ -150,6 +159,7 @@ def open_dataset(
         video_backend=default_video_backend(),
         rgb_encoder=encoder,
         streaming_encoding=True,
+        video_files_size_in_mb=VIDEO_FILE_MB,
     )
 
 

@@ -341,13 +341,16 @@ class RayCollection:
     def _on_worker_lost(self, error: RayActorError) -> None:
         lost = self._dead_workers()
         self.lost_workers.extend(lost)
-        logger.error("Ray collector worker(s) %s lost: %s", lost, error)
+        cause = str(error).strip().splitlines()
+        logger.error("Ray collector worker(s) %s lost: %s", lost, cause[0] if cause else "")
+        logger.debug("Ray's report of the loss: %s", error)
         self._drop(lost)
         if self.config.on_failure == "stop" or not self._workers:
             self.close()
+            shards = "; the shards of the other workers are finalized" if self._recording else ""
             raise WorkerLostError(
-                f"Ray collector worker(s) {lost} lost (on_failure={self.config.on_failure!r}); "
-                f"the shards of the other workers are finalized"
+                f"Ray collector worker(s) {lost} lost (on_failure={self.config.on_failure!r})"
+                f"{shards}"
             ) from error
         logger.warning("continuing with workers %s", self._workers)
 

@@ -120,7 +120,8 @@ class OasisWrapper(_EnvWrapper):
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
             default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, the
             reference's :class:`~oasis_torchrl.rewards.DepthCollisionReward` on frames alone
-            (its depth from the shipped small network).
+            (its depth from the shipped small network); :class:`~oasis_torchrl.rewards.NoReward`
+            for none.
         ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``; a
             server that sends none yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
@@ -414,10 +415,10 @@ class OasisEnv(OasisWrapper):
     With ground truth (the embedded server) the default reward is
     :class:`~oasis_torchrl.rewards.GroundTruthReward`, per row and step:
     ``0.1 * progress_gained - 2 * collision - 0.01 * lane_offset`` (metres gained along the road,
-    1 on the first collided step, mean metres from the lane's centre). On frames alone it is 0
-    unless ``reward=`` is given; the reference reward is
-    :class:`~oasis_torchrl.rewards.DepthCollisionReward`:
-    ``expm1(3 * mean(max(throttle, 0))) / expm1(3)`` minus a straightness penalty.
+    1 on the first collided step, mean metres from the lane's centre). On frames alone it is the
+    reference reward, :class:`~oasis_torchrl.rewards.DepthCollisionReward`:
+    ``expm1(3 * mean(max(throttle, 0))) / expm1(3)`` minus a straightness penalty (a depth network
+    on the front frame every step). ``reward=NoReward()`` scores nothing (0, never terminates).
 
     ## Starting state
 

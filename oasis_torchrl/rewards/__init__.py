@@ -6,6 +6,7 @@
 
 from oasis_torchrl.rewards.base import (
     CallableReward,
+    NoReward,
     RewardFn,
     RewardModule,
     RowState,
@@ -47,6 +48,7 @@ __all__ = [
     "GroundTruthReward",
     "MonocularDepth",
     "NamedDepth",
+    "NoReward",
     "RewardFn",
     "RewardModule",
     "RowState",

@@ -70,6 +70,26 @@ class CallableReward:
         """Nothing to forget: a plain callable holds no per-row state."""
 
 
+class NoReward:
+    """A :class:`RewardModule` that scores nothing: reward 0, no terms, never terminates.
+
+    For an env whose caller reads no reward (a LeRobot robot): the default reward on frames
+    alone runs a depth network every step.
+
+    >>> NoReward()(TensorDict({}, batch_size=[2]))["reward"].tolist()
+    [[0.0], [0.0]]
+    """
+
+    terms: tuple[str, ...] = ()
+
+    def __call__(self, td: TensorDictBase) -> TensorDict:
+        """Zero reward for every row."""
+        return reward_output(torch.zeros(batch_rows(td)))
+
+    def reset(self, mask: torch.Tensor | None = None) -> None:
+        """Nothing to forget."""
+
+
 def as_reward_module(fn: RewardModule | RewardFn) -> RewardModule:
     """Return ``fn`` itself if it is already a :class:`RewardModule`, else wrap it.
 

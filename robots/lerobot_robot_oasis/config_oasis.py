@@ -9,6 +9,7 @@ from lerobot.robots import RobotConfig
 from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
 from oasis_torchrl.data.writer import ROBOT_TYPE
 from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.rewards import NoReward
 from oasis_torchrl.sim.config import ServerConfig
 
 _ENV = EnvConfig()
@@ -56,8 +57,8 @@ class OasisRobotConfig(RobotConfig):
             raise ValueError("robot.prompt must be a non-empty scene description")
 
     def world(self) -> OasisEnv:
-        """The robot's world: a one-session env with all 4 frames of each chunk (it opens
-        nothing before its first reset)."""
+        """The robot's world: a one-session env with all 4 frames of each chunk and no reward
+        (a robot has none; it opens nothing before its first reset)."""
         return OasisEnv(
             self.endpoint,
             num_envs=1,
@@ -68,4 +69,5 @@ class OasisRobotConfig(RobotConfig):
             frame_size=(self.image_height, self.image_width),
             all_frames=True,
             max_steps=2**31 - 1,  # the world ends only when the car collides
+            reward=NoReward(),
         )

@@ -12,6 +12,7 @@ import torch
 from oasis_torchrl.config.recording import DEFAULT_CRF
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.data.images import resize_frames
+from oasis_torchrl.data.writer import VIDEO_FILE_MB
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY, privileged_state
 from oasis_torchrl.sim.config import ServerConfig
@@ -100,6 +101,8 @@ def test_append_adds_episodes_and_checks_features(tmp_path: Path) -> None:
     )
     dataset = open_dataset(root)
     assert [len(range(e.start, e.stop)) for e in episodes(dataset)] == [4, 8, 8]
+    # small video files: LeRobot remuxes the current file at every saved episode
+    assert dataset.meta.info.video_files_size_in_mb == VIDEO_FILE_MB
     assert dataset[16]["episode_index"].item() == 2 and dataset[16]["task"] == "road 1-0"
     with pytest.raises(
         ValueError,

@@ -14,6 +14,7 @@ from lerobot_robot_oasis import OasisRobot, OasisRobotConfig
 
 from oasis_torchrl.data.features import DatasetLayout, build_features
 from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS
+from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward
 from oasis_torchrl.sim.launcher import LocalServer
 
 
@@ -105,5 +106,23 @@ def test_a_remote_endpoint_drives_without_ground_truth(
         _drive(robot, 8)
         assert first["front"].shape == (32, 96, 3)
         assert not np.array_equal(robot.get_observation()["front"], first["front"])
+    finally:
+        robot.disconnect()
+
+
+def test_a_robots_steps_run_no_reward(
+    local_server: LocalServer, server_keys: tuple[str, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def scored(self: object, td: object) -> None:
+        raise AssertionError(f"{type(self).__name__} scored a robot's step")
+
+    # Frames alone would get the depth-collision reward, ground truth the ground-truth one.
+    monkeypatch.setattr(DepthCollisionReward, "__call__", scored)
+    monkeypatch.setattr(GroundTruthReward, "__call__", scored)
+    monkeypatch.setenv(API_KEY_ENV_VAR, server_keys[0])
+    robot = OasisRobot(OasisRobotConfig(endpoint=f"http://{local_server.address}", image_height=32))
+    robot.connect()
+    try:
+        _drive(robot, 8)
     finally:
         robot.disconnect()

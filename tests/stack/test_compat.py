@@ -56,3 +56,32 @@ def test_ray_weight_sync_takes_the_node_address_not_the_hostname(
         assert seen == {"address": "127.0.0.1", "interface": "lo"}
         assert ray_weight_sync.socket is socket
         assert compat.GLOO_INTERFACE_VARIABLE not in os.environ
+
+
+def test_episode_tables_skip_the_image_embedding_only_without_images(tmp_path) -> None:
+    import datasets
+    import numpy as np
+    from lerobot.datasets import dataset_writer
+    from lerobot.datasets.io_utils import embed_images
+    from PIL import Image
+
+    compat.embed_only_image_tables()
+    rows = datasets.Features(
+        {
+            "action": datasets.Sequence(datasets.Value("float32"), length=2),
+            "index": datasets.Value("int64"),
+        }
+    )
+    table = datasets.Dataset.from_dict(
+        {"action": [[0.5, -0.25], [1.0, 0.0]], "index": [0, 1]}, features=rows
+    )
+    skipped = dataset_writer.embed_images(table)
+    assert skipped is table  # no row-by-row map ran
+    assert skipped.with_format("arrow")[:].equals(embed_images(table).with_format("arrow")[:])
+    picture = tmp_path / "frame.png"
+    Image.fromarray(np.zeros((4, 6, 3), np.uint8)).save(picture)
+    images = datasets.Dataset.from_dict(
+        {"image": [str(picture)]}, features=datasets.Features({"image": datasets.Image()})
+    )
+    embedded = dataset_writer.embed_images(images).with_format("arrow")[:]
+    assert embedded.column("image")[0]["bytes"].as_py() == picture.read_bytes()

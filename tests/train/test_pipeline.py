@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from viz._readback import Readback
 
@@ -41,8 +42,13 @@ TINY_PIPELINE = [
 ]
 
 
-def test_demo_command_runs_every_stage(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_demo_command_runs_every_stage(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    threads: list[int] = []
+    monkeypatch.setattr(torch, "set_num_threads", threads.append)  # the suite's own stays
     assert main(["demo", f"output_dir={tmp_path}", *TINY_PIPELINE]) == 0
+    assert threads == [1]  # one torch thread: two fight over 2 cores with the server's processes
     printed = capsys.readouterr()
     table = printed.out.splitlines()
     assert "Map" not in printed.err  # no bar of `datasets` per saved episode, DAgger's included
