@@ -39,7 +39,10 @@ def run(cfg: DictConfig, action: str) -> int:
     from oasis_torchrl.drivers.pretrained import pretrained_path, shipped_policies
 
     if action == "list":
-        sys.stdout.writelines(f"{name}\n" for name in shipped_policies())
+        names = shipped_policies()
+        if not names:  # stdout stays empty for scripts; the person reading is told why
+            logger.warning("no policy is shipped yet (docs/guides/training.md: Shipped policies)")
+        sys.stdout.writelines(f"{name}\n" for name in names)
         return 0
     try:
         if action == "path":
