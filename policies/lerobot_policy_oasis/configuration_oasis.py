@@ -24,14 +24,9 @@ values. Any LeRobot mode can still be chosen per feature type with ``normalizati
 from __future__ import annotations
 
 import dataclasses
-import logging
 import typing
-from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any
 
-import draccus
-from draccus.parsers.decoding import decode_dataclass
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamWConfig
@@ -41,8 +36,6 @@ from oasis_torchrl.config.training import BCPolicyConfig
 from oasis_torchrl.models import DrivingNetConfig
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.protocol import ACTION_DIM, CHUNK, POLICY_CAMERAS
-
-logger = logging.getLogger(__name__)
 
 POLICY_TYPE = "oasis"
 FRAME_SPACING = CHUNK
@@ -267,29 +260,3 @@ class OasisConfig(PreTrainedConfig, OasisPolicyFields):
     def reward_delta_indices(self) -> None:
         """Rewards are not used."""
         return None
-
-
-def decode_known_settings(values: dict[str, Any], path: Sequence[str] = ()) -> OasisConfig:
-    """An :class:`OasisConfig` from a ``config.json``'s settings, those it no longer has left
-    out with a warning that names them: policy folders saved before a setting was removed
-    (``manoeuvre_weight``, ``scheduler_name``, ...) still load. Registered as draccus's
-    decoder of :class:`OasisConfig`, what LeRobot's ``from_pretrained`` parses with; other
-    policy types keep draccus's error on an unknown key.
-
-    Example:
-        >>> config = decode_known_settings({"hidden_dim": 64, "manoeuvre_weight": 20.0})
-        >>> config.hidden_dim
-        64
-    """
-    known = {setting.name for setting in fields(OasisConfig)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        logger.warning(
-            "ignoring settings the oasis policy no longer has (saved by an earlier release): %s",
-            ", ".join(unknown),
-        )
-    kept = {key: value for key, value in values.items() if key in known}
-    return decode_dataclass(OasisConfig, kept, path)
-
-
-draccus.decode.register(OasisConfig, decode_known_settings)

@@ -191,26 +191,3 @@ def test_the_policys_defaults_are_behaviour_clonings() -> None:
         expected = tuple(value) if isinstance(value, list) else value
         assert getattr(config, name) == expected, name
     assert config.use_state is False and config.loss == "nll"
-
-
-def test_a_folder_saved_with_removed_settings_loads_naming_them(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
-) -> None:
-    import json
-
-    from oasis_torchrl.drivers.folders import export_lerobot
-    from oasis_torchrl.models import DrivingNet
-
-    folder = export_lerobot(DrivingNet(), tmp_path / "policy")
-    config_file = folder / "config.json"
-    saved = json.loads(config_file.read_text())
-    removed = {"manoeuvre_weight": 20.0, "scheduler_name": "cosine"}
-    config_file.write_text(json.dumps({**saved, **removed}))
-    policy = OasisPolicy.from_pretrained(str(folder))
-    assert policy.config.hidden_dim == saved["hidden_dim"]
-    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
-    assert any("manoeuvre_weight, scheduler_name" in message for message in warned)
-    # a setting of the policy with a bad value is still an error
-    config_file.write_text(json.dumps({**saved, "hidden_dim": "wide"}))
-    with pytest.raises(Exception, match="hidden_dim"):
-        OasisPolicy.from_pretrained(str(folder))
