@@ -122,7 +122,7 @@ def walk(schema: type, prefix: str = "") -> Iterator[Leaf | Section]:
 
     Example:
         >>> from oasis_torchrl.config.env import EnvConfig
-        >>> [item.key for item in walk(EnvConfig)][5:9]
+        >>> [item.key for item in walk(EnvConfig)][6:10]
         ['server', 'server.width', 'server.height', 'server.fps']
     """
     hints = get_type_hints(schema)

@@ -137,7 +137,9 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
 
     browser.find_element("id", "replay").click()
     wait_until(lambda: "replayed episode 0" in browser.find_element("id", "message").text, "replay")
-    assert page_state(browser)["replayed"] == dataset.num_frames
+    # The end message can arrive while the last frames wait in the page's display queue.
+    shown = lambda: page_state(browser)["replayed"] == dataset.num_frames  # noqa: E731
+    wait_until(shown, f"all {dataset.num_frames} replayed frames shown")
 
     if REGENERATE:
         press(browser, "w")
