@@ -19,8 +19,9 @@ one episode per env row of up to ``eval.max_steps`` chunks:
    budget;
 4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning by more than 2
    standard errors of the paired per-episode difference (the same scenes, episode by episode);
-5. held-out scenes: the references and every trained policy on prompts no stage trained on
-   (night, highway, rural, rain) and a seed no config uses, reported beside (no target).
+5. held-out scenes: the references and every policy the run's other stages trained, on prompts
+   no stage trained on (night, highway, rural, rain) and a seed no config uses, reported beside
+   (no target).
 
 Each PPO stage keeps the policy its periodic evaluations on ``--selection-seeds`` rate best
 (early stopping), then evaluates that one on the evaluation seeds, which no choice has seen.
@@ -104,7 +105,7 @@ PROTOCOL = {
 """The benchmark's episodes and evaluation, over the main job's defaults and the clone preset
 (flags and ``KEY=VALUE`` overrides come after it)."""
 STAGES = ("references", "bc", "bc_dagger", "bc_ppo", "ppo_scratch", "held_out")
-CLONE_STAGES = {"bc", "bc_dagger", "bc_ppo", "held_out"}
+CLONE_STAGES = {"bc", "bc_dagger", "bc_ppo"}
 COLORS = {
     "autopilot": "0.2",
     "best constant": "0.6",
@@ -330,15 +331,14 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
     for stage in ("bc", "bc_dagger"):
         if stage in stages:
             results[stage] = cache.evaluate(cfg, {stage: trained[stage]})[stage]
-    if stages & {"bc_ppo", "held_out"}:
+    if "bc_ppo" in stages:
         with cache.timed("bc_ppo"):
             finetune = ppo_stage(cfg, dagger_policy, "bc_ppo", args.finetune_frames, args)
             history = run_ppo(finetune).history
         trained["bc_ppo"] = str(work / "bc_ppo" / "policy")
-        if "bc_ppo" in stages:
-            results["bc_ppo"] = history
-            results["bc_ppo_start"] = cache.evaluate(cfg, {"bc_dagger": trained["bc_dagger"]})
-    if stages & {"ppo_scratch", "held_out"}:
+        results["bc_ppo"] = history
+        results["bc_ppo_start"] = cache.evaluate(cfg, {"bc_dagger": trained["bc_dagger"]})
+    if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
             scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args)
             history = run_ppo(scratch).history
@@ -346,19 +346,18 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
         early = chosen_within(history, args.ppo_early_frames)
         checkpoints = work / "ppo_scratch" / "checkpoints"
         trained["ppo_scratch_early"] = str(checkpoints / evaluated_checkpoint_name(early["frames"]))
-        if "ppo_scratch" in stages:
-            results["ppo_scratch"] = history
-            if not history[-1].get("ground_truth", True):
-                # A frames-only PPO stage's own evaluations have no distance: its kept policy is
-                # judged here, on the embedded server with ground truth, as the early one is.
-                final = cache.evaluate(cfg, {"ppo_scratch": trained["ppo_scratch"]})
-                results["ppo_scratch_final"] = final["ppo_scratch"]
-            results["ppo_scratch_early"] = {
-                "policy_frames": early["policy_frames"],
-                **cache.evaluate(cfg, {"ppo_scratch_early": trained["ppo_scratch_early"]})[
-                    "ppo_scratch_early"
-                ],
-            }
+        results["ppo_scratch"] = history
+        if not history[-1].get("ground_truth", True):
+            # A frames-only PPO stage's own evaluations have no distance: its kept policy is
+            # judged here, on the embedded server with ground truth, as the early one is.
+            final = cache.evaluate(cfg, {"ppo_scratch": trained["ppo_scratch"]})
+            results["ppo_scratch_final"] = final["ppo_scratch"]
+        results["ppo_scratch_early"] = {
+            "policy_frames": early["policy_frames"],
+            **cache.evaluate(cfg, {"ppo_scratch_early": trained["ppo_scratch_early"]})[
+                "ppo_scratch_early"
+            ],
+        }
     if "held_out" in stages:
         with cache.timed("held_out"):
             policies = {"autopilot": "autopilot", "constant 1.0": REFERENCES["constant 1.0"]}
