@@ -379,7 +379,9 @@ class BCTrainConfig:
     )
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
-        1000, help="also save the policy folder every N steps (0: only at the end)"
+        1000,
+        help="also save the policy so far to checkpoints/last every N steps (0: never); policy/ "
+        "is written at the end only",
     )
 
     def __post_init__(self) -> None:

@@ -130,6 +130,11 @@ def _batches(loader: DataLoader) -> Iterator[dict[str, Any]]:
         yield from loader
 
 
+PARTIAL_POLICY = "checkpoints/last"
+"""Where the policy so far is saved every ``train.save_every`` steps. ``policy/`` is written once,
+at the end, so a run whose ``policy/`` exists finished (the main job reuses such folders)."""
+
+
 class BCTrainer:
     """One behaviour-cloning run; :meth:`run` trains, saves and evaluates.
 
@@ -233,8 +238,8 @@ class BCTrainer:
                     if "aux_loss" in info:
                         self.logger.log_scalar("bc/aux_loss", info["aux_loss"], step=step)
                     bar.set_postfix(loss=f"{average:.4f}")
-                if cfg.save_every and step % cfg.save_every == 0:
-                    self.save(self.output_dir / "policy")
+                if cfg.save_every and step % cfg.save_every == 0 and step < cfg.steps:
+                    self.save(self.output_dir / PARTIAL_POLICY)
         return average
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:

@@ -16,7 +16,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.data.video_frames import MissingFrameError
 from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
-from oasis_torchrl.train.bc import BCTrainer, open_dataset
+from oasis_torchrl.train.bc import PARTIAL_POLICY, BCTrainer, open_dataset
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 
 
@@ -166,3 +166,18 @@ def test_the_cache_shifts_the_frames_as_bytes(tiny_dataset: Path, tmp_path: Path
     trainer = BCTrainer(cfg)
     assert trainer.shift_in_loop is None
     assert trainer.loader.dataset.frame_transform.keywords == {"pad": 2}
+
+
+def test_only_a_finished_run_writes_the_policy_folder(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The policy so far goes to checkpoints/last; policy/ is written once, at the end, so the
+    main job never reuses the folder of a run stopped half way."""
+    saved: list[Path] = []
+    save = BCTrainer.save
+    monkeypatch.setattr(
+        BCTrainer, "save", lambda self, path: saved.append(path) or save(self, path)
+    )
+    BCTrainer(_bc_config(tiny_dataset, tmp_path, "train.save_every=2")).run()
+    assert saved == [tmp_path / PARTIAL_POLICY, tmp_path / "policy"]
+    assert OasisPolicy.from_pretrained(tmp_path / PARTIAL_POLICY) is not None
