@@ -441,6 +441,7 @@ def plot_report(
     figure = Figure(figsize=(10, 8), layout="constrained")
     distances, scale_axes = figure.subplots(2, 1, sharex=True, height_ratios=(3, 2))
     levels: dict[str, float] = {}
+    legend_x = 1.01  # further right when a return axis sits on the right
     if "references" in report:
         references = report["references"]
         levels["autopilot"] = references["autopilot"]["mean_distance"]
@@ -455,13 +456,23 @@ def plot_report(
             continue
         *periodic, kept = report[stage]
         steps = [entry["frames"] for entry in periodic]
-        distances.plot(
-            steps,
-            [entry["mean_distance"] for entry in periodic],
-            "o-",
-            color=COLORS[name],
-            label=f"{name} (selection seeds)",
-        )
+        if f"{stage}_final" in report:  # trained on frames alone: judged with ground truth here
+            kept = {"policy_frames": kept["policy_frames"], **report[f"{stage}_final"]}
+            returns = distances.twinx()
+            curve = [entry["mean_return"] for entry in periodic]
+            returns.plot(steps, curve, "o:", color=COLORS[name])
+            returns.set_ylabel("return (frames only, dotted)")
+            # the return's curve, listed with the distances
+            distances.plot([], [], "o:", color=COLORS[name], label=f"{name}: return (selection)")
+            legend_x = 1.1
+        else:
+            distances.plot(
+                steps,
+                [entry["mean_distance"] for entry in periodic],
+                "o-",
+                color=COLORS[name],
+                label=f"{name} (selection seeds)",
+            )
         kept_policies = [(kept, "*", "kept")]
         if stage == "ppo_scratch" and "ppo_scratch_early" in report:
             early = report["ppo_scratch_early"]
@@ -481,7 +492,7 @@ def plot_report(
     distances.set_title(
         "PPO curves on the selection seeds; levels and kept policies on the evaluation seeds"
     )
-    distances.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    distances.legend(loc="upper left", bbox_to_anchor=(legend_x, 1.0), fontsize=9)
     for name, curves in scales.items():
         for action, style in zip(ACTION_NAMES, ("-", ":"), strict=True):
             points = curves.get(action, [])
