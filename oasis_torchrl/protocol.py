@@ -16,6 +16,7 @@ Example:
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 
 CHUNK = 4
 """Actions per Infer call, and frames per camera in its answer (frame k follows action k)."""
@@ -39,6 +40,17 @@ camera for what is far ahead."""
 
 POLICY_CAMERAS: tuple[str, ...] = (*CAMERAS, FRONT_CROP)
 """Every camera an env, a dataset or a policy may carry, in their conventional order."""
+
+
+def with_front_crop(streams: Sequence[str], front_crop: float | None) -> tuple[str, ...]:
+    """The cameras of ``streams`` plus, when ``front_crop`` is set, the crop derived from them.
+
+    Example:
+        >>> with_front_crop(CAMERAS, 0.25)[-1], with_front_crop(CAMERAS, None) == CAMERAS
+        ('front_crop', True)
+    """
+    return (*streams, FRONT_CROP) if front_crop is not None else tuple(streams)
+
 
 HOSTED_FRAME_SIZE = (512, 768)
 """``(height, width)`` of the hosted model's frames (it advertises 768 wide, 512 high)."""

@@ -10,10 +10,11 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from lerobot_env_oasis.keys import AGENT_POS, PIXELS
+from oasis_torchrl.client.decoding import validate_front_crop
 from oasis_torchrl.config import EmbeddedServerConfig
 from oasis_torchrl.config import EnvConfig as OasisSettings
 from oasis_torchrl.config.env import LOCAL, RewardConfig
-from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, FPS
+from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, FPS, with_front_crop
 
 ENV_TYPE = "oasis"
 REWARDS = ("distance", "return")
@@ -35,7 +36,11 @@ class OasisEnvConfig(EnvConfig):
         endpoint: ``local`` (an embedded simulator server started with the env) or an A2V
             endpoint (the hosted model's key comes from ``DECART_API_KEY``).
         observation_height, observation_width: camera frame size (the policy's input size).
-        server_width, server_height: frame size the embedded server renders.
+        server_width, server_height: frame size the embedded server renders (at least what
+            ``front_crop`` needs).
+        front_crop: add the narrow forward camera ``observation.images.front_crop``, this
+            fraction of the front frame's centre (what a policy trained with
+            ``env.front_crop`` reads; its card names the fraction); None: the three cameras.
         reward: ``distance`` (metres driven this frame: an episode's sum is the distance before
             collision; needs the embedded server's ground truth) or ``return`` (the project's
             env reward, as ``oasis-torchrl eval`` sums it).
@@ -56,6 +61,7 @@ class OasisEnvConfig(EnvConfig):
     observation_width: int = _SETTINGS.image_size[1]
     server_width: int = _SERVER.width
     server_height: int = _SERVER.height
+    front_crop: float | None = None
     reward: str = REWARDS[0]
     render_mode: str = "rgb_array"
     features: dict[str, PolicyFeature] = field(default_factory=dict)
@@ -78,17 +84,23 @@ class OasisEnvConfig(EnvConfig):
                 "env.reward=distance needs the embedded server's ground truth (env.endpoint="
                 "local); on another endpoint use env.reward=return"
             )
+        validate_front_crop(self.front_crop)
         frame = (self.observation_height, self.observation_width, 3)
         self.features = {
             ACTION: PolicyFeature(FeatureType.ACTION, (ACTION_DIM,)),
             AGENT_POS: PolicyFeature(FeatureType.STATE, (ACTION_DIM,)),
-            **{f"{PIXELS}/{c}": PolicyFeature(FeatureType.VISUAL, frame) for c in CAMERAS},
+            **{f"{PIXELS}/{c}": PolicyFeature(FeatureType.VISUAL, frame) for c in self.cameras},
         }
         self.features_map = {
             ACTION: ACTION,
             AGENT_POS: OBS_STATE,
-            **{f"{PIXELS}/{camera}": f"{OBS_IMAGES}.{camera}" for camera in CAMERAS},
+            **{f"{PIXELS}/{camera}": f"{OBS_IMAGES}.{camera}" for camera in self.cameras},
         }
+
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        """The cameras each observation holds: the three streams, then the crop if set."""
+        return with_front_crop(CAMERAS, self.front_crop)
 
     @property
     def gym_kwargs(self) -> dict:
@@ -103,6 +115,7 @@ class OasisEnvConfig(EnvConfig):
             num_envs=num_envs,
             max_steps=self.episode_length // CHUNK,
             image_size=(self.observation_height, self.observation_width),
+            front_crop=self.front_crop,
             server=EmbeddedServerConfig(
                 width=self.server_width, height=self.server_height, fps=float(self.fps)
             ),

@@ -60,6 +60,11 @@ class VectorEnvSettings(Protocol):
     reward: str
     render_mode: str
 
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        """The cameras each observation holds."""
+        ...
+
     def settings(self, num_envs: int) -> OasisSettings:
         """The project's env settings of ``num_envs`` sessions."""
         ...
@@ -123,7 +128,7 @@ class OasisVectorEnv(gym.vector.VectorEnv):
         self.single_observation_space = spaces.Dict(
             {
                 PIXELS: spaces.Dict(
-                    {c: spaces.Box(0, 255, frame, dtype=np.uint8) for c in CAMERAS}
+                    {c: spaces.Box(0, 255, frame, dtype=np.uint8) for c in config.cameras}
                 ),
                 AGENT_POS: spaces.Box(-1.0, 1.0, (ACTION_DIM,), dtype=np.float32),
             }

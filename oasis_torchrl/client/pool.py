@@ -79,7 +79,15 @@ from oasis_torchrl.client.types import (
     StreamInfo,
 )
 from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
-from oasis_torchrl.protocol import ACTION_DIM, API_KEY_ENV_VAR, CAMERAS, CHUNK, FRONT, FRONT_CROP
+from oasis_torchrl.protocol import (
+    ACTION_DIM,
+    API_KEY_ENV_VAR,
+    CAMERAS,
+    CHUNK,
+    FRONT,
+    FRONT_CROP,
+    with_front_crop,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -380,8 +388,9 @@ class SessionPool:
     def camera_names(self) -> tuple[str, ...]:
         """Names of the cameras each step returns: the streams, then ``"front_crop"`` with a
         crop (empty before start)."""
-        crop = (FRONT_CROP,) if self.front_crop is not None and self._streams else ()
-        return (*self.stream_names, *crop)
+        if not self._streams:
+            return ()
+        return with_front_crop(self.stream_names, self.front_crop)
 
     @property
     def frame_size(self) -> tuple[int, int]:

@@ -65,6 +65,8 @@ VELOCITY_SUFFIX = ".vel"
 ACTION_NAMES = tuple(f"{name}{VELOCITY_SUFFIX}" for name in WIRE_NAMES)
 """Dataset names of ``[throttle, steering]`` (state and action)."""
 IMAGE_NAMES = ("height", "width", "channels")
+IMAGE_PREFIX = f"{OBS_IMAGES}."
+"""What every camera's dataset key starts with."""
 
 Feature = dict[str, Any]
 
@@ -76,7 +78,7 @@ def image_key(camera: str) -> str:
         >>> image_key("front")
         'observation.images.front'
     """
-    return f"{OBS_IMAGES}.{camera}"
+    return f"{IMAGE_PREFIX}{camera}"
 
 
 @dataclass(frozen=True)

@@ -32,9 +32,10 @@ import numpy as np
 import torch
 from tensordict import NonTensorData, TensorDictBase
 
+from oasis_torchrl.data.features import image_key
 from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.drivers.base import Driver
-from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, FRONT_CROP, POLICY_CAMERAS
 
 logger = logging.getLogger(__name__)
 
@@ -120,6 +121,8 @@ class LeRobotDriver(Driver):
         self.preprocessor = preprocessor
         self.postprocessor = postprocessor
         self.image_size = _image_size(policy.config)
+        self.cameras = _cameras(policy.config)
+        self.front_crop = getattr(policy.config, "front_crop", None)
         self._episodes: torch.Tensor | None = None
 
     @classmethod
@@ -206,12 +209,24 @@ class LeRobotDriver(Driver):
         return started
 
     def _newest_frames(self, td: TensorDictBase) -> dict[str, np.ndarray]:
-        """The last frame of every camera the env returns, at the policy's image size."""
+        """The last frame of every camera the policy reads, at the policy's image size.
+
+        Raises:
+            ValueError: the env lacks a camera the policy reads (the front crop, say).
+        """
         keys = td.keys(True)
+        missing = [camera for camera in self.cameras if ("pixels", camera) not in keys]
+        if missing:
+            raise ValueError(
+                f"the policy reads the cameras {list(self.cameras)}, the env lacks {missing}"
+                + (
+                    ": build it with env.front_crop set to the fraction its data was recorded with"
+                    if FRONT_CROP in missing
+                    else ""
+                )
+            )
         frames = {}
-        for camera in CAMERAS:
-            if ("pixels", camera) not in keys:
-                continue
+        for camera in self.cameras:
             pixels = td.get(("pixels", camera))
             newest = pixels[:, -1] if pixels.dim() == 5 else pixels
             newest = newest.cpu()
@@ -219,6 +234,13 @@ class LeRobotDriver(Driver):
                 newest = resize_frames(newest, self.image_size)
             frames[camera] = newest.numpy()
         return frames
+
+
+def _cameras(config: Any) -> tuple[str, ...]:
+    """The cameras whose ``observation.images.<camera>`` the policy reads, in the conventional
+    order (the three streams for a policy that reads none, as LeRobot's env gives them)."""
+    read = tuple(camera for camera in POLICY_CAMERAS if image_key(camera) in config.image_features)
+    return read or CAMERAS
 
 
 def _image_size(config: Any) -> tuple[int, int] | None:

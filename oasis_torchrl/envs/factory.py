@@ -20,7 +20,6 @@ it, and ``env.reward.kind: auto`` follows it.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -91,32 +90,6 @@ def env_front_crop(cfg: Settings, required: float | None) -> float | None:
     )
 
 
-def render_size(
-    server: tuple[int, int], frame_size: tuple[int, int] | None, front_crop: float | None
-) -> tuple[int, int]:
-    """``(height, width)`` an embedded server renders at: its own size, or, with a front crop,
-    at least the size whose centre crop holds ``frame_size`` pixels (rounded up to even), so
-    the crop shows detail the cameras' frames lack. Rendering larger is the cheapest correct
-    way: the crop is then cut exactly as from the hosted service's 768x512 frames, and the
-    client decodes every camera to ``frame_size`` anyway.
-
-    Example:
-        >>> render_size((64, 96), (64, 96), 0.25)
-        (256, 384)
-        >>> render_size((64, 96), (64, 96), None), render_size((512, 768), (64, 96), 0.25)
-        ((64, 96), (512, 768))
-    """
-    if front_crop is None or frame_size is None:
-        return server
-    needed = (_even(math.ceil(side / front_crop)) for side in frame_size)
-    height, width = (max(own, need) for own, need in zip(server, needed, strict=True))
-    return height, width
-
-
-def _even(value: int) -> int:
-    return value + value % 2
-
-
 def make_env(
     cfg: Settings,
     *,
@@ -172,14 +145,13 @@ def make_env(
     frame_size = None if size is None else (int(size[0]), int(size[1]))
     crop = env_front_crop(cfg, front_crop)
     server = cfg.server
-    height, width = render_size((server.height, server.width), frame_size, crop)
     env_kwargs.setdefault("ground_truth", found.ground_truth)
     env = OasisEnv(
         cfg.endpoint,
         num_envs or cfg.num_envs,
         prompts if prompts is not None else episode_prompts(cfg.prompts),
         server=ServerConfig(
-            width=width, height=height, fps=float(server.fps), hosted=server.hosted
+            width=server.width, height=server.height, fps=float(server.fps), hosted=server.hosted
         ),
         frame_size=frame_size,
         front_crop=crop,

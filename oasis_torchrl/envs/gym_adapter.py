@@ -9,6 +9,7 @@ recovery and the embedded server behave exactly as in the batched env. Importing
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -18,7 +19,7 @@ from gymnasium import spaces
 from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.envs.episodes import Prompts
-from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv, StreamLayout
+from oasis_torchrl.envs.oasis_env import LOCAL, OasisEnv
 from oasis_torchrl.protocol import ACTION_DIM, CHUNK, FPS
 
 RENDER_MODES = ("rgb_array",)
@@ -35,19 +36,16 @@ def chunk_space() -> spaces.Box:
     return spaces.Box(-1.0, 1.0, (CHUNK, ACTION_DIM), dtype=np.float32)
 
 
-def camera_space(streams: StreamLayout) -> spaces.Dict:
+def camera_space(cameras: Sequence[str], frame_size: tuple[int, int]) -> spaces.Dict:
     """One observation: the last frame of each camera, uint8 ``(H, W, 3)``.
 
     Example:
-        >>> camera_space(StreamLayout.hosted())["front"].shape
+        >>> camera_space(("front", "front_crop"), (512, 768))["front_crop"].shape
         (512, 768, 3)
     """
-    height, width = streams.frame_size
+    height, width = frame_size
     return spaces.Dict(
-        {
-            camera: spaces.Box(0, 255, (height, width, 3), dtype=np.uint8)
-            for camera in streams.cameras
-        }
+        {camera: spaces.Box(0, 255, (height, width, 3), dtype=np.uint8) for camera in cameras}
     )
 
 
@@ -125,7 +123,7 @@ class OasisGymEnv(gym.Env):
         )
         self.render_mode = render_mode
         self.action_space = chunk_space()
-        self.observation_space = camera_space(self._env.streams)
+        self.observation_space = camera_space(self._cameras, self._env.layout.frame_size)
         self._last: dict[str, np.ndarray] | None = None
 
     def reset(
@@ -167,7 +165,7 @@ class OasisGymEnv(gym.Env):
 
     @property
     def _cameras(self) -> tuple[str, ...]:
-        return self._env.streams.cameras
+        return self._env.layout.cameras
 
     @staticmethod
     def _info(td: TensorDictBase) -> dict[str, Any]:

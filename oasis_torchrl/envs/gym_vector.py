@@ -93,10 +93,10 @@ class OasisVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self.num_envs = num_envs
         self.single_action_space = chunk_space()
-        self.single_observation_space = camera_space(self._env.streams)
+        self._cameras = self._env.layout.cameras
+        self.single_observation_space = camera_space(self._cameras, self._env.layout.frame_size)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self._cameras = self._env.streams.cameras
         self._autoreset = np.zeros(num_envs, dtype=bool)
         self._td: TensorDictBase | None = None
         self._last: dict[str, np.ndarray] | None = None

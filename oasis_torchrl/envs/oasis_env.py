@@ -25,6 +25,7 @@ collectors each get their own sessions.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -55,8 +56,8 @@ from oasis_torchrl.protocol import (
     CHUNK,
     FORMAT_NAMES,
     FPS,
-    FRONT_CROP,
     HOSTED_FRAME_SIZE,
+    with_front_crop,
 )
 from oasis_torchrl.rewards import (
     DepthCollisionReward,
@@ -198,10 +199,9 @@ class OasisWrapper(_EnvWrapper):
         return env
 
     def _make_specs(self, env: SessionPool) -> None:
-        crop = (FRONT_CROP,) if env.front_crop is not None else ()
         self.layout = EnvLayout(
             num_envs=self.num_envs,
-            cameras=(*self.streams.cameras, *crop),
+            cameras=with_front_crop(self.streams.cameras, env.front_crop),
             frame_size=self.streams.frame_size,
             all_frames=self.all_frames,
             chunk_actions=self.chunk_actions,
@@ -465,8 +465,8 @@ class OasisEnv(OasisWrapper):
         front_crop: add a fourth camera, ``("pixels", "front_crop")``: the centre of the front
             camera, this fraction of its height and width, cut from the front frame decoded at
             the server's full size and resized to ``frame_size`` (a narrow forward camera; the
-            detail it shows is what the server's size holds: an embedded server needs a larger
-            size than ``frame_size`` for it, which :func:`~oasis_torchrl.envs.make_env` sets).
+            detail it shows is what the server's size holds: the embedded server renders at
+            least :func:`render_size` for it, so a crop of ``frame_size`` pixels has detail).
         retry: transient-failure policy of the session pool.
         timeout: per-call deadline in seconds.
         **kwargs: the other :class:`OasisWrapper` arguments (``chunk_actions``, ``max_steps``,
@@ -516,7 +516,10 @@ class OasisEnv(OasisWrapper):
         local = endpoint == LOCAL
         if local:
             config = server if server is not None else ServerConfig()
-            streams = StreamLayout(CAMERAS, frame_size or (config.height, config.width))
+            frame_size = frame_size or (config.height, config.width)
+            height, width = render_size((config.height, config.width), frame_size, front_crop)
+            config = replace(config, height=height, width=width)
+            streams = StreamLayout(CAMERAS, frame_size)
             if expert and config.hosted:
                 raise ValueError(
                     "the expert needs ground truth, which a hosted-like server does not send: "
@@ -554,6 +557,32 @@ class OasisEnv(OasisWrapper):
     def server(self) -> LocalServer | ServerProcess | None:
         """The embedded server of ``endpoint="local"`` (started with the env's sessions)."""
         return self._env.server
+
+
+def render_size(
+    server: tuple[int, int], frame_size: tuple[int, int] | None, front_crop: float | None
+) -> tuple[int, int]:
+    """``(height, width)`` an embedded server renders at: its own size, or, with a front crop,
+    at least the size whose centre crop holds ``frame_size`` pixels (rounded up to even), so
+    the crop shows detail the cameras' frames lack (:class:`OasisEnv` renders so). Rendering
+    larger is the cheapest correct way: the crop is then cut exactly as from the hosted
+    service's 768x512 frames, and the client decodes every camera to ``frame_size`` anyway.
+
+    Example:
+        >>> render_size((64, 96), (64, 96), 0.25)
+        (256, 384)
+        >>> render_size((64, 96), (64, 96), None), render_size((512, 768), (64, 96), 0.25)
+        ((64, 96), (512, 768))
+    """
+    if front_crop is None or frame_size is None:
+        return server
+    needed = (_even(math.ceil(side / front_crop)) for side in frame_size)
+    height, width = (max(own, need) for own, need in zip(server, needed, strict=True))
+    return height, width
+
+
+def _even(value: int) -> int:
+    return value + value % 2
 
 
 SPARE_SESSIONS = 4

@@ -27,6 +27,7 @@ from torchrl.record.loggers import get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config
+from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
@@ -36,8 +37,6 @@ from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.shift import random_shift
 
 logger = logging.getLogger(__name__)
-
-IMAGE_PREFIX = "observation.images."
 
 
 @dataclass

@@ -348,6 +348,7 @@ def ship_policy(cfg: DictConfig) -> Path:
         "machine": cfg.machine or machine(),
         "budget": run.budget,
         "training_prompts": list(run.settings.env.prompts),
+        "front_crop": run.settings.env.get("front_crop"),
         "baseline": cfg.baseline,
         "figures": [{**asdict(row), "ratio": row.ratio} for row in figures],
     }
@@ -393,6 +394,17 @@ def card_text(facts: Mapping[str, Any], settings_yaml: str) -> str:
     """The card (Markdown) of :func:`ship_policy`'s ``facts``."""
     name = facts["name"]
     what = "PPO from scratch" if facts["kind"] == "ppo" else "behaviour cloning with DAgger"
+    crop = facts.get("front_crop")
+    inputs = (
+        f"the three camera streams and a narrow forward camera cut from the front one on the "
+        f"client (its centre {crop}: `env.front_crop={crop}`, which every env that drives it "
+        "gets)"
+        if crop is not None
+        else "the three camera streams only"
+    )
+    env_flags = "--env.type=oasis --env.task=urban" + (
+        f" --env.front_crop={crop}" if crop is not None else ""
+    )
     rows = [
         f"| {'report' if i == 0 else 'held out'}: {row['scene']} | "
         f"{', '.join(str(s) for s in row['seeds'])} | {row['episodes']} | "
@@ -407,8 +419,8 @@ def card_text(facts: Mapping[str, Any], settings_yaml: str) -> str:
             "",
             f"A camera policy trained by {what} ({facts['budget']}) on "
             f"{len(facts['training_prompts'])} prompts: "
-            f"{'; '.join(facts['training_prompts'])}. It reads the three camera streams only, "
-            "so it drives any endpoint, the hosted service included.",
+            f"{'; '.join(facts['training_prompts'])}. It reads {inputs}, so it drives any "
+            "endpoint, the hosted service included.",
             "",
             "Load it:",
             "",
@@ -416,7 +428,7 @@ def card_text(facts: Mapping[str, Any], settings_yaml: str) -> str:
             f"oasis-torchrl eval policy=pretrained:{name}",
             f"oasis-torchrl serve-policy pretrained:{name}",
             f"lerobot-eval --policy.path=$(oasis-torchrl pretrained path {name}) \\",
-            "    --env.type=oasis --env.task=urban --eval.batch_size=8 --eval.n_episodes=16",
+            f"    {env_flags} --eval.batch_size=8 --eval.n_episodes=16",
             "```",
             "",
             "## Training",

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
 from oasis_torchrl.data.video_frames import episode_frames
 from oasis_torchrl.viz.blueprint import default_blueprint
@@ -32,7 +33,6 @@ from oasis_torchrl.viz.series import send_series
 
 logger = logging.getLogger(__name__)
 
-IMAGE_PREFIX = "observation.images."
 STATE, ACTION, REWARD, DONE, SEED = (
     "observation.state",
     "action",

@@ -30,6 +30,7 @@ from torch import Tensor, nn
 from lerobot_policy_oasis.configuration_oasis import FRAME_SPACING, POLICY_TYPE, OasisConfig
 from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
+from oasis_torchrl.protocol import FRONT_CROP
 
 ACTION_IS_PAD = f"{ACTION}_is_pad"
 
@@ -86,7 +87,16 @@ class OasisPolicy(PreTrainedPolicy):
 
     def _get(self, batch: dict[str, Any], key: str) -> Tensor:
         if key not in batch:
-            raise KeyError(f"the oasis policy needs batch[{key!r}]; the batch has {sorted(batch)}")
+            crop = f"{OBS_IMAGES}.{FRONT_CROP}"
+            hint = (
+                f": turn the env's narrow forward camera on (--env.front_crop="
+                f"{self.config.front_crop} in lerobot-eval, --robot.front_crop in lerobot-record)"
+                if key == crop
+                else ""
+            )
+            raise KeyError(
+                f"the oasis policy needs batch[{key!r}]; the batch has {sorted(batch)}{hint}"
+            )
         return batch[key]
 
     def _features(self, batch: dict[str, Any]) -> Tensor:

@@ -6,9 +6,11 @@ from dataclasses import dataclass
 
 from lerobot.robots import RobotConfig
 
+from oasis_torchrl.client.decoding import validate_front_crop
 from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig
 from oasis_torchrl.data.writer import ROBOT_TYPE
 from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.protocol import CAMERAS, with_front_crop
 from oasis_torchrl.rewards import NoReward
 from oasis_torchrl.sim.config import ServerConfig
 
@@ -31,7 +33,11 @@ class OasisRobotConfig(RobotConfig):
             episode ``N`` with ``--robot.seed=<seed + N>``.
         image_height, image_width: size the camera frames are decoded to (the policy's input
             size; the project's datasets default to 64x96).
-        server_width, server_height: frame size the embedded server renders (``local`` only).
+        server_width, server_height: frame size the embedded server renders (``local`` only;
+            at least what ``front_crop`` needs).
+        front_crop: add the narrow forward camera ``front_crop`` (recorded as
+            ``observation.images.front_crop``), this fraction of the front frame's centre:
+            what a policy trained with ``env.front_crop`` reads. None: the three cameras.
         rerun: also log the session to rerun: an ``.rrd`` path, ``spawn`` or a viewer URL.
 
     Example:
@@ -46,6 +52,7 @@ class OasisRobotConfig(RobotConfig):
     image_width: int = _ENV.image_size[1]
     server_width: int = _SERVER.width
     server_height: int = _SERVER.height
+    front_crop: float | None = None
     rerun: str | None = None
 
     def __post_init__(self) -> None:
@@ -55,6 +62,13 @@ class OasisRobotConfig(RobotConfig):
             raise ValueError(f"frame sizes must be positive, got {sizes}")
         if not self.prompt.strip():
             raise ValueError("robot.prompt must be a non-empty scene description")
+        validate_front_crop(self.front_crop)
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """The robot's virtual cameras: the three streams, then the crop if set (LeRobot's
+        ``cameras`` is a robot's physical cameras, which this robot has none of)."""
+        return with_front_crop(CAMERAS, self.front_crop)
 
     def world(self) -> OasisEnv:
         """The robot's world: a one-session env with all 4 frames of each chunk and no reward
@@ -67,6 +81,7 @@ class OasisRobotConfig(RobotConfig):
                 width=self.server_width, height=self.server_height, fps=_SERVER.fps
             ),
             frame_size=(self.image_height, self.image_width),
+            front_crop=self.front_crop,
             all_frames=True,
             max_steps=2**31 - 1,  # the world ends only when the car collides
             reward=NoReward(),

@@ -3,7 +3,8 @@
 Features (the names of the project's datasets, :mod:`oasis_torchrl.data.features`):
 
 - observation: the three cameras ``left_forward``, ``front``, ``right_forward`` (``(H, W, 3)``
-  frames, recorded as ``observation.images.<camera>``) and ``throttle.vel``, ``steering.vel``,
+  frames, recorded as ``observation.images.<camera>``; with ``--robot.front_crop`` also the
+  narrow forward ``front_crop``) and ``throttle.vel``, ``steering.vel``,
   the previous action (recorded as ``observation.state``);
 - action: ``throttle.vel``, ``steering.vel`` in ``[-1, 1]`` (recorded as ``action``).
 
@@ -41,7 +42,6 @@ from lerobot_robot_oasis.config_oasis import ROBOT_TYPE, OasisRobotConfig
 from oasis_torchrl.compat import on_lerobot_episode_start
 from oasis_torchrl.data.features import ACTION_NAMES
 from oasis_torchrl.envs.per_frame import FrameStepper
-from oasis_torchrl.protocol import CAMERAS
 
 logger = logging.getLogger(__name__)
 
@@ -108,7 +108,8 @@ class OasisRobot(Robot):
     def observation_features(self) -> dict[str, type | tuple[int, int, int]]:
         """The cameras' ``(H, W, 3)`` frames and the previous action."""
         frame = (self.config.image_height, self.config.image_width, 3)
-        return {**dict.fromkeys(CAMERAS, frame), **dict.fromkeys(ACTION_NAMES, float)}
+        cameras = dict.fromkeys(self.config.camera_names, frame)
+        return {**cameras, **dict.fromkeys(ACTION_NAMES, float)}
 
     @cached_property
     def action_features(self) -> dict[str, type]:
@@ -166,7 +167,7 @@ class OasisRobot(Robot):
                 self._begin(self._requested)
             self._requested = None
         observation = self._stepper.observation
-        frames = {camera: observation.pixels[camera][0] for camera in CAMERAS}
+        frames = {camera: observation.pixels[camera][0] for camera in self.config.camera_names}
         state = dict(zip(ACTION_NAMES, observation.state[0].tolist(), strict=True))
         return {**frames, **state}
 

@@ -17,7 +17,7 @@ from oasis_torchrl.client.decoding import FrontCrop, RawRgbDecoder, RgbResizer
 from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig, load_config
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.drivers import Autopilot, ScriptedDriver, load_driver
-from oasis_torchrl.envs import make_env
+from oasis_torchrl.envs import OasisGymEnv, make_env
 from oasis_torchrl.envs.oasis_env import embedded_server
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.bc import BCTrainer
@@ -112,3 +112,19 @@ def test_a_crop_dataset_trains_a_policy_that_needs_the_crop(tmp_path: Path) -> N
             driver(plain.reset())
     finally:
         plain.close()
+
+
+def test_the_gymnasium_env_observes_the_crop() -> None:
+    envs = {
+        crop: OasisGymEnv(server=ServerConfig(width=width, height=height), front_crop=crop)
+        for crop, (height, width) in ((0.5, (24, 32)), (None, (48, 64)))
+    }
+    try:
+        assert envs[0.5].observation_space["front_crop"].shape == (24, 32, 3)
+        observations = {crop: env.reset(seed=4)[0] for crop, env in envs.items()}
+    finally:
+        for env in envs.values():
+            env.close()
+    np.testing.assert_array_equal(
+        observations[0.5]["front_crop"], observations[None]["front"][12:36, 16:48]
+    )

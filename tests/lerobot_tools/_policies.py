@@ -3,6 +3,7 @@ and the project's own policy."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -18,11 +19,18 @@ from oasis_torchrl.protocol import CAMERAS
 IMAGE_SIZE = (64, 96)
 
 
-def act_folder(folder: Path, *, n_action_steps: int = 4, seed: int = 0) -> Path:
-    """A tiny randomly initialised ACT policy with its processors, saved as LeRobot does."""
+def act_folder(
+    folder: Path,
+    *,
+    n_action_steps: int = 4,
+    seed: int = 0,
+    cameras: Sequence[str] = CAMERAS,
+) -> Path:
+    """A tiny randomly initialised ACT policy reading ``cameras``, with its processors, saved
+    as LeRobot does."""
     inputs = {
         f"observation.images.{camera}": PolicyFeature(FeatureType.VISUAL, (3, *IMAGE_SIZE))
-        for camera in CAMERAS
+        for camera in cameras
     }
     inputs["observation.state"] = PolicyFeature(FeatureType.STATE, (2,))
     config = ACTConfig(

@@ -16,7 +16,7 @@ from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.folders import export_lerobot
 from oasis_torchrl.drivers.lerobot import LeRobotDriver
 from oasis_torchrl.models import DrivingNet
-from oasis_torchrl.protocol import CAMERAS
+from oasis_torchrl.protocol import CAMERAS, FRONT_CROP, POLICY_CAMERAS
 
 from ._policies import IMAGE_SIZE, act_folder
 
@@ -82,6 +82,17 @@ def test_frames_of_another_size_are_resized_to_the_policy(act: Path) -> None:
     td = _chunk_step(rows=1, step_count=0)
     for camera in CAMERAS:
         td["pixels", camera] = torch.zeros(1, 4, 128, 192, 3, dtype=torch.uint8)
+    assert driver(td)["action"].shape == (1, 4, 2)
+
+
+def test_a_stock_policy_reading_the_crop_gets_it_or_a_named_error(tmp_path: Path) -> None:
+    folder = act_folder(tmp_path / "act_crop", cameras=POLICY_CAMERAS)
+    driver = load_driver(folder)
+    assert driver.cameras == POLICY_CAMERAS and driver.front_crop is None  # ACT keeps no fraction
+    td = _chunk_step(rows=1, step_count=0)
+    with pytest.raises(ValueError, match=r"lacks \['front_crop'\]: build it with env\.front_crop"):
+        driver(td.clone())
+    td["pixels", FRONT_CROP] = td["pixels", "front"].flip(-2)
     assert driver(td)["action"].shape == (1, 4, 2)
 
 

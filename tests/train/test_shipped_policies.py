@@ -37,9 +37,11 @@ TINY_CARD = [
 
 @pytest.fixture(scope="module")
 def ppo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A smoke PPO run (16 env steps, evaluated every iteration): its folder."""
+    """A smoke PPO run (16 env steps, evaluated every iteration) of a policy that reads the
+    front crop, as the shipped ones do: its folder."""
     run = tmp_path_factory.mktemp("run") / "ppo"
-    overrides = tiny_ppo(run, 16, "eval.every=1", "checkpoint.keep_evaluated=true")
+    crop = "env.front_crop=0.5"
+    overrides = tiny_ppo(run, 16, "eval.every=1", "checkpoint.keep_evaluated=true", crop)
     assert main(["train", "ppo", *overrides]) == 0
     return run
 
@@ -78,6 +80,8 @@ def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path) -> N
     assert "held out: highway at night in the rain | 4241 | 1 |" in readme
     assert "![training curve](curve.png)" in readme and (folder / "curve.png").stat().st_size
     assert "ground truth" in readme  # distances need the embedded server, said plainly
+    # the crop is named, and every command the card gives turns it on
+    assert card["front_crop"] == 0.5 and "--env.front_crop=0.5 --eval" in readme
 
 
 def test_shipping_again_or_from_an_incomplete_run_is_a_one_line_error(
