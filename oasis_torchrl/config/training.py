@@ -424,6 +424,11 @@ class BCConfig(BCSettings):
     init_from: str | None = option(
         None, help="start from this policy (LeRobot folder or PPO checkpoint)"
     )
+    resume: str | None = option(
+        None,
+        help="'latest': continue from output_dir/checkpoints/last (its weights, optimizer and "
+        "step), left by a run stopped half way; null: start afresh",
+    )
     dataset: DatasetConfig = option(default_factory=DatasetConfig, help="the demonstrations")
     eval: EvaluationConfig = option(
         default_factory=EvaluationConfig, help="evaluation after training (episodes 0: none)"

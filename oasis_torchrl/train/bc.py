@@ -14,6 +14,7 @@ and as a PPO warm start (``init_from``). Config: :class:`~oasis_torchrl.config.B
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -130,8 +131,13 @@ def _batches(loader: DataLoader) -> Iterator[dict[str, Any]]:
 
 
 PARTIAL_POLICY = "checkpoints/last"
-"""Where the policy so far is saved every ``train.save_every`` steps. ``policy/`` is written once,
-at the end, so a run whose ``policy/`` exists finished (the main job reuses such folders)."""
+"""Where the policy so far is saved every ``train.save_every`` steps, with its
+:data:`TRAINING_STATE`. ``policy/`` is written once, at the end, so a run whose ``policy/``
+exists finished (the main job reuses such folders)."""
+
+TRAINING_STATE = "training_state.pt"
+"""What ``resume=latest`` continues from, beside the partial policy: the step, the weights, the
+optimizer's state, the smoothed loss and the torch generator's state."""
 
 
 class BCTrainer:
@@ -199,6 +205,27 @@ class BCTrainer:
             experiment_name=cfg.logger.exp_name,
         )
         self.image_keys = [key for key in self.policy_config.image_features]
+        self.done_steps, self.average = self._resume() if cfg.resume else (0, float("nan"))
+
+    def _resume(self) -> tuple[int, float]:
+        """Load ``checkpoints/last``'s training state (``resume=latest``); the steps it had
+        taken and its smoothed loss.
+
+        Raises:
+            ValueError: ``resume`` is not ``latest``.
+            FileNotFoundError: the run left no training state to resume.
+        """
+        if self.cfg.resume != "latest":
+            raise ValueError(f"resume must be 'latest' or null, got {self.cfg.resume!r}")
+        path = self.output_dir / PARTIAL_POLICY / TRAINING_STATE
+        if not path.exists():
+            raise FileNotFoundError(f"nothing to resume: {path} does not exist")
+        state = torch.load(path, weights_only=False)
+        self.policy.load_state_dict(state["policy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        torch.set_rng_state(state["rng"])
+        logger.info("resuming behaviour cloning at step %d from %s", state["step"], path)
+        return int(state["step"]), float(state["average"])
 
     def run(self) -> BCResult:
         """Train ``train.steps`` steps, save the policy folder, evaluate if configured."""
@@ -214,10 +241,15 @@ class BCTrainer:
         clip = self.policy_config.optimizer_grad_clip_norm
         parameters = list(self.policy.get_optim_params())
         self.policy.train()
-        average = float("nan")
+        average = self.average
         batches = _batches(self.loader)
         with tqdm(
-            range(1, cfg.steps + 1), desc="bc", unit="step", disable=not self.cfg.progress
+            range(self.done_steps + 1, cfg.steps + 1),
+            desc="bc",
+            unit="step",
+            initial=self.done_steps,
+            total=cfg.steps,
+            disable=not self.cfg.progress,
         ) as bar:
             for step in bar:
                 batch = self._preprocessed(next(batches))
@@ -230,7 +262,7 @@ class BCTrainer:
                 grad_norm = torch.nn.utils.clip_grad_norm_(parameters, clip)
                 self.optimizer.step()
                 value = loss.item()
-                average = value if step == 1 else 0.98 * average + 0.02 * value
+                average = value if math.isnan(average) else 0.98 * average + 0.02 * value
                 if step % cfg.log_every == 0 or step == cfg.steps:
                     self.logger.log_scalar("bc/loss", value, step=step)
                     self.logger.log_scalar("bc/grad_norm", float(grad_norm), step=step)
@@ -238,8 +270,23 @@ class BCTrainer:
                         self.logger.log_scalar("bc/aux_loss", info["aux_loss"], step=step)
                     bar.set_postfix(loss=f"{average:.4f}")
                 if cfg.save_every and step % cfg.save_every == 0 and step < cfg.steps:
-                    self.save(self.output_dir / PARTIAL_POLICY)
+                    self.save_partial(step, average)
         return average
+
+    def save_partial(self, step: int, average: float) -> Path:
+        """Save the policy so far and its training state to :data:`PARTIAL_POLICY`."""
+        path = self.save(self.output_dir / PARTIAL_POLICY)
+        state = {
+            "step": step,
+            "average": average,
+            "policy": self.policy.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "rng": torch.get_rng_state(),
+        }
+        partial = path / f"{TRAINING_STATE}.partial"
+        torch.save(state, partial)
+        partial.replace(path / TRAINING_STATE)  # a stop mid-write leaves the last state whole
+        return path
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:
         """The batch through the policy's preprocessor, the privileged state kept beside it

@@ -373,7 +373,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
         >>> clone(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
         PosixPath('outputs/demo/bc/round_0/policy')
     """
-    from oasis_torchrl.train.bc import train_bc
+    from oasis_torchrl.train.bc import PARTIAL_POLICY, TRAINING_STATE, train_bc
 
     labeller = Demonstrators.of(cfg).labeller
     rounds = cfg.dagger.rounds if labeller is not None else 0
@@ -385,6 +385,10 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
         policy = Path(bc_cfg.output_dir) / "policy"
         if (policy / "model.safetensors").exists():
             logger.info("reusing %s", policy)
+            continue
+        if (Path(bc_cfg.output_dir) / PARTIAL_POLICY / TRAINING_STATE).exists():
+            bc_cfg.resume = "latest"  # a clone stopped half way: its round's episodes are in
+            train_bc(bc_cfg)
             continue
         if round_:
             record_demonstrations(

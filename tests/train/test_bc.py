@@ -16,7 +16,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.data.video_frames import MissingFrameError
 from oasis_torchrl.drivers.folders import load_net
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
-from oasis_torchrl.train.bc import PARTIAL_POLICY, BCTrainer, open_dataset
+from oasis_torchrl.train.bc import PARTIAL_POLICY, TRAINING_STATE, BCTrainer, open_dataset
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 
 
@@ -181,3 +181,38 @@ def test_only_a_finished_run_writes_the_policy_folder(
     BCTrainer(_bc_config(tiny_dataset, tmp_path, "train.save_every=2")).run()
     assert saved == [tmp_path / PARTIAL_POLICY, tmp_path / "policy"]
     assert OasisPolicy.from_pretrained(tmp_path / PARTIAL_POLICY) is not None
+
+
+def test_a_run_stopped_half_way_resumes_where_it_stopped(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A stop after step 3 of 4 leaves step 2's state; ``resume=latest`` takes steps 3 and 4
+    only, from step 2's weights and optimizer, and writes policy/."""
+    steps: list[int] = []
+    forward = OasisPolicy.forward
+
+    def counted(self, batch, reduction="mean"):
+        steps.append(len(steps) + 1)
+        if len(steps) == 3 and not resumed:
+            raise KeyboardInterrupt  # a stop half way through
+        return forward(self, batch, reduction)
+
+    resumed = False
+    monkeypatch.setattr(OasisPolicy, "forward", counted)
+    with pytest.raises(KeyboardInterrupt):
+        BCTrainer(_bc_config(tiny_dataset, tmp_path, "train.save_every=2")).run()
+    assert not (tmp_path / "policy").exists()
+    state = torch.load(tmp_path / PARTIAL_POLICY / TRAINING_STATE, weights_only=False)
+    assert state["step"] == 2
+    resumed, steps[:] = True, []
+    trainer = BCTrainer(_bc_config(tiny_dataset, tmp_path, "train.save_every=2", "resume=latest"))
+    saved = trainer.optimizer.state_dict()["state"]
+    assert all(int(each["step"]) == 2 for each in saved.values())  # Adam's, after 2 steps
+    for name, value in trainer.policy.state_dict().items():
+        torch.testing.assert_close(value, state["policy"][name])
+    trainer.run()
+    assert steps == [1, 2]  # the run's steps 3 and 4
+    assert (tmp_path / "policy" / "model.safetensors").exists()
+    fresh = _bc_config(tiny_dataset, tmp_path / "fresh", "resume=latest")
+    with pytest.raises(FileNotFoundError, match=r"nothing to resume: .*training_state\.pt"):
+        BCTrainer(fresh)
