@@ -141,6 +141,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.evaluate",
             "oasis_torchrl.train.comparison",
             "oasis_torchrl.train.cards",
+            "oasis_torchrl.train.stage_seconds",
             "oasis_torchrl.train.driving",
             "oasis_torchrl.train.aux_replay",
             "oasis_torchrl.train.perception_warmup",

@@ -31,6 +31,7 @@ from oasis_torchrl.config.presets import preset_names
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.drivers.pretrained import POLICY_FILES, policies_folder
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS
 
 logger = logging.getLogger(__name__)
 
@@ -121,6 +122,9 @@ class TrainingRun:
     def _clone(cls, policy: Path, root: Path) -> TrainingRun:
         settings = OmegaConf.load(missing(root / "config.yaml"))
         seconds = json.loads(missing(root / "summary.json").read_text())["seconds"]
+        totals = root / STAGE_SECONDS  # every run of the folder, stopped ones included
+        if totals.exists():
+            seconds = json.loads(totals.read_text())
         rounds = sorted((root / "bc").glob("round_*"), key=lambda p: int(p.name.split("_")[1]))
         rounds = rounds[: rounds.index(policy.parent) + 1]
         curve, offset = {}, 0.0

@@ -68,6 +68,7 @@ from oasis_torchrl.train.comparison import (
 )
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator, side_by_side_for
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
 
 logger = logging.getLogger(__name__)
 
@@ -177,8 +178,12 @@ took: pretrained:ppo-scratch 204,800 env steps, 5.0 h on 2 cores.
 
 
 @contextmanager
-def timed_stage(seconds: dict[str, float], stage: str) -> Iterator[None]:
-    """Log the start of ``stage`` and put its wall time (seconds, 0.1 s) in ``seconds``.
+def timed_stage(
+    seconds: dict[str, float], stage: str, totals: Path | None = None
+) -> Iterator[None]:
+    """Log the start of ``stage`` and put its wall time (seconds, 0.1 s) in ``seconds``; with
+    ``totals`` (a JSON file), also add it to the stage's total there, even if the stage stops
+    half way.
 
     Example:
         >>> seconds = {}
@@ -189,8 +194,13 @@ def timed_stage(seconds: dict[str, float], stage: str) -> Iterator[None]:
     """
     logger.info("pipeline stage %s", stage)
     started = time.perf_counter()
-    yield
-    seconds[stage] = round(time.perf_counter() - started, 1)
+    try:
+        yield
+    finally:
+        elapsed = round(time.perf_counter() - started, 1)
+        seconds[stage] = elapsed
+        if totals is not None:
+            add_stage_seconds(totals, stage, elapsed)
 
 
 @dataclass(frozen=True)
@@ -530,11 +540,12 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     out = Path(cfg.output_dir)
     save_config(cfg, out / "config.yaml")
     seconds: dict[str, float] = {}
-    with timed_stage(seconds, "record"):
+    totals = out / STAGE_SECONDS
+    with timed_stage(seconds, "record", totals):
         dataset = demonstrations(cfg, out / "demos")
-    with timed_stage(seconds, "bc"):
+    with timed_stage(seconds, "bc", totals):
         bc_policy = clone(cfg, dataset)
-    with timed_stage(seconds, "ppo"):
+    with timed_stage(seconds, "ppo", totals):
         # The eval stage evaluates the kept policy on the same prompts and seeds right after:
         # PPO's own final evaluation would repeat it.
         ppo = run_ppo(OmegaConf.merge(ppo_config(cfg, bc_policy), {"eval": {"final": False}}))

@@ -15,6 +15,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
 from oasis_torchrl.train import pipeline
 from oasis_torchrl.train.cards import TrainingRun
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
 
 from .conftest import TINY_ENV
 
@@ -87,10 +88,22 @@ def test_demo_command_runs_every_stage(
         tmp_path,
         "2 demonstrations, 1 DAgger rounds",
     )
-    assert run.wall_seconds == summary["seconds"]["record"] + summary["seconds"]["bc"]
+    totals = json.loads((tmp_path / STAGE_SECONDS).read_text())
+    assert totals == {stage: summary["seconds"][stage] for stage in ("record", "bc", "ppo")}
+    assert run.wall_seconds == totals["record"] + totals["bc"]
     assert list(run.curve) == ["round 0", "round 1"] and all(run.curve.values())
     assert run.curve["round 1"][0][0] > run.curve["round 0"][-1][0]  # one axis of steps
     assert run.command() == f"oasis-torchrl demo --config {tmp_path / 'config.yaml'}"
+
+
+def test_a_stage_stopped_half_way_still_adds_its_time(tmp_path: Path) -> None:
+    """A clone's wall time counts every run of its folder: the one a stop cut short too."""
+    totals = tmp_path / STAGE_SECONDS
+    add_stage_seconds(totals, "bc", 100.0)  # an earlier run's
+    seconds: dict[str, float] = {}
+    with pytest.raises(KeyboardInterrupt), pipeline.timed_stage(seconds, "bc", totals):
+        raise KeyboardInterrupt
+    assert json.loads(totals.read_text()) == {"bc": 100.0 + seconds["bc"]}
 
 
 def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(

@@ -1,0 +1,27 @@
+"""A run folder's wall time per stage over every run of it (:data:`STAGE_SECONDS`): the main
+job adds each stage's time when the stage ends or stops; a shipped clone's card reads the totals.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+STAGE_SECONDS = "stage_seconds.json"
+"""A run folder's wall time per stage over every run of it (a run stopped half way and the run
+that finishes it both count; a reused stage adds nothing): what a shipped clone took to train."""
+
+
+def add_stage_seconds(totals: Path, stage: str, elapsed: float) -> dict[str, float]:
+    """Add ``elapsed`` seconds to ``stage``'s total in the JSON file ``totals``; the totals.
+
+    Example:
+        >>> import tempfile
+        >>> path = Path(tempfile.mkdtemp()) / STAGE_SECONDS
+        >>> add_stage_seconds(path, "bc", 60.0) and add_stage_seconds(path, "bc", 30.5)
+        {'bc': 90.5}
+    """
+    found = json.loads(totals.read_text()) if totals.exists() else {}
+    found[stage] = round(found.get(stage, 0.0) + elapsed, 1)
+    totals.write_text(json.dumps(found, indent=2))
+    return found
