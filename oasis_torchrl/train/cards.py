@@ -121,10 +121,11 @@ class TrainingRun:
     @classmethod
     def _clone(cls, policy: Path, root: Path) -> TrainingRun:
         settings = OmegaConf.load(missing(root / "config.yaml"))
-        seconds = json.loads(missing(root / "summary.json").read_text())["seconds"]
         totals = root / STAGE_SECONDS  # every run of the folder, stopped ones included
         if totals.exists():
             seconds = json.loads(totals.read_text())
+        else:  # a run from before the totals: its last run's times
+            seconds = json.loads(missing(root / "summary.json").read_text())["seconds"]
         rounds = sorted((root / "bc").glob("round_*"), key=lambda p: int(p.name.split("_")[1]))
         rounds = rounds[: rounds.index(policy.parent) + 1]
         curve, offset = {}, 0.0
