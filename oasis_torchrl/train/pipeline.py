@@ -397,10 +397,9 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
             logger.info("reusing %s", policy)
             continue
         if (Path(bc_cfg.output_dir) / PARTIAL_POLICY / TRAINING_STATE).exists():
-            bc_cfg.resume = "latest"  # a clone stopped half way: its round's episodes are in
-            train_bc(bc_cfg)
-            continue
-        if round_:
+            # Its cloning stopped half way, so the round's episodes are recorded already.
+            bc_cfg.resume = "latest"
+        elif round_:
             record_demonstrations(
                 cfg.env,
                 dataset,

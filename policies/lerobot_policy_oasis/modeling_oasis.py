@@ -28,6 +28,7 @@ from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
 from lerobot_policy_oasis.configuration_oasis import FRAME_SPACING, POLICY_TYPE, OasisConfig
+from oasis_torchrl.data.features import image_key
 from oasis_torchrl.models import DrivingNet
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY
 from oasis_torchrl.protocol import FRONT_CROP
@@ -87,11 +88,10 @@ class OasisPolicy(PreTrainedPolicy):
 
     def _get(self, batch: dict[str, Any], key: str) -> Tensor:
         if key not in batch:
-            crop = f"{OBS_IMAGES}.{FRONT_CROP}"
             hint = (
                 f": turn the env's narrow forward camera on (--env.front_crop="
                 f"{self.config.front_crop} in lerobot-eval, --robot.front_crop in lerobot-record)"
-                if key == crop
+                if key == image_key(FRONT_CROP)
                 else ""
             )
             raise KeyError(
