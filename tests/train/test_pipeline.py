@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -104,6 +105,51 @@ def test_a_stage_stopped_half_way_still_adds_its_time(tmp_path: Path) -> None:
     with pytest.raises(KeyboardInterrupt), pipeline.timed_stage(seconds, "bc", totals):
         raise KeyboardInterrupt
     assert json.loads(totals.read_text()) == {"bc": 100.0 + seconds["bc"]}
+
+
+def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_again(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The main job run again after a stop at DAgger round 1's third cloning step takes that
+    round's steps 3 and 4 from its saved state; its episodes, recorded already, are not
+    recorded twice."""
+    from lerobot_policy_oasis import OasisPolicy
+
+    from oasis_torchrl.train import bc
+
+    dataset = tmp_path / "demos"
+    shutil.copytree(tiny_dataset, dataset)
+    overrides = [*TINY_PIPELINE, "dagger.steps=4", "bc.train.save_every=2"]
+    cfg = load_config("demo", [f"output_dir={tmp_path}", *overrides])
+    runs: list[tuple[str, str | None]] = []
+    steps: list[int] = []
+    train_bc, forward = bc.train_bc, OasisPolicy.forward
+
+    def tracked(bc_cfg):
+        runs.append((Path(bc_cfg.output_dir).name, bc_cfg.resume))
+        steps.clear()
+        return train_bc(bc_cfg)
+
+    def counted(self, batch, reduction="mean"):
+        steps.append(len(steps) + 1)
+        if runs == [("round_0", None), ("round_1", None)] and len(steps) == 3:
+            raise KeyboardInterrupt  # a stop half way through round 1's cloning
+        return forward(self, batch, reduction)
+
+    def recorded_again(*args, **kwargs):
+        raise AssertionError("round 1's episodes were recorded again")
+
+    monkeypatch.setattr(bc, "train_bc", tracked)
+    monkeypatch.setattr(OasisPolicy, "forward", counted)
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.clone(cfg, dataset)
+    episodes = LeRobotDataset("local/demos", root=dataset, video_backend="pyav").num_episodes
+    assert episodes == 4  # the 2 demonstrations and round 1's 2 episodes
+    monkeypatch.setattr(pipeline, "record_demonstrations", recorded_again)
+    assert pipeline.clone(cfg, dataset) == tmp_path / "bc" / "round_1" / "policy"
+    assert runs[2:] == [("round_1", "latest")]  # round 0 reused, round 1 resumed
+    assert steps == [1, 2]  # round 1's steps 3 and 4
+    assert (tmp_path / "bc" / "round_1" / "policy" / "model.safetensors").exists()
 
 
 def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
