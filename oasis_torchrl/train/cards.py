@@ -189,7 +189,8 @@ def matching_preset(kind: str, settings: DictConfig) -> str | None:
         for key in CAPABILITY_KEYS:
             if OmegaConf.select(preset, key, default=0) is None:
                 OmegaConf.update(cfg, key, None)
-        plain = OmegaConf.to_container(cfg)
+        # As saved: a run's YAML holds lists where a loaded preset holds tuples.
+        plain = OmegaConf.to_container(OmegaConf.create(OmegaConf.to_yaml(cfg)))
         return {key: value for key, value in plain.items() if key not in RUN_ONLY_KEYS}
 
     # Paths made from the output folder (the main job's eval.rerun) follow the run's.

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from omegaconf import OmegaConf
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.config import load_config
+from oasis_torchrl.config import load_config, save_config
 from oasis_torchrl.config.scenes import HELD_OUT_SCENES
 from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
@@ -202,8 +203,11 @@ def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_groun
 @pytest.mark.parametrize(
     ("command", "preset"), [("ppo", "pretrained_ppo_scratch"), ("demo", "pretrained_clone")]
 )
-def test_a_run_of_a_preset_names_the_preset_on_its_card(command: str, preset: str) -> None:
-    saved = load_config(command, ["output_dir=elsewhere", "progress=false"], file=preset)
+def test_a_run_of_a_preset_names_the_preset_on_its_card(
+    command: str, preset: str, tmp_path: Path
+) -> None:
+    run = load_config(command, ["output_dir=elsewhere", "progress=false"], file=preset)
+    saved = OmegaConf.load(save_config(run, tmp_path / "config.yaml"))  # as the card reads it
     assert matching_preset(command, saved) == preset
     changed = load_config(command, ["seed=7"], file=preset)
     assert matching_preset(command, changed) is None  # the card then names the saved settings
