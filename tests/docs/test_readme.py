@@ -12,8 +12,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from oasis_torchrl.drivers.pretrained import shipped_policies
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.train.cards import hours, load_card
 
 from ._hooks import ROOT
 
@@ -23,6 +25,9 @@ CARD_ROW = re.compile(
     r"^\s*\| `(?P<key>[^`]+)` \| `(?P<spec>[^`]+)` "
     r"\| `\[(?P<shape>[^\]]+)\]` \| `(?P<dtype>\w+)` \|$"
 )
+
+
+RETRAIN_ROW = "retrain it (wall time on 2 cores)"
 
 
 def quick_start(lang: str) -> list[str]:
@@ -141,3 +146,36 @@ def test_readme_and_docs_home_say_the_same_about_where_features_work() -> None:
     assert table == [
         line for line in section(home, "Where each feature works").splitlines() if "|" in line
     ]
+
+
+def table_cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def test_the_shipped_policies_table_holds_their_cards_figures() -> None:
+    """A column per shipped policy, each cell its card's figure (the best constant's column
+    the same on every card: the same episodes), and the card's command and wall time."""
+    table = README.split("<!-- shipped-policies -->\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    header, rows = table_cells(table[0]), [table_cells(line) for line in table[2:]]
+    by_scene = {row[0]: row for row in rows}
+    shipped = shipped_policies()
+    assert shipped, "no policy is shipped"
+    assert header[2:] == [f"`pretrained:{name}`" for name in shipped]
+    for column, folder in enumerate(shipped.values(), start=2):
+        card = load_card(folder)
+        assert card is not None, f"{folder} has no card"
+        assert len(rows) == len(card["figures"]) + 1
+        for index, figure in enumerate(card["figures"]):
+            seeds = ", ".join(str(seed) for seed in figure["seeds"])
+            label = "report" if index == 0 else "held out"
+            row = by_scene[f"{label}: {figure['scene']} ({seeds}; {figure['episodes']})"]
+            assert row[1] == (
+                f"{figure['baseline_distance']:.1f} m, "
+                f"{figure['baseline_collision_rate']:.2f} collided"
+            )
+            assert row[column] == (
+                f"{figure['distance']:.1f} m, **{figure['ratio']:.2f}x**, "
+                f"{figure['collision_rate']:.2f} collided"
+            )
+        retrain = f"`{card['command']}` ({hours(card['wall_seconds'])})"
+        assert by_scene[RETRAIN_ROW][column] == retrain
