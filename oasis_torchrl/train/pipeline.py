@@ -106,10 +106,7 @@ class PipelineResult:
     def rows(self) -> list[PolicyRow]:
         """The evaluations compared with the autopilot and the best constant action; a
         fine-tuning not kept is a "not kept" row."""
-        constants = [name for name in self.evaluations if name.startswith(SCRIPTED)]
-        rows = comparison(
-            self.evaluations, autopilot=AUTOPILOT, constants=constants, shipped=list(self.cards)
-        )
+        rows = comparison_rows(self.evaluations, list(self.cards))
         return rows if self.fine_tune_kept else [*rows, PolicyRow.not_kept(FINE_TUNE)]
 
     def table(self) -> str:
@@ -468,22 +465,48 @@ def shipped_specs(names: list[str] | None) -> dict[str, str]:
     return {spec: spec for spec in specs}
 
 
-def record_best(cfg: DictConfig, policies: dict[str, str], rows: list[PolicyRow]) -> None:
-    """Record the best learned policy's episodes (``eval.rerun``, ``eval.lerobot``), side by
-    side with ``eval.compare``'s, when :func:`evaluate_all` recorded another (the last one):
-    evaluations are deterministic, so the recording shows the table's episodes.
+def evaluate_and_record_best(
+    cfg: DictConfig, policies: dict[str, str], shipped: list[str]
+) -> dict[str, dict[str, Any]]:
+    """:func:`evaluate_all` of ``policies`` (``shipped``: the shipped ones' names), in their
+    order, with one recording (``eval.rerun``, ``eval.lerobot``): the best learned policy's
+    episodes, side by side with ``eval.compare``'s.
+
+    Which policy is best is known only once all are evaluated, so the others are evaluated
+    unrecorded first; the compared ones and the best then drive the recorded pass (the best's
+    figures repeat its first evaluation's: evaluations are deterministic). Recording costs
+    several times an unrecorded evaluation, so this records each episode once.
 
     Example:
-        >>> record_best(load_config("demo"), {"bc": "out/bc"}, [])  # nothing learned to record
+        >>> cfg = load_config("demo", ["eval.rerun=null"])  # nothing to record
+        >>> evaluate_and_record_best(cfg, {}, [])
+        {}
     """
-    best = best_learned(rows)
-    specs = list(policies.values())
-    if best is None or not (cfg.eval.rerun or cfg.eval.lerobot) or policies[best.name] == specs[-1]:
-        return
-    logger.info("recording %s, the best learned policy", best.name)
-    compared = {str(spec) for spec in cfg.eval.compare}
-    others = {name: spec for name, spec in policies.items() if spec in compared}
-    evaluate_all(cfg, {**others, best.name: policies[best.name]})
+    recording = bool(cfg.eval.rerun or cfg.eval.lerobot)
+    compared = {str(spec) for spec in cfg.eval.compare} if recording else set()
+    plain = OmegaConf.merge(cfg, {"eval": {"rerun": None, "lerobot": None}})
+    results = evaluate_all(plain, {n: s for n, s in policies.items() if s not in compared})
+    if recording:
+        recorded = {name: spec for name, spec in policies.items() if spec in compared}
+        best = best_learned(comparison_rows(results, shipped))
+        if best is not None:
+            logger.info("recording %s, the best learned policy", best.name)
+            recorded[best.name] = policies[best.name]
+        results |= evaluate_all(cfg, recorded)
+    return {name: results[name] for name in policies}
+
+
+def comparison_rows(evaluations: dict[str, dict[str, Any]], shipped: list[str]) -> list[PolicyRow]:
+    """The main job's evaluations as comparison rows: the autopilot, the scripted constants
+    (``constant:...``) and the ``shipped`` policies named as such, the rest learned.
+
+    Example:
+        >>> evaluations = {"bc": {"mean_distance": 240.0, "collision_rate": 0.25, "episodes": 4}}
+        >>> [(row.name, row.kind) for row in comparison_rows(evaluations, [])]
+        [('bc', 'learned')]
+    """
+    constants = [name for name in evaluations if name.startswith(SCRIPTED)]
+    return comparison(evaluations, autopilot=AUTOPILOT, constants=constants, shipped=shipped)
 
 
 @dataclass
@@ -560,7 +583,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
     cards = {name: load_card(pretrained_path(name)) for name in shipped}
     with timed_stage(seconds, "eval"):
-        evaluations = evaluate_all(cfg, policies)
+        evaluations = evaluate_and_record_best(cfg, policies, list(shipped))
         result = PipelineResult(
             dataset,
             bc_policy,
@@ -574,7 +597,6 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
             kept,
             cards,
         )
-        record_best(cfg, policies, result.rows())
     result.summary_path.write_text(json.dumps(result.to_dict(), indent=2))
     seeds = ", ".join(str(seed) for seed in cfg.eval.seeds)
     title = (

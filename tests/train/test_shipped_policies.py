@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from omegaconf import OmegaConf
+from viz._readback import Readback
 
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config, save_config
@@ -166,18 +167,33 @@ def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
     assert result.to_dict()["fine_tune_kept"] is False
 
 
-def test_the_best_learned_policy_is_recorded(tmp_path: Path) -> None:
+def test_only_the_best_learned_policy_is_recorded_beside_the_compared_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The best ("fast", not last) is recorded beside the autopilot; no other episode is
+    recorded, and the compared autopilot drives once, in the recorded pass."""
+    recorded: list[bool] = []
+    for_driver = pipeline.Evaluator.for_driver
+
+    def counting_for_driver(env_cfg, eval_cfg, driver, **kwargs):
+        recorded.append(bool(eval_cfg.rerun or kwargs.get("rerun_logger")))
+        return for_driver(env_cfg, eval_cfg, driver, **kwargs)
+
+    monkeypatch.setattr(pipeline.Evaluator, "for_driver", counting_for_driver)
     rerun = tmp_path / "eval.rrd"
     overrides = [*TINY_ENV, "eval.episodes=1", "eval.max_steps=2", "progress=false"]
-    cfg = load_config("demo", [*overrides, f"eval.rerun={rerun}", "eval.compare=[]"])
-    plain = load_config("demo", overrides)
-    policies = {"fast": "constant:throttle=1.0", "slow": "constant:throttle=0.2"}
-    result = pipeline.PipelineResult(*[Path()] * 7, pipeline.evaluate_all(plain, policies))
-    pipeline.record_best(cfg, policies, result.rows())
-    assert rerun.stat().st_size > 0  # "fast" drives farther: recorded although not last
-    rerun.unlink()
-    pipeline.record_best(cfg, dict(reversed(policies.items())), result.rows())
-    assert not rerun.exists()  # the last one is the best: evaluate_all recorded it already
+    cfg = load_config("demo", [*overrides, f"eval.rerun={rerun}", "eval.compare=[autopilot]"])
+    policies = {
+        "autopilot": "autopilot",
+        "fast": "constant:throttle=1.0",
+        "slow": "constant:throttle=0.2",
+    }
+    results = pipeline.evaluate_and_record_best(cfg, policies, [])
+    assert list(results) == list(policies)  # the table keeps the policies' order
+    assert results["fast"]["mean_distance"] > results["slow"]["mean_distance"]
+    assert recorded == [False, False, True, True]  # fast, slow; then autopilot, fast
+    entities = " ".join(Readback(rerun).entities())
+    assert "fast" in entities and "autopilot" in entities and "slow" not in entities
 
 
 def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_ground_truth(
