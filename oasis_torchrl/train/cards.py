@@ -146,6 +146,11 @@ class TrainingRun:
             ("gradient steps", "behaviour-cloning loss"),
         )
 
+    def settings_yaml(self) -> str:
+        """The run's saved settings as YAML, its folder written ``<run>``: where it ran (a path
+        of the machine that trained it) is not part of the recipe."""
+        return OmegaConf.to_yaml(self.settings).replace(str(self.root), "<run>")
+
     def command(self) -> str:
         """The command that retrains it: its preset's when its saved settings are the preset's,
         else the saved settings themselves."""
@@ -360,7 +365,7 @@ def ship_policy(cfg: DictConfig) -> Path:
     }
     (partial / CARD_DATA).write_text(json.dumps(facts, indent=2))
     plot_curve(run, partial / CURVE, cfg.name)
-    (partial / CARD).write_text(card_text(facts, OmegaConf.to_yaml(run.settings)))
+    (partial / CARD).write_text(card_text(facts, run.settings_yaml()))
     os.replace(partial, target)
     logger.info("shipped %s: %s", cfg.name, target)
     return target

@@ -63,7 +63,7 @@ def registry(shipped: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return shipped
 
 
-def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path) -> None:
+def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path, ppo_run: Path) -> None:
     folder = shipped / "tiny"
     assert {"config.json", "model.safetensors", "README.md", "curve.png", "card.json"} <= {
         path.name for path in folder.iterdir()
@@ -82,6 +82,8 @@ def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path) -> N
     assert "held out: highway at night in the rain | 4241 | 1 |" in readme
     assert "![training curve](curve.png)" in readme and (folder / "curve.png").stat().st_size
     assert "ground truth" in readme  # distances need the embedded server, said plainly
+    settings = readme.split("## Settings", 1)[1]  # the recipe, not where it ran
+    assert "output_dir: <run>" in settings and str(ppo_run) not in settings
     # the crop is named, and every command the card gives turns it on
     assert card["front_crop"] == 0.5 and "--env.front_crop=0.5 --eval" in readme
 
