@@ -1,7 +1,6 @@
 """Merge the finalized shard parts of a sharded recording into one LeRobot dataset.
 
-The merge is lerobot's own ``aggregate_datasets``: episode indices are renumbered in shard
-order, tasks unified, videos and parquet files concatenated and the statistics aggregated.
+The merge is :func:`~oasis_torchrl.data.combine.combine_datasets` in shard order.
 Parts without the completion marker (a worker killed mid-part) are skipped and named in the log.
 """
 
@@ -10,6 +9,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from oasis_torchrl.data.combine import combine_datasets
 from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER
 
 logger = logging.getLogger(__name__)
@@ -45,19 +45,9 @@ def merge_shards(root: str | Path, output: str | Path, *, repo_id: str | None = 
         >>> merge_shards("recordings/shards", "recordings/drives")  # doctest: +SKIP
         PosixPath('recordings/drives')
     """
-    from lerobot.datasets.aggregate import aggregate_datasets
-
-    output = Path(output)
-    if output.exists():
-        raise FileExistsError(f"merge output {output} already exists")
     shards = complete_shards(root)
     if not shards:
         raise ValueError(f"no finalized shard parts under {root}")
-    aggregate_datasets(
-        repo_ids=[f"local/{shard.name}" for shard in shards],
-        aggr_repo_id=repo_id or f"local/{output.name}",
-        roots=shards,
-        aggr_root=output,
-    )
+    output = combine_datasets(shards, output, repo_id=repo_id)
     logger.info("merged %d shard parts of %s into %s", len(shards), root, output)
     return output

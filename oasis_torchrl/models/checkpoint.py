@@ -9,12 +9,12 @@ The network as a LeRobot policy folder: :mod:`oasis_torchrl.drivers.folders`.
 from __future__ import annotations
 
 import logging
-import os
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.models.config import DrivingNetConfig
 from oasis_torchrl.models.network import DrivingNet
 
@@ -42,9 +42,8 @@ def save_checkpoint(path: str | Path, net: DrivingNet, **state: Any) -> Path:
         "net_state": net.state_dict(),
         **state,
     }
-    partial = path.with_name(path.name + ".partial")
-    torch.save(payload, partial)
-    os.replace(partial, path)
+    with written_whole(path) as partial:
+        torch.save(payload, partial)
     return path
 
 

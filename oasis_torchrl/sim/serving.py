@@ -8,11 +8,11 @@ signal, then stop cleanly, letting in-flight calls finish within a grace period.
 from __future__ import annotations
 
 import logging
-import os
 import signal
 import threading
 from pathlib import Path
 
+from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.sim.config import ServerConfig
 
 logger = logging.getLogger(__name__)
@@ -28,9 +28,8 @@ def write_port_file(path: Path, port: int) -> None:
         >>> path.read_text()
         '50051\\n'
     """
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(f"{port}\n")
-    os.replace(partial, path)
+    with written_whole(path) as partial:
+        partial.write_text(f"{port}\n")
 
 
 def wait_for_signal(stop: threading.Event) -> None:

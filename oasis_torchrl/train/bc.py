@@ -27,6 +27,7 @@ from torch.utils.data import DataLoader
 from torchrl.record.loggers import get_logger
 from tqdm import tqdm
 
+from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config import save_config
 from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
@@ -283,9 +284,8 @@ class BCTrainer:
             "optimizer": self.optimizer.state_dict(),
             "rng": torch.get_rng_state(),
         }
-        partial = path / f"{TRAINING_STATE}.partial"
-        torch.save(state, partial)
-        partial.replace(path / TRAINING_STATE)  # a stop mid-write leaves the last state whole
+        with written_whole(path / TRAINING_STATE) as partial:  # a stop keeps the last state
+            torch.save(state, partial)
         return path
 
     def _preprocessed(self, raw: dict[str, Any]) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config import load_config
 from oasis_torchrl.config.presets import preset_names
 from oasis_torchrl.drivers import load_driver
@@ -347,9 +348,15 @@ def ship_policy(cfg: DictConfig) -> Path:
     if target.exists():
         raise FileExistsError(f"{target} exists: delete it to ship {cfg.name} again")
     figures = evaluate_card(cfg, run.policy)
-    partial = shipped / f".{cfg.name}.partial"
-    shutil.rmtree(partial, ignore_errors=True)
-    shutil.copytree(run.policy, partial)
+    with written_whole(target) as partial:
+        shutil.copytree(run.policy, partial)
+        _write_card(partial, run, cfg, figures)
+    logger.info("shipped %s: %s", cfg.name, target)
+    return target
+
+
+def _write_card(folder: Path, run: TrainingRun, cfg: DictConfig, figures: list[Any]) -> None:
+    """The card's facts, curve and text into the policy ``folder`` being shipped."""
     facts = {
         "name": cfg.name,
         "kind": run.kind,
@@ -363,12 +370,9 @@ def ship_policy(cfg: DictConfig) -> Path:
         "baseline": cfg.baseline,
         "figures": [{**asdict(row), "ratio": row.ratio} for row in figures],
     }
-    (partial / CARD_DATA).write_text(json.dumps(facts, indent=2))
-    plot_curve(run, partial / CURVE, cfg.name)
-    (partial / CARD).write_text(card_text(facts, run.settings_yaml()))
-    os.replace(partial, target)
-    logger.info("shipped %s: %s", cfg.name, target)
-    return target
+    (folder / CARD_DATA).write_text(json.dumps(facts, indent=2))
+    plot_curve(run, folder / CURVE, cfg.name)
+    (folder / CARD).write_text(card_text(facts, run.settings_yaml()))
 
 
 def plot_curve(run: TrainingRun, path: Path, name: str) -> Path:

@@ -5,7 +5,8 @@
 2. ``bc``: behaviour cloning on it (the ``bc`` stage settings,
    :class:`~oasis_torchrl.config.BCSettings`),
    then ``dagger.rounds`` DAgger rounds: the clone drives ``dagger.episodes`` episodes labelled
-   by the autopilot, appended to the dataset, and is fine-tuned for ``dagger.steps`` on it all;
+   by the autopilot and is fine-tuned for ``dagger.steps`` on them and all the earlier data
+   (:func:`dagger_data`; the demonstrations themselves are never written to);
 3. ``ppo``: PPO fine-tuning warm-started from the cloned policy (the ``ppo`` stage settings,
    :class:`~oasis_torchrl.config.PPOSettings`, with the shared ``env``);
 4. ``eval``: the reference drivers, the shipped policies (``eval.pretrained``, by default every
@@ -25,11 +26,12 @@ source it stops at once, saying what to pass.
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the
 folder to redo it), so re-running after an interruption continues where it stopped. Outputs under
 ``output_dir``: ``demos/`` (dataset), ``bc/round_<k>/policy/``, ``ppo/policy/`` (LeRobot policy
-folders), ``ppo/checkpoints/`` (``latest.pt``, the training state; ``best.pt``, the policy kept
-when PPO's evaluations select one), ``eval.rrd``, ``summary.json`` (paths, evaluations with
-their episodes, seconds per stage) and ``comparison.png`` (the evaluations as bars; the same
-comparison as a text table is :meth:`PipelineResult.table`). Config:
-:class:`~oasis_torchrl.config.DemoConfig`.
+folders), ``bc/round_<k>/dagger/`` and ``bc/round_<k>/dataset/`` (round k's episodes, and the
+data it cloned: the demonstrations and rounds 1 to k), ``ppo/checkpoints/`` (``latest.pt``, the
+training state; ``best.pt``, the policy kept when PPO's evaluations select one), ``eval.rrd``,
+``summary.json`` (paths, evaluations with their episodes, seconds per stage) and
+``comparison.png`` (the evaluations as bars; the same comparison as a text table is
+:meth:`PipelineResult.table`). Config: :class:`~oasis_torchrl.config.DemoConfig`.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config import load_config, save_config
 from oasis_torchrl.config.env import AUTO
 from oasis_torchrl.drivers import (
@@ -260,7 +263,8 @@ def _is_recordings(source: str) -> bool:
 def demonstrations(cfg: DictConfig, root: Path) -> Path:
     """The demonstrations: ``record.source``'s dataset, its recordings imported into ``root``,
     or ``cfg.record.episodes`` noisy-execution episodes recorded into ``root`` (labelled by the
-    autopilot or the source policy; a complete earlier recording is reused).
+    autopilot or the source policy; a complete earlier recording is reused). Written whole or
+    not at all (:func:`~oasis_torchrl.atomic.written_whole`).
 
     Example:
         >>> demonstrations(load_config("demo"), Path("outputs/demo/demos"))  # doctest: +SKIP
@@ -278,24 +282,26 @@ def demonstrations(cfg: DictConfig, root: Path) -> Path:
         raise FileExistsError(
             f"{root} holds {episodes} of {cfg.record.episodes} episodes; delete it"
         )
-    if _is_recordings(who.source):
-        from oasis_torchrl.data.importer import import_recordings
+    with written_whole(root) as partial:  # a stop half way records them again next run
+        if _is_recordings(who.source):
+            from oasis_torchrl.data.importer import import_recordings
 
-        report = import_recordings(who.source, root, image_size=tuple(cfg.env.image_size))
-        logger.info("imported %d recordings from %s", len(report.imported), who.source)
-        return root
-    reaction = cfg.record.late_reaction
-    late = reaction is not None and who.source == AUTOPILOT
-    return record_demonstrations(
-        cfg.env,
-        root,
-        episodes=cfg.record.episodes,
-        seed=cfg.record.seed,
-        noise=ActionNoise(**cfg.record.noise),
-        learner=LateReactionAutopilot(tuple(reaction), seed=cfg.record.seed) if late else None,
-        labeller=who.driver(),
-        progress=cfg.progress,
-    )
+            report = import_recordings(who.source, partial, image_size=tuple(cfg.env.image_size))
+            logger.info("imported %d recordings from %s", len(report.imported), who.source)
+        else:
+            reaction, seed = cfg.record.late_reaction, cfg.record.seed
+            late = reaction is not None and who.source == AUTOPILOT
+            record_demonstrations(
+                cfg.env,
+                partial,
+                episodes=cfg.record.episodes,
+                seed=seed,
+                noise=ActionNoise(**cfg.record.noise),
+                learner=LateReactionAutopilot(tuple(reaction), seed=seed) if late else None,
+                labeller=who.driver(),
+                progress=cfg.progress,
+            )
+    return root
 
 
 def bc_config(cfg: DictConfig, dataset: Path, round_: int) -> DictConfig:
@@ -373,6 +379,52 @@ def _plain(stage: DictConfig) -> dict[str, Any]:
     return OmegaConf.to_container(stage, resolve=True)
 
 
+def round_data(cfg: DictConfig, dataset: Path, round_: int) -> Path:
+    """The data clone round ``round_`` trains on: the demonstrations ``dataset`` (round 0), or
+    those and DAgger rounds 1 to ``round_`` combined (``bc/round_<k>/dataset``).
+
+    Example:
+        >>> round_data(load_config("demo", ["output_dir=/tmp/d"]), Path("/tmp/d/demos"), 2)
+        PosixPath('/tmp/d/bc/round_2/dataset')
+    """
+    return round_folder(cfg, round_) / "dataset" if round_ else dataset
+
+
+def dagger_data(cfg: DictConfig, dataset: Path, round_: int, labeller: str) -> Path:
+    """Record DAgger round ``round_``'s episodes (the previous clone drives, ``labeller`` labels)
+    into ``bc/round_<k>/dagger``, and combine them with the previous round's data into
+    :func:`round_data`; either folder is reused when it exists.
+
+    Each is written whole or not at all (:func:`~oasis_torchrl.atomic.written_whole`): a stop
+    while the round records loses only the round's unfinished episodes, which the next run
+    records again from the start, and the demonstrations, a person's dataset among them, are
+    only read.
+
+    Example:
+        >>> cfg = load_config("demo")
+        >>> dagger_data(cfg, Path("outputs/demo/demos"), 1, "autopilot")  # doctest: +SKIP
+        PosixPath('outputs/demo/bc/round_1/dataset')
+    """
+    from oasis_torchrl.data.combine import combine_datasets
+
+    episodes, data = round_folder(cfg, round_) / "dagger", round_data(cfg, dataset, round_)
+    if not episodes.exists():
+        with written_whole(episodes) as partial:
+            record_demonstrations(
+                cfg.env,
+                partial,
+                episodes=cfg.dagger.episodes,
+                seed=cfg.record.seed + 1000 * round_,
+                noise=ActionNoise(**cfg.dagger.noise),
+                learner=load_driver(str(previous_clone(cfg, round_))),
+                labeller=None if labeller == AUTOPILOT else load_driver(labeller),
+                progress=cfg.progress,
+            )
+    if not data.exists():
+        combine_datasets([round_data(cfg, dataset, round_ - 1), episodes], data)
+    return data
+
+
 def clone(cfg: DictConfig, dataset: Path) -> Path:
     """Behaviour cloning, then the DAgger rounds; the final policy folder (stages reused).
 
@@ -388,25 +440,14 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
         logger.info("no DAgger rounds: demonstrations from a dataset have no labeller")
     policy = Path()
     for round_ in range(rounds + 1):
-        bc_cfg = bc_config(cfg, dataset, round_)
-        policy = Path(bc_cfg.output_dir) / "policy"
+        policy = round_folder(cfg, round_) / "policy"
         if (policy / "model.safetensors").exists():
             logger.info("reusing %s", policy)
             continue
+        data = dagger_data(cfg, dataset, round_, labeller) if round_ else dataset
+        bc_cfg = bc_config(cfg, data, round_)
         if (Path(bc_cfg.output_dir) / PARTIAL_POLICY / TRAINING_STATE).exists():
-            # Its cloning stopped half way, so the round's episodes are recorded already.
-            bc_cfg.resume = "latest"
-        elif round_:
-            record_demonstrations(
-                cfg.env,
-                dataset,
-                episodes=cfg.dagger.episodes,
-                seed=cfg.record.seed + 1000 * round_,
-                noise=ActionNoise(**cfg.dagger.noise),
-                learner=load_driver(str(previous_clone(cfg, round_))),
-                labeller=None if labeller == AUTOPILOT else load_driver(labeller),
-                progress=cfg.progress,
-            )
+            bc_cfg.resume = "latest"  # its cloning stopped half way
         train_bc(bc_cfg)
     return policy
 

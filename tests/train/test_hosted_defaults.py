@@ -87,7 +87,9 @@ def test_demo_runs_the_whole_loop_on_frames_alone(
     # no autopilot on frames alone; a fine-tune that was not kept has no evaluation of its own
     learned = ["bc", "bc+ppo"] if summary["fine_tune_kept"] else ["bc"]
     assert list(summary["evaluations"]) == learned
-    dataset = json.loads((tmp_path / "demos" / "meta" / "info.json").read_text())
+    dataset = json.loads(
+        (tmp_path / "bc" / "round_1" / "dataset" / "meta" / "info.json").read_text()
+    )
     assert dataset["total_episodes"] == 4  # 2 demonstrations + 2 DAgger episodes
     assert all(not report["ground_truth"] for report in summary["evaluations"].values())
     assert "mean return (frames only)" in table[0]

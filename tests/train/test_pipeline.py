@@ -44,6 +44,18 @@ TINY_PIPELINE = [
 ]
 
 
+def episodes(root: Path) -> int:
+    """The episodes of the LeRobot dataset at ``root``, read with lerobot."""
+    return LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav").num_episodes
+
+
+def fingerprint(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` by its path: a dataset left as it was has the same one."""
+    return {
+        str(path.relative_to(root)): path.read_bytes() for path in root.rglob("*") if path.is_file()
+    }
+
+
 def test_demo_command_runs_every_stage(
     tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -69,8 +81,9 @@ def test_demo_command_runs_every_stage(
     assert table[1].endswith("1.00x")  # the constant is the best constant
     assert str(paths["plot"]) in table[-1] and paths["plot"].stat().st_size > 0
     assert paths["bc_policy"] == tmp_path / "bc" / "round_1" / "policy"
-    dataset = LeRobotDataset("local/demos", root=paths["dataset"], video_backend="pyav")
-    assert dataset.num_episodes == 4  # 2 demonstrations + 2 DAgger episodes
+    assert episodes(paths["dataset"]) == 2  # the demonstrations; DAgger's are kept apart
+    assert episodes(tmp_path / "bc" / "round_1" / "dagger") == 2
+    assert episodes(tmp_path / "bc" / "round_1" / "dataset") == 4  # what round 1 cloned
     assert (paths["ppo_policy"] / "model.safetensors").exists()
     # the fine-tuned policy is kept only if it beats the clone on the selection seeds
     assert paths["ppo_checkpoint"].name == "best.pt" and kept["frames"] in (0, 12)
@@ -143,13 +156,47 @@ def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_aga
     monkeypatch.setattr(OasisPolicy, "forward", counted)
     with pytest.raises(KeyboardInterrupt):
         pipeline.clone(cfg, dataset)
-    episodes = LeRobotDataset("local/demos", root=dataset, video_backend="pyav").num_episodes
-    assert episodes == 4  # the 2 demonstrations and round 1's 2 episodes
+    assert episodes(tmp_path / "bc" / "round_1" / "dataset") == 4  # 2 demonstrations, 2 DAgger
     monkeypatch.setattr(pipeline, "record_demonstrations", recorded_again)
     assert pipeline.clone(cfg, dataset) == tmp_path / "bc" / "round_1" / "policy"
     assert runs[2:] == [("round_1", "latest")]  # round 0 reused, round 1 resumed
     assert steps == [1, 2]  # round 1's steps 3 and 4
     assert (tmp_path / "bc" / "round_1" / "policy" / "model.safetensors").exists()
+
+
+def test_a_stop_while_a_round_records_loses_only_its_unfinished_episodes(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A Ctrl-C in DAgger round 1's recording, then a kill in the next run's (which leaves a
+    partial folder behind): the demonstrations stay byte for byte as they were, and the run
+    after records the round whole."""
+    from oasis_torchrl.data import LeRobotRecorder
+
+    dataset = tmp_path / "demos"
+    shutil.copytree(tiny_dataset, dataset)
+    before = fingerprint(dataset)
+    cfg = load_config("demo", [f"output_dir={tmp_path}", *TINY_PIPELINE, "dagger.episodes=4"])
+    round_1 = tmp_path / "bc" / "round_1"
+    write = LeRobotRecorder.write
+
+    def stopped(self, batch):
+        if self.episodes_written:  # two of the round's episodes written, two running
+            raise KeyboardInterrupt
+        return write(self, batch)
+
+    monkeypatch.setattr(LeRobotRecorder, "write", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.clone(cfg, dataset)
+    assert (tmp_path / "bc" / "round_0" / "policy").exists() and not (round_1 / "dagger").exists()
+    assert not any(round_1.glob(".*partial"))  # a stop that ran Python's cleanup leaves none
+    killed = round_1 / ".dagger.partial"  # what a kill mid-recording leaves instead
+    shutil.copytree(tiny_dataset, killed)
+    (killed / "meta" / "info.json").write_text("{")
+    monkeypatch.setattr(LeRobotRecorder, "write", write)
+    assert pipeline.clone(cfg, dataset) == round_1 / "policy"
+    assert fingerprint(dataset) == before
+    assert episodes(round_1 / "dagger") == 4 and episodes(round_1 / "dataset") == 6
+    assert not killed.exists()
 
 
 def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
