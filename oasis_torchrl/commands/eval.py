@@ -63,12 +63,12 @@ def run(cfg: DictConfig) -> int:
             if not cfg.rerun:
                 raise ValueError("compare records policies side by side: set rerun=<file>.rrd")
             drivers = {str(spec): load_driver(spec) for spec in [cfg.policy, *cfg.compare]}
-            reports = evaluate_side_by_side(cfg.env, cfg, drivers)
+            reports = evaluate_side_by_side(cfg.env, cfg, drivers, progress=cfg.progress)
             report = reports.pop(str(cfg.policy))
             compared = {spec: other.summary() for spec, other in reports.items()}
         else:
             driver = load_driver(cfg.policy)
-            with Evaluator.for_driver(cfg.env, cfg, driver) as evaluator:
+            with Evaluator.for_driver(cfg.env, cfg, driver, progress=cfg.progress) as evaluator:
                 report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)

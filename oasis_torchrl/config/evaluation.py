@@ -54,6 +54,7 @@ class EvalConfig(EvaluationConfig):
         "(grpc://host:port; key in OASIS_POLICY_API_KEY)",
     )
     output: str | None = option(None, help="JSON file (the report is also printed)")
+    progress: bool = option(True, help="tqdm progress bars")
     baseline: str | None = option(
         None,
         help="an earlier report (JSON) of the same prompts, seeds and episodes: the report adds "

@@ -93,7 +93,7 @@ def test_eval_command_compares_with_a_baseline(
     settings = [*TINY_ENV, "episodes=2", "max_steps=3", "seeds=[5]"]
     constant = tmp_path / "constant.json"
     assert main(["eval", *settings, "policy=constant:throttle=0.2", f"output={constant}"]) == 0
-    capsys.readouterr()
+    assert "evaluating" in capsys.readouterr().err  # its progress bar
     faster = tmp_path / "faster.json"
     code = main(
         [
@@ -102,6 +102,7 @@ def test_eval_command_compares_with_a_baseline(
             "policy=constant:throttle=1.0",
             f"baseline={constant}",
             f"output={faster}",
+            "progress=false",
         ]
     )
     assert code == 0
@@ -110,7 +111,8 @@ def test_eval_command_compares_with_a_baseline(
     assert versus["baseline"] == str(constant) and versus["episodes"] == 2.0
     assert versus["mean"] == pytest.approx(report["mean_distance"] - before["mean_distance"])
     assert versus["mean"] > 0
-    assert json.loads(capsys.readouterr().out) == report
+    printed = capsys.readouterr()
+    assert json.loads(printed.out) == report and "evaluating" not in printed.err
 
 
 def test_eval_command_keeps_the_report_when_the_baseline_ran_other_episodes(
