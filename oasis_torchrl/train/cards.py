@@ -86,6 +86,9 @@ class TrainingRun:
     curve: dict[str, list[tuple[float, float]]]
     """Named series of (x, y) points."""
     curve_axes: tuple[str, str]
+    kept_steps: int | None = None
+    """The env steps of the policy a PPO run kept, where its selection evaluations kept an
+    earlier one than the last (None: the last)."""
 
     @classmethod
     def of(cls, policy: Path) -> TrainingRun:
@@ -103,11 +106,18 @@ class TrainingRun:
 
     @classmethod
     def _ppo(cls, policy: Path, root: Path) -> TrainingRun:
-        from oasis_torchrl.models.checkpoint import LATEST, load_checkpoint
+        from oasis_torchrl.models.checkpoint import BEST, LATEST, load_checkpoint
 
         settings = OmegaConf.load(missing(root / "config.yaml"))
         state = load_checkpoint(missing(root / "checkpoints" / LATEST))
-        points = [(entry["policy_frames"], entry["mean_distance"]) for entry in state["history"]]
+        curve: dict[str, list[tuple[float, float]]] = {}  # a series per evaluated seeds
+        for entry in state["history"]:  # the final evaluation too, at its policy's steps
+            seeds = entry["seeds"]
+            label = f"seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}"
+            point = (entry["policy_frames"], entry["mean_distance"])
+            curve.setdefault(f"evaluations on {label}", []).append(point)
+        best = root / "checkpoints" / BEST  # the policy exported when the selection chose one
+        kept = load_checkpoint(best)["frames"] if best.exists() else state["frames"]
         return cls(
             "ppo",
             root,
@@ -115,8 +125,9 @@ class TrainingRun:
             settings,
             state.get("wall_seconds"),
             f"{state['frames']:,} env steps",
-            {"periodic evaluations": points},
+            {name: sorted(points) for name, points in curve.items()},
             ("env steps", "mean distance before collision (m)"),
+            None if kept == state["frames"] else kept,
         )
 
     @classmethod
@@ -365,6 +376,7 @@ def _write_card(folder: Path, run: TrainingRun, cfg: DictConfig, figures: list[A
         "wall_seconds": run.wall_seconds,
         "machine": cfg.machine or machine(),
         "budget": run.budget,
+        "kept_steps": run.kept_steps,
         "training_prompts": list(run.settings.env.prompts),
         "front_crop": run.settings.env.get("front_crop"),
         "baseline": cfg.baseline,
@@ -405,6 +417,17 @@ def hours(seconds: float | None) -> str:
     return "not recorded" if seconds is None else f"{seconds / 3600:.1f} h"
 
 
+def _kept(facts: Mapping[str, Any]) -> str:
+    """The card's sentence on which policy of the run it ships ("" for the last one)."""
+    kept = facts.get("kept_steps")
+    if kept is None:
+        return ""
+    return (
+        f" It is the policy of {kept:,} env steps, the best of the run's periodic evaluations "
+        "on its selection seeds (the training curve)."
+    )
+
+
 def card_text(facts: Mapping[str, Any], settings_yaml: str) -> str:
     """The card (Markdown) of :func:`ship_policy`'s ``facts``."""
     name = facts["name"]
@@ -434,8 +457,8 @@ def card_text(facts: Mapping[str, Any], settings_yaml: str) -> str:
             "",
             f"A camera policy trained by {what} ({facts['budget']}) on "
             f"{len(facts['training_prompts'])} prompts: "
-            f"{'; '.join(facts['training_prompts'])}. It reads {inputs}, so it drives any "
-            "endpoint, the hosted service included.",
+            f"{'; '.join(facts['training_prompts'])}.{_kept(facts)} It reads {inputs}, so it "
+            "drives any endpoint, the hosted service included.",
             "",
             "Load it:",
             "",

@@ -11,6 +11,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from omegaconf import OmegaConf
 from viz._readback import Readback
@@ -21,8 +22,9 @@ from oasis_torchrl.config.scenes import HELD_OUT_SCENES
 from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
 from oasis_torchrl.envs import capabilities
+from oasis_torchrl.models.checkpoint import BEST, LATEST, load_checkpoint
 from oasis_torchrl.train import pipeline
-from oasis_torchrl.train.cards import matching_preset
+from oasis_torchrl.train.cards import TrainingRun, card_text, matching_preset
 
 from .conftest import TINY_ENV, tiny_ppo
 
@@ -86,6 +88,33 @@ def test_the_card_holds_the_command_commit_figures_and_curve(shipped: Path, ppo_
     assert "output_dir: <run>" in settings and str(ppo_run) not in settings
     # the crop is named, and every command the card gives turns it on
     assert card["front_crop"] == 0.5 and "--env.front_crop=0.5 --eval" in readme
+
+
+def test_a_card_names_the_earlier_policy_its_run_kept(
+    ppo_run: Path, shipped: Path, tmp_path: Path
+) -> None:
+    """A run whose selection evaluations (seed 2000) kept the policy of 8 env steps
+    (``best.pt``) ships that one: the card says so, and its curve draws the final evaluation
+    (seed 1000, of that policy) apart; a run that kept its last policy says nothing of it."""
+    run = tmp_path / "ppo"
+    shutil.copytree(ppo_run, run)
+    latest = load_checkpoint(run / "checkpoints" / LATEST)
+    evaluations = [(16, [2000], 20.0), (8, [2000], 30.0), (8, [1000], 25.0)]
+    history = [
+        {"policy_frames": x, "seeds": seeds, "mean_distance": y} for x, seeds, y in evaluations
+    ]
+    torch.save({**latest, "history": history}, run / "checkpoints" / LATEST)
+    facts = json.loads((shipped / "tiny" / "card.json").read_text())
+    for frames, kept in ((8, 8), (16, None)):
+        torch.save({**latest, "frames": frames}, run / "checkpoints" / BEST)
+        training = TrainingRun.of(run / "policy")
+        assert training.kept_steps == kept
+        text = card_text({**facts, "kept_steps": kept}, "")
+        assert ("It is the policy of 8 env steps" in text) is (kept is not None)
+    assert training.curve == {
+        "evaluations on seed 2000": [(8, 30.0), (16, 20.0)],
+        "evaluations on seed 1000": [(8, 25.0)],
+    }
 
 
 def test_shipping_again_or_from_an_incomplete_run_is_a_one_line_error(
