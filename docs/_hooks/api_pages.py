@@ -148,6 +148,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.shift",
             "oasis_torchrl.train.depth",
             "oasis_torchrl.allocator",
+            "oasis_torchrl.atomic",
         ),
     ),
     "config": ApiPage(
@@ -189,6 +190,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.data.loading",
             "oasis_torchrl.data.video_frames",
             "oasis_torchrl.data.quiet",
+            "oasis_torchrl.data.combine",
             "oasis_torchrl.compat",
         ),
     ),
