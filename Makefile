@@ -58,7 +58,7 @@ demo: venv-python $(STAMP)
 
 test: venv-python $(STAMP)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider --durations=30
 
 # The docs site (mkdocs.yml) into site/, strict: a broken link or reference fails it.
 docs: venv-python $(STAMP)
