@@ -3,7 +3,8 @@
 The content goes to a hidden ``.<name>.partial`` beside the target and is moved into place only
 when the writing finished, so a run stopped half way (a kill, a Ctrl-C, an error) never leaves
 something a later run or a reader would take for finished: a checkpoint, a shipped policy, a
-round's recorded episodes.
+round's recorded episodes, a Ray worker's shard part. :func:`written_whole` does it for one
+block; :func:`fresh_partial` and :func:`publish` for writing that spans calls.
 """
 
 from __future__ import annotations
@@ -25,11 +26,48 @@ def partial_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.partial")
 
 
+def is_partial(path: Path) -> bool:
+    """Whether ``path`` is an unfinished write: a run stopped before it moved it into place.
+
+    Example:
+        >>> is_partial(partial_path(Path("shards/worker-001-part-0003")))
+        True
+        >>> is_partial(Path("shards/worker-001-part-0003"))
+        False
+    """
+    return path.name.startswith(".") and path.name.endswith(".partial")
+
+
 def _remove(path: Path) -> None:
     if path.is_dir():
         shutil.rmtree(path)
     else:
         path.unlink(missing_ok=True)
+
+
+def fresh_partial(path: str | Path) -> Path:
+    """The partial path to write ``path``'s content to, with what an earlier run killed half way
+    left there removed; :func:`publish` moves it into place.
+
+    Example:
+        >>> import tempfile
+        >>> target = Path(tempfile.mkdtemp()) / "worker-000-part-0000"
+        >>> fresh_partial(target).mkdir()
+        >>> publish(target)
+        >>> target.is_dir(), partial_path(target).exists()
+        (True, False)
+    """
+    path = Path(path)
+    partial = partial_path(path)
+    _remove(partial)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return partial
+
+
+def publish(path: str | Path) -> None:
+    """Move ``path``'s finished partial (see :func:`fresh_partial`) into place."""
+    path = Path(path)
+    os.replace(partial_path(path), path)
 
 
 @contextmanager
@@ -49,13 +87,10 @@ def written_whole(path: str | Path) -> Iterator[Path]:
         >>> [file.name for file in target.iterdir()], partial.exists()
         (['episode_0.txt'], False)
     """
-    path = Path(path)
-    partial = partial_path(path)
-    _remove(partial)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = fresh_partial(path)
     try:
         yield partial
     except BaseException:
         _remove(partial)
         raise
-    os.replace(partial, path)
+    publish(path)

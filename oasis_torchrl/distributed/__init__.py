@@ -18,10 +18,9 @@ from oasis_torchrl.distributed.ray_collection import (
     env_factory,
 )
 from oasis_torchrl.distributed.ray_recording import RayRecording, record_on_ray
-from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER, ShardRecorder
+from oasis_torchrl.distributed.sharded_recording import ShardRecorder
 
 __all__ = [
-    "COMPLETE_MARKER",
     "ClusterStartupError",
     "RayCollection",
     "RayCollectionConfig",

@@ -1,7 +1,8 @@
 """Merge the finalized shard parts of a sharded recording into one LeRobot dataset.
 
 The merge is :func:`~oasis_torchrl.data.combine.combine_datasets` in shard order.
-Parts without the completion marker (a worker killed mid-part) are skipped and named in the log.
+A part appears under its own name only once finalized; the hidden partial of a part a worker was
+killed in is skipped and named in the log.
 """
 
 from __future__ import annotations
@@ -9,8 +10,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from oasis_torchrl.atomic import is_partial
 from oasis_torchrl.data.combine import combine_datasets
-from oasis_torchrl.distributed.sharded_recording import COMPLETE_MARKER
 
 logger = logging.getLogger(__name__)
 
@@ -26,11 +27,12 @@ def complete_shards(root: str | Path) -> list[Path]:
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"shard root {root} does not exist")
-    parts = sorted(path for path in root.iterdir() if path.is_dir())
-    incomplete = [path.name for path in parts if not (path / COMPLETE_MARKER).is_file()]
-    if incomplete:
-        logger.warning("skipping unfinished shard parts (worker lost mid-part): %s", incomplete)
-    return [path for path in parts if (path / COMPLETE_MARKER).is_file()]
+    folders = sorted(path for path in root.iterdir() if path.is_dir())
+    unfinished = [path.name for path in folders if is_partial(path)]
+    if unfinished:
+        logger.warning("skipping unfinished shard parts (worker lost mid-part): %s", unfinished)
+    # other hidden folders are a killed recorder's scratch, never a part
+    return [path for path in folders if not path.name.startswith(".")]
 
 
 def merge_shards(root: str | Path, output: str | Path, *, repo_id: str | None = None) -> Path:

@@ -3,8 +3,9 @@
 A :class:`ShardRecorder` is the ``post_collect_hook`` of one remote collector: it runs inside the
 worker, wraps a :class:`~oasis_torchrl.data.LeRobotRecorder` and writes ``<root>/worker-<i>-
 part-<j>``. A part is finalized when the run closes it or, with ``part_batches``, every that many
-batches (episodes still running are then saved as they are, and continue in the next part); a
-finalized part gets a :data:`COMPLETE_MARKER` file, so a merge takes exactly the readable parts.
+batches (episodes still running are then saved as they are, and continue in the next part). A
+part is written under a hidden partial name and appears under its own only once finalized
+(:mod:`oasis_torchrl.atomic`), so a merge takes exactly the readable parts.
 The episodes still running when the run closes the last part are kept or dropped as the
 recorder's ``keep_unfinished`` says.
 """
@@ -20,12 +21,10 @@ import datasets
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
+from oasis_torchrl.atomic import fresh_partial, publish
 from oasis_torchrl.data import LeRobotRecorder
 
 logger = logging.getLogger(__name__)
-
-COMPLETE_MARKER = ".shard-complete"
-"""File written into a shard part once its dataset is finalized."""
 
 
 def shard_name(worker: int, part: int) -> str:
@@ -117,7 +116,7 @@ class ShardRecorder:
             datasets.disable_progress_bars()  # a worker's bars reach the driver as log lines
             remaining = None if self.max_episodes is None else self.max_episodes - self.episodes
             self._recorder = LeRobotRecorder(
-                self.root / shard_name(self.worker, self._part),
+                fresh_partial(self._part_root),
                 max_episodes=remaining,
                 **self.recorder_kwargs,
             )
@@ -134,9 +133,13 @@ class ShardRecorder:
         recorder.close(keep_unfinished=keep_unfinished)
         self.episodes += recorder.episodes_written
         if recorder.dataset is not None:
-            (recorder.root / COMPLETE_MARKER).touch()
-            logger.info("worker %d finalized shard %s", self.worker, recorder.root)
+            publish(self._part_root)
+            logger.info("worker %d finalized shard %s", self.worker, self._part_root)
         self._part += 1
+
+    @property
+    def _part_root(self) -> Path:
+        return self.root / shard_name(self.worker, self._part)
 
     def close(self) -> int:
         """Finalize the open part (its running episodes kept or dropped as the recorder's

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from oasis_torchrl.distributed import complete_shards
 from oasis_torchrl.distributed.namespace_cluster import (
     HEAD_ADDRESS,
     WORKER_ADDRESS,
@@ -150,8 +151,8 @@ def test_a_run_disrupted_mid_way(
             remote = next(
                 i for i, node in placement(log.read_text()).items() if node != HEAD_ADDRESS
             )
-            first_part = shards / f"worker-{remote:03d}-part-0000" / ".shard-complete"
-            wait_for(first_part.exists, RUN_TIMEOUT_S, "the worker node's first shard part")
+            first_part = shards / f"worker-{remote:03d}-part-0000"  # appears once finalized
+            wait_for(first_part.is_dir, RUN_TIMEOUT_S, "the worker node's first shard part")
             if disruption == "ctrl-c":
                 driver.send_signal(signal.SIGINT)
             else:
@@ -163,7 +164,7 @@ def test_a_run_disrupted_mid_way(
                 driver.wait()
     text = log.read_text()
     assert code == {"stop": 1, "continue": 0, "ctrl-c": 130}[disruption], text[-4000:]
-    finalized = sorted(path.parent.name for path in shards.glob("*/.shard-complete"))
+    finalized = [path.name for path in complete_shards(shards)]
     assert f"worker-{remote:03d}-part-0000" in finalized
     # every finalized part holds one batch: an episode per session
     assert episodes_in(root).unique().tolist() == list(range(len(finalized) * SESSIONS))
