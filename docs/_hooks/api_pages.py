@@ -137,6 +137,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.ppo_loss",
             "oasis_torchrl.train.bc",
             "oasis_torchrl.train.bc_data",
+            "oasis_torchrl.train.batch_order",
             "oasis_torchrl.train.demonstrations",
             "oasis_torchrl.train.evaluate",
             "oasis_torchrl.train.comparison",

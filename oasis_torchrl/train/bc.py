@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -34,6 +34,7 @@ from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.protocol import FRONT_CROP
+from oasis_torchrl.train.batch_order import StepBatches
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
 from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.shift import random_shift
@@ -126,11 +127,6 @@ def policy_inputs(
     return inputs
 
 
-def _batches(loader: DataLoader) -> Iterator[dict[str, Any]]:
-    while True:
-        yield from loader
-
-
 PARTIAL_POLICY = "checkpoints/last"
 """Where the policy so far is saved every ``train.save_every`` steps, with its
 :data:`TRAINING_STATE`. ``policy/`` is written once, at the end, so a run whose ``policy/``
@@ -189,12 +185,13 @@ class BCTrainer:
         # The cache shifts the frames while they are bytes; LeRobot's dataset gives floats.
         self.shift_in_loop = shift if cached is None else None
         data = dataset if cached is None else cached
+        self.batch_order = StepBatches(len(data), cfg.train.batch_size, cfg.seed, drop_last=True)
         self.loader = DataLoader(
             data,
-            batch_size=cfg.train.batch_size,
-            shuffle=True,
-            drop_last=len(data) > cfg.train.batch_size,
+            batch_sampler=self.batch_order,
             num_workers=cfg.train.num_workers,
+            # its workers' seeds from its own generator: starting it draws none from torch's
+            generator=torch.Generator().manual_seed(cfg.seed),
             collate_fn=None if cached is None else cached.collate,
         )
         self.optimizer = self.policy_config.get_optimizer_preset().build(
@@ -243,7 +240,9 @@ class BCTrainer:
         parameters = list(self.policy.get_optim_params())
         self.policy.train()
         average = self.average
-        batches = _batches(self.loader)
+        # a resumed run takes the batches the run that never stopped takes
+        self.batch_order.first_step = self.done_steps
+        batches = iter(self.loader)
         with tqdm(
             range(self.done_steps + 1, cfg.steps + 1),
             desc="bc",

@@ -187,7 +187,8 @@ def test_a_run_stopped_half_way_resumes_where_it_stopped(
     tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A stop after step 3 of 4 leaves step 2's state; ``resume=latest`` takes steps 3 and 4
-    only, from step 2's weights and optimizer, and writes policy/."""
+    only, from step 2's weights and optimizer, on the batches a run never stopped takes, and
+    writes policy/: the weights of that run, to the bit."""
     steps: list[int] = []
     forward = OasisPolicy.forward
 
@@ -213,6 +214,12 @@ def test_a_run_stopped_half_way_resumes_where_it_stopped(
     trainer.run()
     assert steps == [1, 2]  # the run's steps 3 and 4
     assert (tmp_path / "policy" / "model.safetensors").exists()
+    never_stopped = BCTrainer(
+        _bc_config(tiny_dataset, tmp_path / "never_stopped", "train.save_every=2")
+    )
+    never_stopped.run()
+    for name, value in never_stopped.policy.state_dict().items():
+        assert torch.equal(value, trainer.policy.state_dict()[name]), name
     fresh = _bc_config(tiny_dataset, tmp_path / "fresh", "resume=latest")
     with pytest.raises(FileNotFoundError, match=r"nothing to resume: .*training_state\.pt"):
         BCTrainer(fresh)
