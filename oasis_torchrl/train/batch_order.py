@@ -23,10 +23,12 @@ class StepBatches(Sampler[list[int]]):
         size: the dataset's length.
         batch_size: indices per batch.
         seed: the run's seed; epoch ``e``'s order is drawn from ``(seed, e)``.
-        drop_last: leave out each epoch's last, smaller batch (not when it is the only one).
+
+    An epoch's last, smaller batch is left out, unless it is the epoch's only one (fewer rows
+    than ``batch_size``).
 
     Example:
-        >>> batches = StepBatches(size=5, batch_size=2, seed=0, drop_last=True)
+        >>> batches = StepBatches(size=5, batch_size=2, seed=0)
         >>> stream = iter(batches)
         >>> taken = [next(stream) for _ in range(3)]
         >>> batches.first_step = 2  # a run resumed after its second step
@@ -34,12 +36,11 @@ class StepBatches(Sampler[list[int]]):
         True
     """
 
-    def __init__(self, size: int, batch_size: int, seed: int, *, drop_last: bool) -> None:
+    def __init__(self, size: int, batch_size: int, seed: int) -> None:
         if size < 1 or batch_size < 1:
             raise ValueError(f"need a non-empty dataset and batch, got {size} rows, {batch_size}")
         self.size, self.batch_size, self.seed = size, batch_size, seed
-        whole, rest = divmod(size, batch_size)
-        self.per_epoch = whole + (1 if rest and not (drop_last and whole) else 0)
+        self.per_epoch = max(1, size // batch_size)
         self.first_step = 0
 
     def __iter__(self) -> Iterator[list[int]]:

@@ -185,7 +185,7 @@ class BCTrainer:
         # The cache shifts the frames while they are bytes; LeRobot's dataset gives floats.
         self.shift_in_loop = shift if cached is None else None
         data = dataset if cached is None else cached
-        self.batch_order = StepBatches(len(data), cfg.train.batch_size, cfg.seed, drop_last=True)
+        self.batch_order = StepBatches(len(data), cfg.train.batch_size, cfg.seed)
         self.loader = DataLoader(
             data,
             batch_sampler=self.batch_order,
