@@ -14,8 +14,8 @@ policy beats another beyond the noise of the scenes:
 baseline=constant.json``.
 
 On an endpoint that sends frames only (the hosted service) the report holds what frames give
-(return under the reference's depth-collision reward, episode length, likely-collision
-terminations, the reference's progress term; ``ground_truth: false``), and ``vs_baseline`` is
+(return under the frames-only motion reward, episode length, likely-collision
+terminations, the metres seen in the frames; ``ground_truth: false``), and ``vs_baseline`` is
 the unpaired (Welch) difference in mean return: such an endpoint ignores seeds.
 
 With ``compare=[autopilot]`` and ``rerun=pair.rrd`` the other policies

@@ -1,8 +1,11 @@
-"""``oasis-torchrl train {ppo,bc,depth}``: train a driving policy, or the small depth network.
+"""``oasis-torchrl train {ppo,bc,motion,depth}``: train a driving policy, or a frames-only reward's
+network.
 
 ``train ppo`` runs TorchRL PPO in the world model (:class:`~oasis_torchrl.config.PPOConfig`);
 ``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`);
-``train depth`` fits the frames-only reward's depth network to the embedded world's depth
+``train motion`` fits the frames-only reward's motion network to the embedded world's ground truth
+(:class:`~oasis_torchrl.config.training.MotionTrainConfig`); ``train depth`` the reference
+reward's small depth network to its depth
 (:class:`~oasis_torchrl.config.training.DepthTrainConfig`).
 Any setting can be given as ``key=value``, e.g.
 ``oasis-torchrl train ppo env.num_envs=4 collector.total_frames=20000 logger.backend=tensorboard``.
@@ -15,16 +18,16 @@ import sys
 
 from omegaconf import DictConfig
 
-from oasis_torchrl.config.training import BCConfig, DepthTrainConfig, PPOConfig
+from oasis_torchrl.config.training import BCConfig, DepthTrainConfig, MotionTrainConfig, PPOConfig
 
 logger = logging.getLogger(__name__)
 
 NAME = "train"
 HELP = (
     "train a driving policy: ppo (TorchRL, in the world model) or bc (LeRobot dataset); or "
-    "depth (the frames-only reward's depth network)"
+    "motion (the frames-only reward's network) or depth (the reference reward's depth network)"
 )
-CONFIG = {"ppo": PPOConfig, "bc": BCConfig, "depth": DepthTrainConfig}
+CONFIG = {"ppo": PPOConfig, "bc": BCConfig, "motion": MotionTrainConfig, "depth": DepthTrainConfig}
 
 
 def lost_worker(error: BaseException) -> bool:
@@ -54,6 +57,11 @@ def run(cfg: DictConfig, algorithm: str) -> int:
 
             result = train_ppo(cfg)
             logger.info("PPO done: checkpoint %s, policy %s", result.checkpoint, result.policy_dir)
+        elif algorithm == "motion":
+            from oasis_torchrl.train.motion import train_motion
+
+            logger.info("motion network done: %s", train_motion(cfg).path)
+            return 0
         elif algorithm == "depth":
             from oasis_torchrl.train.depth import train_depth
 

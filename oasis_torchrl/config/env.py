@@ -12,7 +12,7 @@ LOCAL = "local"
 """``env.endpoint`` of an embedded server started for the env."""
 AUTO = "auto"
 """A setting found from the endpoint (:mod:`oasis_torchrl.envs.capabilities`)."""
-REWARD_KINDS = (AUTO, "ground_truth", "depth")
+REWARD_KINDS = (AUTO, "ground_truth", "motion", "depth")
 
 
 @dataclass
@@ -31,13 +31,19 @@ class EmbeddedServerConfig:
 
 @dataclass
 class RewardConfig:
-    """The reward: ground truth where the endpoint sends it, else the reference's
-    depth-collision reward on the front frame."""
+    """The reward: ground truth where the endpoint sends it, else the motion reward on the
+    front frames (progress seen, crashes seen)."""
 
     kind: str = option(
         AUTO,
-        help="auto (ground_truth where the endpoint sends it, else depth) | ground_truth "
-        "(embedded server) | depth (the depth-collision reward on frames alone)",
+        help="auto (ground_truth where the endpoint sends it, else motion) | ground_truth "
+        "(embedded server) | motion (progress and crashes seen in the frames) | depth (the "
+        "reference's depth-collision reward, for comparison)",
+    )
+    motion_model: str = option(
+        "small",
+        help="the motion reward's network: small (the shipped one) or a weights file written "
+        "by 'oasis-torchrl train motion'",
     )
     depth_model: str = option(
         "small",

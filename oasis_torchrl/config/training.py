@@ -439,6 +439,118 @@ class BCConfig(BCSettings):
     progress: bool = option(True, help="tqdm progress bars")
 
 
+# -- the frames-only reward's motion network -----------------------------------------------
+
+JUDGED_PROMPTS = (
+    "highway at night in the rain",
+    "urban street at sunset in the snow",
+    "rural road at night in the fog",
+    "highway at sunset in the rain",
+)
+"""The held-out scenes every learned policy and the frames-only reward are judged on: no
+training prompt of the project is one of them."""
+
+MOTION_TRAINING_PROMPTS = (
+    "urban street",
+    "city street at night",
+    "urban street at sunset in the rain",
+    "city street in the snow",
+    "foggy urban street at night",
+    "rainy city street",
+    "highway",
+    "highway at sunset",
+    "snowy highway",
+    "foggy highway at sunset",
+    "rural road",
+    "rural road at night",
+    "rural road at sunset in the fog",
+    "rainy rural road",
+    "snowy rural road at night",
+    "highway at night",
+)
+"""The scenes ``train motion`` draws from: every layout, lighting and weather, none of
+:data:`JUDGED_PROMPTS`."""
+
+
+@dataclass
+class MotionTrainConfig:
+    """``oasis-torchrl train motion``: the frames-only reward's network
+    (oasis_torchrl.models.motion) on the embedded world's front frames, labelled by its ground
+    truth (progress, collisions)."""
+
+    image_size: list[int] = option(
+        default_factory=lambda: [64, 96], help="[height, width] the frames are decoded to"
+    )
+    hosted_every: int = option(
+        7,
+        help="every this many rounds, one is rendered at the hosted model's 768x512 (decoded "
+        "down to image_size); the others at image_size (0: none)",
+    )
+    frame_format: str = option(
+        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+    )
+    channels: list[int] = option(
+        default_factory=lambda: [16, 32, 48, 64], help="widths of the network's levels"
+    )
+    horizon: int = option(5, help="chunks ahead the collision-ahead head predicts")
+    prompts: list[str] = option(
+        default_factory=lambda: list(MOTION_TRAINING_PROMPTS), help="scenes, one drawn per episode"
+    )
+    drivers: list[str] = option(
+        default_factory=lambda: [
+            "autopilot",
+            "constant:throttle=1.0,steering=0.0",
+            "scripted:throttle=sine:0.7:90:0.3,steering=sine:0.4:60",
+            "scripted:throttle=1.0,steering=weave:0.088:20:100",
+            "constant:throttle=0.5,steering=0.0",
+            "scripted:throttle=sine:1.0:70,steering=sine:0.8:30",
+            "constant:throttle=0.0,steering=0.0",
+            "scripted:throttle=0.75,steering=sine:0.15:120",
+        ],
+        help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
+        "in turn",
+    )
+    num_envs: int = option(8, help="episodes driven at once (one round)")
+    episodes: int = option(256, help="episodes driven (a multiple of num_envs)")
+    steps: int = option(60, help="chunks per episode (a collision does not end it)")
+    epochs: int = option(12, help="passes over the chunks")
+    batch_size: int = option(64, help="chunks per step")
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
+    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    validation: float = option(
+        0.125, help="share of the episodes (whole rounds) kept out of training to report losses"
+    )
+    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    chunks_file: str | None = option(
+        None,
+        help="keep the driven chunks here: read when the file exists (no driving), else written "
+        "after driving (null: not kept)",
+    )
+    output: str = option("outputs/motion/motion_small.pt", help="the weights file written")
+    progress: bool = option(True, help="tqdm progress bars")
+
+    def __post_init__(self) -> None:
+        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
+            raise ValueError(
+                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
+                f"({self.num_envs})"
+            )
+        if len(self.image_size) != 2 or min(self.image_size) <= 0:
+            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
+        if self.hosted_every < 0:
+            raise ValueError(f"hosted_every must be >= 0, got {self.hosted_every}")
+        for name in ("horizon", "steps", "epochs", "batch_size", "lr"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
+        if not self.drivers or not self.prompts:
+            raise ValueError("drivers and prompts must each name at least one")
+        judged = sorted(set(self.prompts) & set(JUDGED_PROMPTS))
+        if judged:
+            raise ValueError(f"prompts must not hold the judged scenes {judged}")
+
+
 # -- the small depth network -------------------------------------------------------------------
 
 DEPTH_TRAINING_PROMPTS = (

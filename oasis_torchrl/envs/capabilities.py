@@ -43,7 +43,7 @@ class Capabilities:
     Example:
         >>> frames = Capabilities("http://127.0.0.1:1", ground_truth=False)
         >>> frames.summary()  # doctest: +ELLIPSIS
-        'http://127.0.0.1:1 sends frames only: the depth-collision reward, ...'
+        'http://127.0.0.1:1 sends frames only: the motion reward, ...'
         >>> frames.require("the autopilot", "pass a person or a policy")
         Traceback (most recent call last):
         ...
@@ -75,7 +75,7 @@ class Capabilities:
                 "critic and auxiliary head, distance and collision metrics and the autopilot are on"
             )
         return (
-            f"{self.endpoint} sends frames only: the depth-collision reward, a camera-only "
+            f"{self.endpoint} sends frames only: the motion reward, a camera-only "
             "critic, metrics from frames, demonstrations from a person, recordings or a policy"
         )
 
@@ -129,19 +129,23 @@ def probe(endpoint: str, *, api_key: str | None = None, timeout: float = 60.0) -
         raise ValueError(f"cannot ask {endpoint} what it sends: {error}") from error
 
 
+FRAMES_ONLY_REWARD = "motion"
+"""The reward ``env.reward.kind=auto`` picks where the endpoint sends frames alone."""
+
+
 def resolve_reward_kind(kind: str, found: Capabilities) -> str:
     """``env.reward.kind`` resolved: ``auto`` becomes ground_truth where the endpoint sends it,
-    else depth; ground_truth on a frames-only endpoint is an error.
+    else motion (the frames-only reward); ground_truth on a frames-only endpoint is an error.
 
     Example:
         >>> resolve_reward_kind("auto", Capabilities("x", ground_truth=False))
-        'depth'
+        'motion'
     """
     if kind == "auto":
-        return "ground_truth" if found.ground_truth else "depth"
+        return "ground_truth" if found.ground_truth else FRAMES_ONLY_REWARD
     if kind == "ground_truth":
         found.require(
             "env.reward.kind=ground_truth",
-            "use env.reward.kind=depth (the depth-collision reward) or auto",
+            "use env.reward.kind=motion (the frames-only reward) or auto",
         )
     return kind

@@ -36,8 +36,11 @@ from oasis_torchrl.rewards import (
     ClearanceShaping,
     DepthCollisionReward,
     GroundTruthReward,
+    MotionReward,
+    MotionRewardConfig,
     NamedDepth,
     RewardModule,
+    load_motion_net,
 )
 from oasis_torchrl.sim.config import ServerConfig
 
@@ -46,8 +49,8 @@ Settings = EnvConfig | DictConfig
 
 def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardModule:
     """The reward module of ``env.reward`` on an endpoint that sends what ``found`` says
-    (``kind: auto`` is the ground-truth reward where it sends ground truth, else the reference's
-    depth-collision reward with ``depth_model``).
+    (``kind: auto`` is the ground-truth reward where it sends ground truth, else the motion
+    reward on the frames).
 
     Example:
         >>> embedded = Capabilities("the embedded server", ground_truth=True)
@@ -55,11 +58,14 @@ def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardMo
         'GroundTruthReward'
         >>> type(make_reward(RewardConfig(clearance_weight=0.2), embedded)).__name__
         'ClearanceShaping'
+        >>> type(make_reward(RewardConfig(), Capabilities("hosted", ground_truth=False))).__name__
+        'MotionReward'
     """
     if cfg.kind not in REWARD_KINDS:
         raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {cfg.kind!r}")
-    if resolve_reward_kind(cfg.kind, found) == "depth":
-        return DepthCollisionReward(NamedDepth(cfg.depth_model))
+    kind = resolve_reward_kind(cfg.kind, found)
+    if kind != "ground_truth":
+        return make_frames_reward(cfg, kind)
     reward = GroundTruthReward(
         progress_scale=cfg.progress_scale,
         collision_penalty=cfg.collision_penalty,
@@ -68,6 +74,25 @@ def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardMo
     if not cfg.clearance_weight:
         return reward
     return ClearanceShaping(reward, cfg.clearance_weight, cfg.clearance_horizon)
+
+
+def make_frames_reward(cfg: RewardConfig | DictConfig, kind: str = "motion") -> RewardModule:
+    """The frames-only reward ``kind`` names (``motion`` or the reference's ``depth``), with the
+    settings of ``env.reward``: what an endpoint without ground truth is scored with, and what
+    an evaluation scores beside the ground truth.
+
+    Example:
+        >>> type(make_frames_reward(RewardConfig(), "depth")).__name__
+        'DepthCollisionReward'
+    """
+    if kind == "depth":
+        return DepthCollisionReward(NamedDepth(cfg.depth_model))
+    if kind != "motion":
+        raise ValueError(f"{kind!r} is not a frames-only reward: motion or depth")
+    constants = MotionRewardConfig(
+        progress_scale=cfg.progress_scale, collision_penalty=cfg.collision_penalty
+    )
+    return MotionReward(load_motion_net(cfg.motion_model), constants)
 
 
 def env_front_crop(cfg: Settings, required: float | None) -> float | None:
@@ -101,6 +126,7 @@ def make_env(
     frame_stack: int | None = POLICY_FRAMES,
     privileged: bool = False,
     front_crop: float | None = None,
+    reward: RewardModule | None = None,
     **env_kwargs: Any,
 ) -> TransformedEnv:
     """The :class:`~oasis_torchrl.envs.OasisEnv` of an ``env`` settings section, transformed.
@@ -118,6 +144,7 @@ def make_env(
             truth: an error on an endpoint that sends frames only).
         front_crop: the front crop a policy reads (its fraction): the env gets it whatever
             ``env.front_crop`` says (another fraction there is an error); None: the section's.
+        reward: the reward module; None: ``env.reward``'s (:func:`make_reward`).
         **env_kwargs: further :class:`~oasis_torchrl.envs.OasisEnv` arguments.
 
     Example:
@@ -157,7 +184,7 @@ def make_env(
         front_crop=crop,
         all_frames=all_frames,
         max_steps=max_steps or cfg.max_steps,
-        reward=make_reward(cfg.reward, found),
+        reward=make_reward(cfg.reward, found) if reward is None else reward,
         **env_kwargs,
     )
     transforms = [RewardSum(), StepCounter()]

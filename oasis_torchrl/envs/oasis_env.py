@@ -60,9 +60,8 @@ from oasis_torchrl.protocol import (
     with_front_crop,
 )
 from oasis_torchrl.rewards import (
-    DepthCollisionReward,
     GroundTruthReward,
-    NamedDepth,
+    MotionReward,
     RewardModule,
     as_reward_module,
 )
@@ -119,16 +118,18 @@ class OasisWrapper(_EnvWrapper):
         chunk_actions: actions are ``[N, 4, 2]`` chunks (default) or ``[N, 2]`` repeated 4 times.
         max_steps: steps (chunks) before an episode is truncated.
         reward: a :class:`~oasis_torchrl.rewards.RewardModule` or a callable ``fn(td) -> Tensor``;
-            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth, the
-            reference's :class:`~oasis_torchrl.rewards.DepthCollisionReward` on frames alone
-            (its depth from the shipped small network); :class:`~oasis_torchrl.rewards.NoReward`
-            for none.
+            default: :class:`~oasis_torchrl.rewards.GroundTruthReward` with ground truth,
+            :class:`~oasis_torchrl.rewards.MotionReward` on frames alone (the shipped motion
+            network); :class:`~oasis_torchrl.rewards.NoReward` for none.
         ground_truth: expose the embedded simulator's ground truth as ``("truth", field)``; a
             server that sends none yields NaN.
         depth_cameras: cameras whose ground-truth depth is fetched after each step (embedded
             server only), e.g. ``("front",)`` for ``GroundTruthDepth``.
         terminate_on_collision: end the episode when the ground truth reports a collision.
         fps: the world's frame rate (the protocol does not say; the hosted preview uses 20).
+        observe_all_frames: observe all 4 frames of each chunk (default: whatever the pool
+            returns); False with a pool of ``frames="all"`` observes the last frame while the
+            reward still reads all 4 (a reward that ``reads_chunk_frames``).
         device: device of the returned tensors.
 
     Example:
@@ -157,6 +158,7 @@ class OasisWrapper(_EnvWrapper):
         depth_cameras: Sequence[str] = (),
         terminate_on_collision: bool = True,
         fps: float = FPS,
+        observe_all_frames: bool | None = None,
         device: torch.device | str = "cpu",
     ) -> None:
         if env is None:
@@ -166,7 +168,9 @@ class OasisWrapper(_EnvWrapper):
         num_envs = env.num_sessions
         self.num_envs = num_envs
         self.max_steps = max_steps
-        self.all_frames = env.frames == "all"
+        self.all_frames = env.frames == "all" if observe_all_frames is None else observe_all_frames
+        if self.all_frames and env.frames != "all":
+            raise ValueError("observe_all_frames needs a pool built with frames='all'")
         self.chunk_actions = chunk_actions
         self.terminate_on_collision = terminate_on_collision
         self.ground_truth = ground_truth
@@ -308,7 +312,7 @@ class OasisWrapper(_EnvWrapper):
         if restarted.any():  # a re-opened session starts a new clip: per-row reward state too
             self._reward.reset(restarted.flatten())
         obs = self._observation(step, rows, chunk[:, -1])
-        scored = self._reward(obs.clone(False).set("action", chunk.to(self.device)))
+        scored = self._reward(self._reward_input(obs, step, chunk))
         terminated = scored.get("terminated", torch.zeros(self.num_envs, 1, dtype=torch.bool))
         if self.terminate_on_collision and "truth" in obs.keys():
             terminated = terminated | (obs["truth", "collided"][:, -1:] > 0.5)
@@ -319,6 +323,17 @@ class OasisWrapper(_EnvWrapper):
         self._last_obs = obs.clone(False)
         obs.set("reward", scored["reward"].to(torch.float32))
         return obs.update(_flags(self.num_envs, self.device, terminated, truncated))
+
+    def _reward_input(
+        self, obs: TensorDictBase, step: PoolStep, chunk: torch.Tensor
+    ) -> TensorDictBase:
+        """What the reward module reads: the observation, the action chunk and, where the pool
+        returns them, all 4 frames of every camera (the observation may keep the last alone)."""
+        scored = obs.clone(False).set("action", chunk.to(self.device))
+        if self._env.frames == "all" and not self.all_frames:
+            for camera in self.layout.cameras:
+                scored["pixels", camera] = torch.from_numpy(step.frames[camera]).to(self.device)
+        return scored
 
     def _action_chunk(self, action: torch.Tensor) -> torch.Tensor:
         """Validate the action before any request and expand it to ``[N, 4, 2]``."""
@@ -415,10 +430,12 @@ class OasisEnv(OasisWrapper):
     With ground truth (the embedded server) the default reward is
     :class:`~oasis_torchrl.rewards.GroundTruthReward`, per row and step:
     ``0.1 * progress_gained - 2 * collision - 0.01 * lane_offset`` (metres gained along the road,
-    1 on the first collided step, mean metres from the lane's centre). On frames alone it is the
-    reference reward, :class:`~oasis_torchrl.rewards.DepthCollisionReward`:
-    ``expm1(3 * mean(max(throttle, 0))) / expm1(3)`` minus a straightness penalty (a depth network
-    on the front frame every step). ``reward=NoReward()`` scores nothing (0, never terminates).
+    1 on the first collided step, mean metres from the lane's centre). On frames alone it is
+    :class:`~oasis_torchrl.rewards.MotionReward`: ``0.1 * seen_progress - 2 * crash``, the metres
+    a network sees the car move in the chunk's front frames, and a crash when the frames show
+    one (which ends the episode). The reference's reward,
+    :class:`~oasis_torchrl.rewards.DepthCollisionReward`, is there by name for comparison.
+    ``reward=NoReward()`` scores nothing (0, never terminates).
 
     ## Starting state
 
@@ -428,7 +445,7 @@ class OasisEnv(OasisWrapper):
     ## Episode end
 
     - Termination: a frame of the chunk collided (ground truth: an obstacle hit or the road
-      left), or the reward module says so (the depth reward: collision risk reached 1).
+      left), or the reward module says so (the motion reward: a crash seen in the frames).
     - Truncation: ``max_steps`` steps (chunks; 512 by default), or the row's session was lost and
       re-opened mid-episode (counted in ``("info", "session_restarts")``).
 
@@ -526,6 +543,9 @@ class OasisEnv(OasisWrapper):
                     "drive with a person, recordings or a policy"
                 )
         formats = {} if frame_format is None else {"accepted_formats": [FORMAT_NAMES[frame_format]]}
+        truth = (local and not config.hosted) if ground_truth is None else ground_truth
+        reward = _resolve_reward(kwargs.pop("reward", None), truth)
+        pool_frames = all_frames or getattr(reward, "reads_chunk_frames", False)
         pool = SessionPool(
             embedded_server(config, num_envs) if local else endpoint,
             num_envs,
@@ -534,7 +554,7 @@ class OasisEnv(OasisWrapper):
             timeout=timeout,
             retry=retry,
             resize=frame_size,
-            frames="all" if all_frames else "last",
+            frames="all" if pool_frames else "last",
             expert=expert,
             front_crop=front_crop,
             **formats,
@@ -543,8 +563,10 @@ class OasisEnv(OasisWrapper):
             pool,
             streams=streams,
             prompts=prompts,
-            ground_truth=(local and not config.hosted) if ground_truth is None else ground_truth,
+            reward=reward,
+            ground_truth=truth,
             fps=config.fps if local else FPS,
+            observe_all_frames=all_frames,
             **kwargs,
         )
 
@@ -637,7 +659,7 @@ def _flags(
 
 def _resolve_reward(reward: Any, ground_truth: bool) -> RewardModule:
     if reward is None:
-        return GroundTruthReward() if ground_truth else DepthCollisionReward(NamedDepth())
+        return GroundTruthReward() if ground_truth else MotionReward()
     if hasattr(reward, "reset"):
         return reward
     return as_reward_module(reward)

@@ -32,11 +32,14 @@ from oasis_torchrl.rewards.depth_sources import (
     MonocularDepth,
 )
 from oasis_torchrl.rewards.ground_truth import GroundTruthReward
+from oasis_torchrl.rewards.motion import MotionReward, MotionRewardConfig
+from oasis_torchrl.rewards.motion_net import SMALL_MOTION_MODEL, MotionModelError, load_motion_net
 from oasis_torchrl.rewards.shaping import ClearanceShaping
 
 __all__ = [
     "DEFAULT_DEPTH_MODEL",
     "SMALL_DEPTH_MODEL",
+    "SMALL_MOTION_MODEL",
     "CallableDepth",
     "CallableReward",
     "ClearanceShaping",
@@ -47,6 +50,9 @@ __all__ = [
     "GroundTruthDepth",
     "GroundTruthReward",
     "MonocularDepth",
+    "MotionModelError",
+    "MotionReward",
+    "MotionRewardConfig",
     "NamedDepth",
     "NoReward",
     "RewardFn",
@@ -55,6 +61,7 @@ __all__ = [
     "as_reward_module",
     "collision_risk",
     "forward_reward",
+    "load_motion_net",
     "normalize_per_image",
     "reward_output",
     "straightness_penalty",

@@ -2,7 +2,7 @@
 (with its standard error over episodes), collision rate, and ratios to the autopilot and to the
 best constant action, as a text table and as a matplotlib PNG. Evaluations on an endpoint that
 sends frames only (``ground_truth: false``: no distance) are compared by their mean return
-under the reference's depth-collision reward instead, and their collisions are the reward's
+under the frames-only reward (the motion reward) instead, and their collisions are the reward's
 likely-collision terminations.
 
 Evaluations are :func:`oasis_torchrl.train.evaluate.EvalReport.to_dict` dicts (aggregates and

@@ -8,10 +8,11 @@ episode ending *terminated* (the ground-truth collision, or the reward's termina
 return sums the rewards up to and including that step. With the same policy, prompts, seeds
 and server, the numbers are the same run after run.
 
-Every endpoint also gets what frames give: the return under the reference's depth-collision
-reward (the env's reward on frames alone, else scored beside it: :class:`ReferenceScore`), the
-episode length, the likely-collision terminations (that reward's) and the reference's progress
-term (the sum of its ``forward`` term). On an endpoint that sends frames only (the hosted
+Every endpoint also gets what frames give: the return under the frames-only reward (the env's
+reward on frames alone, else scored beside it: :class:`ReferenceScore`; the motion reward unless
+``env.reward.kind`` names the reference's depth reward), the episode length, the likely-collision
+terminations (that reward's) and its progress term (the sum of its first term: ``seen_progress``,
+or the depth reward's ``forward``). On an endpoint that sends frames only (the hosted
 service, a hosted-like server) there is no distance and no ground-truth collision, and the
 report says ``ground_truth: false``. Such an endpoint ignores seeds, so its
 episodes cannot be paired across policies: comparisons (:func:`difference`) then use the
@@ -39,11 +40,17 @@ from torchrl.envs import EnvBase
 from tqdm import tqdm
 
 from oasis_torchrl.client import SceneLookup
+from oasis_torchrl.config.env import RewardConfig
 from oasis_torchrl.drivers.base import Driver
-from oasis_torchrl.envs.factory import make_env
+from oasis_torchrl.envs.capabilities import (
+    FRAMES_ONLY_REWARD,
+    env_capabilities,
+    resolve_reward_kind,
+)
+from oasis_torchrl.envs.factory import make_env, make_frames_reward
 from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
-from oasis_torchrl.rewards import DepthCollisionReward, NamedDepth
+from oasis_torchrl.rewards import DepthCollisionReward, MotionReward
 from oasis_torchrl.train.driving import drive
 
 if TYPE_CHECKING:
@@ -55,7 +62,7 @@ logger = logging.getLogger(__name__)
 Policy = Callable[[TensorDictBase], TensorDictBase]
 NEXT = "next"
 REFERENCE = "reference"
-"""Where :class:`ReferenceScore` puts the reference reward's entries of a step."""
+"""Where :class:`ReferenceScore` puts the frames-only reward's entries of a step."""
 _PAIRED_KEYS = ("prompt", "episode_seed", "distance")
 
 
@@ -76,11 +83,11 @@ episode_return=2.0, steps=60, progress=None, likely_collision=False, reference_r
     episode_return: float
     steps: int
     progress: float | None = None
-    """The reference reward's progress (its ``forward`` term) summed (None: not scored)."""
+    """The frames-only reward's progress term summed (None: not scored)."""
     likely_collision: bool = False
-    """The reference reward terminated within the episode (a likely collision, from frames)."""
+    """The frames-only reward terminated within the episode (a likely collision, from frames)."""
     reference_return: float | None = None
-    """The return under the reference's depth-collision reward (None: not scored)."""
+    """The return under the frames-only reward (None: not scored)."""
 
 
 @dataclass
@@ -120,19 +127,19 @@ class EvalReport:
 
     @property
     def mean_progress(self) -> float | None:
-        """Mean of the reference reward's progress term (None under another reward)."""
+        """Mean of the frames-only reward's progress term (None: not scored)."""
         progress = [episode.progress for episode in self.episodes]
         return None if None in progress else _mean(progress)
 
     @property
     def mean_reference_return(self) -> float | None:
-        """Mean return under the reference's depth-collision reward (None: not scored)."""
+        """Mean return under the frames-only reward (None: not scored)."""
         values = [episode.reference_return for episode in self.episodes]
         return None if None in values else _mean(values)
 
     @property
     def likely_collision_rate(self) -> float:
-        """Fraction of episodes the reward ended (the depth reward's likely collisions)."""
+        """Fraction of episodes the frames-only reward ended (its likely collisions)."""
         return _mean([float(episode.likely_collision) for episode in self.episodes])
 
     def progress_figure(self) -> dict[str, str]:
@@ -146,8 +153,8 @@ class EvalReport:
         return {"return": f"{self.mean_return:.1f}"}
 
     def summary(self) -> dict[str, float]:
-        """The aggregates (for loggers and progress bars; ``mean_progress`` under the
-        reference reward only)."""
+        """The aggregates (for loggers and progress bars; ``mean_progress`` where a frames-only
+        reward was scored)."""
         progress, reference = self.mean_progress, self.mean_reference_return
         return {
             "mean_distance": self.mean_distance,
@@ -480,15 +487,19 @@ def episode_results(rollout: TensorDictBase) -> list[EpisodeResult]:
 def _reference_sums(
     rollout: TensorDictBase, within: torch.Tensor
 ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
-    """Per row: the reference reward's return, its progress term and whether it terminated
-    within the episode, from :class:`ReferenceScore`'s entries or, where the env's reward is the
-    reference, from the env's own; all None when neither is there."""
+    """Per row: the frames-only reward's return, its progress term and whether it terminated
+    within the episode, from :class:`ReferenceScore`'s entries or, where the env's reward is a
+    frames-only one, from the env's own; all None when neither is there."""
     scored = rollout.get((NEXT, REFERENCE), None)
-    forward_key = "forward" if scored is not None else ("reward_terms", "forward")
-    scored = rollout.get(NEXT) if scored is None else scored
-    forward = scored.get(forward_key, None)
-    if forward is None:
-        return None, None, None
+    if scored is not None:
+        forward = scored.get("progress")
+    else:
+        scored = rollout.get(NEXT)
+        terms = scored.get("reward_terms", None)
+        names = () if terms is None else [key for key in terms.keys() if key in PROGRESS_TERMS]
+        if not names:
+            return None, None, None
+        forward = terms.get(names[0])
     shape = rollout.batch_size
     reference = (scored.get("reward").reshape(shape).cpu() * within).sum(1)
     progress = (forward.reshape(shape).cpu() * within).sum(1)
@@ -496,22 +507,29 @@ def _reference_sums(
     return reference, progress, likely
 
 
+PROGRESS_TERMS = (MotionReward.terms[0], DepthCollisionReward.terms[0])
+"""The progress terms of the frames-only rewards (the motion reward's, the depth reward's)."""
+
+
 class ReferenceScore:
-    """The reference's depth-collision reward scored beside an env whose own reward is another
-    (the ground-truth reward): every step gets ``("next", "reference", <reward | terminated |
-    forward>)``, so an evaluation reports what frames give on every endpoint.
+    """The frames-only reward scored beside an env whose own reward is another (the
+    ground-truth reward): every step gets ``("next", "reference", <reward | terminated |
+    progress>)``, so an evaluation reports what frames give on every endpoint.
+
+    It reads all 4 frames of each chunk: the :class:`Evaluator` observes them for it.
 
     Example:
-        >>> score = ReferenceScore("small")
+        >>> score = ReferenceScore(RewardConfig())
         >>> score.reward.terms[0]
-        'forward'
+        'seen_progress'
     """
 
-    def __init__(self, depth_model: str) -> None:
-        self.reward = DepthCollisionReward(NamedDepth(depth_model))
+    def __init__(self, reward_cfg: RewardConfig | DictConfig) -> None:
+        kind = "depth" if reward_cfg.kind == "depth" else FRAMES_ONLY_REWARD
+        self.reward = make_frames_reward(reward_cfg, kind)
 
     def on_reset(self, td: TensorDictBase) -> None:
-        """New episodes on every row: the reference's heading restarts."""
+        """New episodes on every row: the reward's per-row state restarts."""
         self.reward.reset(torch.ones(int(td.batch_size[0]), dtype=torch.bool))
 
     def on_step(self, td: TensorDictBase) -> None:
@@ -521,7 +539,7 @@ class ReferenceScore:
         entries = {
             "reward": scored.get("reward").float(),
             "terminated": scored.get("terminated"),
-            "forward": scored.get(("reward_terms", "forward")).float(),
+            "progress": scored.get(("reward_terms", self.reward.terms[0])).float(),
         }
         step.set(REFERENCE, TensorDict(entries, batch_size=step.batch_size))
 
@@ -636,14 +654,18 @@ class Evaluator:
         self.progress = progress
         self._batches = 0
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
+        frames_scored = resolve_reward_kind(env_cfg.reward.kind, env_capabilities(env_cfg))
+        self.reference = None if frames_scored != "ground_truth" else ReferenceScore(env_cfg.reward)
+        recorded = bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger)
         self.env = make_env(
             env_cfg,
             num_envs=len(row_prompts),
             prompts=row_prompts,
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
-            # Recorders keep every frame; the metrics and the policies need the last alone.
-            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger),
+            # Recorders keep every frame, and the frames-only reward scored beside reads them;
+            # the policies need the last alone.
+            all_frames=recorded or self.reference is not None,
             frame_stack=frame_stack,
             expert=expert,
             front_crop=front_crop,
@@ -653,8 +675,6 @@ class Evaluator:
             eval_cfg.get("lerobot"),
             scenes=self.env.scene_source(),
         )
-        scored = isinstance(self.env.base_env.reward_module, DepthCollisionReward)
-        self.reference = None if scored else ReferenceScore(env_cfg.reward.depth_model)
         if rerun_logger is not None and self.frames_only:
             logger.warning(
                 "policies side by side on a frames-only endpoint: it ignores seeds, so each "

@@ -20,7 +20,7 @@ autopilot: the demonstrations come from ``record.source`` (a saved or served pol
 dataset of a person's drives, or a folder of recordings in the reference format, imported), the
 DAgger rounds are labelled by ``dagger.labeller`` (by default the demonstrating policy; none
 after a dataset), behaviour cloning has no auxiliary loss, PPO a camera-only critic and the
-depth-collision reward, and the comparison reports returns (:class:`Demonstrators`). Without a
+frames-only motion reward, and the comparison reports returns (:class:`Demonstrators`). Without a
 source it stops at once, saying what to pass.
 
 Every stage shows a progress bar. A stage whose output already exists is reused (delete the

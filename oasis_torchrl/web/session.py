@@ -39,8 +39,9 @@ Command = Record | Reset | Takeover
 IDLE_S = 0.05
 SHOWN_TRUTH = ("speed", "progress")
 """Ground truth the page shows where the server sends it (the hosted model does not)."""
-RISK = ("next", "reward_terms", "collision_risk")
-"""The depth-collision reward's risk (``env.reward.kind=depth``), the page's risk bar."""
+RISKS = (("next", "reward_terms", "collision_ahead"), ("next", "reward_terms", "collision_risk"))
+"""The page's risk bar: the motion reward's chance of a collision ahead (the frames-only
+default), or the depth-collision reward's risk (``env.reward.kind=depth``)."""
 
 
 def _known(value: torch.Tensor | None) -> float | None:
@@ -49,6 +50,15 @@ def _known(value: torch.Tensor | None) -> float | None:
         return None
     last = float(value.reshape(-1)[-1])
     return last if math.isfinite(last) else None
+
+
+def _risk(step: TensorDictBase) -> float | None:
+    """The risk bar's value: the first of :data:`RISKS` the step holds, else None."""
+    for key in RISKS:
+        value = _known(step.get(key, None))
+        if value is not None:
+            return value
+    return None
 
 
 class DriveSession:
@@ -207,7 +217,7 @@ class DriveSession:
             "period_ms": round(self.period * 1000),
             "human": human,
             "policy": self.pilot.policy is not None,
-            "risk": None if step is None else _known(step.get(RISK, None)),
+            "risk": None if step is None else _risk(step),
             "recording_enabled": recording is not None,
             "recording": recording is not None and recording.recording,
             "episode_steps": 0 if recording is None else recording.steps,

@@ -24,7 +24,7 @@ def _privileged(names: object) -> list[str]:
     return [str(name) for name in names if any(w in str(name) for w in PRIVILEGED_WORDS)]
 
 
-def test_hosted_like_env_sends_frames_and_scores_them_with_the_depth_reward() -> None:
+def test_hosted_like_env_sends_frames_and_scores_them_with_the_motion_reward() -> None:
     env = OasisEnv("local", 2, server=ServerConfig(width=96, height=64, hosted=True), max_steps=3)
     try:
         rollout = env.rollout(3, break_when_any_done=False)
@@ -32,7 +32,8 @@ def test_hosted_like_env_sends_frames_and_scores_them_with_the_depth_reward() ->
         env.close()
     keys = rollout.keys(include_nested=True, leaves_only=True)
     assert not _privileged(keys)
-    assert ("next", "reward_terms", "forward") in keys  # the reference's depth-collision reward
+    assert ("next", "reward_terms", "seen_progress") in keys  # the frames-only motion reward
+    # The env observes the last frame of each chunk; the reward read all four.
     assert rollout["next", "pixels", "front"].shape == (2, 3, 64, 96, 3)
 
 

@@ -1,0 +1,141 @@
+"""The frames-only reward: metres the car is seen to move, and the crashes the frames show.
+
+What the hosted world model sends is frames, so this is the reward of every endpoint without
+ground truth (``env.reward.kind=auto`` picks it there). Per row and step (a chunk of 4 frames),
+from the front camera's 4 frames through :class:`~oasis_torchrl.models.motion.MotionNet`::
+
+    reward = progress_scale * seen_progress
+             - collision_penalty * crash
+             - ahead_weight * P(collision within the head's horizon)
+
+- ``seen_progress``: the metres the network sees the car move during the chunk, linear, with
+  ``deadband`` metres shaved off either way (a car standing still earns nothing, whatever its
+  throttle: the reward never reads the throttle to pay).
+- ``crash``: 1 on the first step the frames show a crash, which also ends the episode: the
+  collided head says so, or the car is *stuck*: it has not been seen to move (less than
+  ``stuck_metres`` a chunk) for ``stuck_chunks`` chunks in a row while the mean throttle was at
+  least ``stuck_throttle``. A car that collided stands still, whatever the policy asks.
+- the collision-ahead cost reads the chunk's actions with the frames (off by default).
+
+It needs all 4 frames of a chunk: the env hands them over whatever it observes
+(:class:`~oasis_torchrl.envs.OasisEnv` asks the server for them when the reward reads them).
+Where the endpoint sends ground truth, :class:`~oasis_torchrl.rewards.GroundTruthReward` is the
+default and this reward is scored beside it in evaluations, so the two can be compared.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+
+from oasis_torchrl.models.motion import MotionNet, collision_within
+from oasis_torchrl.protocol import CHUNK, FRONT
+from oasis_torchrl.rewards.base import RowState, batch_rows, get_entry, reward_output
+from oasis_torchrl.rewards.motion_net import SMALL_MOTION_MODEL, load_motion_net
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionRewardConfig:
+    """Constants of :class:`MotionReward`.
+
+    >>> MotionRewardConfig().stuck_chunks
+    2
+    """
+
+    progress_scale: float = 0.1
+    collision_penalty: float = 2.0
+    ahead_weight: float = 0.0
+    deadband: float = 0.03
+    stuck_metres: float = 0.06
+    stuck_throttle: float = 0.5
+    stuck_chunks: int = 2
+    collided_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        if min(self.progress_scale, self.collision_penalty, self.ahead_weight) < 0:
+            raise ValueError("progress_scale, collision_penalty and ahead_weight must be >= 0")
+        if self.deadband < 0 or self.stuck_metres < 0 or self.stuck_chunks < 1:
+            raise ValueError(
+                f"deadband and stuck_metres must be >= 0 and stuck_chunks >= 1, got "
+                f"{self.deadband}, {self.stuck_metres}, {self.stuck_chunks}"
+            )
+        if not 0.0 < self.collided_threshold < 1.0:
+            raise ValueError(f"collided_threshold must be in (0, 1), got {self.collided_threshold}")
+
+
+class MotionReward:
+    """Progress seen in the front frames, and crashes seen there, ending the episode.
+
+    Args:
+        net: the motion network; default: the shipped one (``env.reward.motion_model=small``).
+        config: the reward's constants.
+        camera: the camera it reads (the network was trained on the front camera).
+
+    Example:
+        >>> reward = MotionReward()
+        >>> still = torch.full((2, 4, 64, 96, 3), 90, dtype=torch.uint8)
+        >>> td = TensorDict({("pixels", "front"): still, "action": torch.zeros(2, 4, 2)}, [2])
+        >>> out = reward(td)
+        >>> out["reward"].shape, out["reward_terms", "seen_progress"].abs().max().item() < 0.5
+        (torch.Size([2, 1]), True)
+    """
+
+    terms = ("seen_progress", "crash", "collision_ahead")
+    reads_chunk_frames = True
+    """The env hands this reward all 4 frames of every chunk."""
+
+    def __init__(
+        self,
+        net: MotionNet | None = None,
+        config: MotionRewardConfig | None = None,
+        camera: str = FRONT,
+    ) -> None:
+        self.net = (net if net is not None else load_motion_net(SMALL_MOTION_MODEL)).eval()
+        self.config = config or MotionRewardConfig()
+        self.camera = camera
+        self._still = RowState("chunks seen still under throttle")
+        self._crashed = RowState("crashed", dtype=torch.bool)
+
+    def __call__(self, td: TensorDictBase) -> TensorDict:
+        """Reward, termination and terms of the chunk in ``td``."""
+        batch = batch_rows(td)
+        frames = self._chunk_frames(td, batch)
+        action = get_entry(td, "action", type(self).__name__).reshape(batch, CHUNK, -1).float()
+        with torch.inference_mode():
+            out = self.net(frames, action.to(frames.device))
+        cfg = self.config
+        moved = out.progress.float().cpu()
+        seen = torch.sign(moved) * (moved.abs() - cfg.deadband).clamp_min(0.0)
+        throttle = action[..., 0].mean(-1)
+        still = (moved.abs() < cfg.stuck_metres) & (throttle >= cfg.stuck_throttle)
+        count = (self._still.read(batch, moved.device) + 1) * still
+        self._still.write(count)
+        collided = torch.sigmoid(out.collided.float().cpu()) >= cfg.collided_threshold
+        crashed_now = collided | (count >= cfg.stuck_chunks)
+        before = self._crashed.read(batch, moved.device)
+        crash = (crashed_now & ~before).float()
+        self._crashed.write(before | crashed_now)
+        ahead = collision_within(out.ahead.float().cpu())[:, -1]
+        reward = (
+            cfg.progress_scale * seen - cfg.collision_penalty * crash - cfg.ahead_weight * ahead
+        )
+        terms = dict(zip(self.terms, (seen, crash, ahead), strict=True))
+        return reward_output(reward, terms, terminated=crashed_now)
+
+    def reset(self, mask: torch.Tensor | None = None) -> None:
+        """Forget the still count and the crashed flag of the rows where ``mask`` is True."""
+        self._still.reset(mask)
+        self._crashed.reset(mask)
+
+    def _chunk_frames(self, td: TensorDictBase, batch: int) -> torch.Tensor:
+        frames = get_entry(td, ("pixels", self.camera), type(self).__name__)
+        if frames.ndim != 5 or frames.shape[:2] != (batch, CHUNK) or frames.dtype != torch.uint8:
+            raise ValueError(
+                f"MotionReward needs all {CHUNK} frames of each chunk, td[('pixels', "
+                f"{self.camera!r})] as uint8 [{batch}, {CHUNK}, H, W, 3], got "
+                f"{frames.dtype} {list(frames.shape)}: build the env with this reward (it asks "
+                "the server for every frame) or with all_frames=True"
+            )
+        return frames
