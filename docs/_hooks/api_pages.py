@@ -191,6 +191,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.data.loading",
             "oasis_torchrl.data.video_frames",
             "oasis_torchrl.data.quiet",
+            "oasis_torchrl.video_fallback",
             "oasis_torchrl.data.combine",
             "oasis_torchrl.compat",
         ),
