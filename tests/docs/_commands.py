@@ -1,6 +1,7 @@
 """The shell commands of the README and the docs' pages, and checks of their flags that run
 nothing: ``oasis-torchrl`` lines through the command's own parser and config loading, LeRobot's
-tools against their config dataclasses, ``make`` targets against the Makefile."""
+tools against their config dataclasses (or their argparse parser), a script through its
+``parse_arguments``, ``make`` targets against the Makefile."""
 
 from __future__ import annotations
 
@@ -46,8 +47,9 @@ class Command:
 
 
 def page_commands(page: Path) -> list[Command]:
-    """The simple commands of ``page``'s shell blocks (continued lines joined, comments and
-    ``VAR=value`` prefixes dropped, ``$(...)`` replaced by a path).
+    """The simple commands of ``page``'s shell blocks and of its running text (:data:`INLINE`,
+    placeholders such as ``PATH`` or ``<command>`` left out): continued lines joined, comments
+    and ``VAR=value`` prefixes dropped, ``$(...)`` replaced by a path.
 
     Example:
         >>> import tempfile
