@@ -31,7 +31,8 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test docs lint protos lock bench bench-learning ffmpeg-libs clean-venv venv-python
+.PHONY: demo test docs lint protos lock bench bench-learning bench-crop-rule bench-ray-nodes \
+	ffmpeg-libs clean-venv venv-python
 
 venv-python:
 	@if [ -x $(PY) ] && ! $(PY) -c '$(IS_PYTHON_VERSION)'; then \
@@ -81,15 +82,25 @@ lock: venv-python $(STAMP)
 		$(PY) -m pip freeze --exclude-editable; } > constraints.tmp
 	mv constraints.tmp constraints.txt
 
-# The quick benchmarks (each a few minutes at most; benchmarks/_*.py are their helpers); the
-# learning benchmark trains policies for hours and has its own target.
+# The quick benchmarks (each a few minutes at most; benchmarks/_*.py are their helpers). The
+# long ones have a target each: the learning benchmark and the narrow crop's rule train policies
+# for hours, and Ray across nodes builds network namespaces (root).
 LEARNING_BENCH := benchmarks/learning.py
+CROP_RULE_BENCH := benchmarks/front_crop_rule.py
+RAY_NODES_BENCH := benchmarks/ray_nodes.py
+LONG_BENCHES := $(LEARNING_BENCH) $(CROP_RULE_BENCH) $(RAY_NODES_BENCH)
 bench: venv-python $(STAMP)
-	set -e; for script in $(filter-out $(LEARNING_BENCH),$(wildcard benchmarks/[!_]*.py)); do \
+	set -e; for script in $(filter-out $(LONG_BENCHES),$(wildcard benchmarks/[!_]*.py)); do \
 		$(PY) $$script; done
 
 bench-learning: venv-python $(STAMP)
 	$(PY) $(LEARNING_BENCH)
+
+bench-crop-rule: venv-python $(STAMP)
+	$(PY) $(CROP_RULE_BENCH)
+
+bench-ray-nodes: venv-python $(STAMP)
+	$(PY) $(RAY_NODES_BENCH)
 
 # LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
 # the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).

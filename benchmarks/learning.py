@@ -238,7 +238,8 @@ def chosen_within(history: Sequence[dict[str, Any]], budget: int) -> dict[str, A
     return max(within, key=selection_figure)
 
 
-def main() -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The benchmark's flags, and the main job's settings (``--config``, flags, overrides)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", type=Path, default=Path("benchmarks/results"))
     parser.add_argument(
@@ -275,10 +276,21 @@ def main() -> None:
         "workers, each with its own embedded server)",
     )
     add_config_arguments(parser, DemoConfig)  # the main job's settings: --config, flags
-    args, extra = parser.parse_known_args()
+    return parser
+
+
+def parse_arguments(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[str]]:
+    """The parsed flags and the ``KEY=VALUE`` overrides of ``argv`` (default: the process's)."""
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
     overrides, unknown = split_overrides(extra)
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    return args, overrides
+
+
+def main() -> None:
+    args, overrides = parse_arguments()
     # force: LeRobot's import checks log first, which gives the root logger a WARNING handler.
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", force=True)
     keep_batches_in_heap()  # as the oasis-torchrl command does

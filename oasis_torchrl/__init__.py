@@ -9,7 +9,8 @@ Importing the package registers the Gymnasium id ``"oasis_torchrl/Oasis-v0"`` (a
 own and most third-party env packages do; ``gymnasium.make("oasis_torchrl:oasis_torchrl/Oasis-v0")``
 imports it by itself): ``gymnasium.make`` builds :class:`~oasis_torchrl.envs.OasisGymEnv`,
 ``gymnasium.make_vec`` :class:`~oasis_torchrl.envs.OasisVectorEnv` (N sessions stepped
-concurrently); keyword arguments go to them.
+concurrently); keyword arguments go to them. It also shortens LeRobot's fallback from torchcodec
+to PyAV to one log line (:mod:`oasis_torchrl.video_fallback`).
 
 >>> import gymnasium
 >>> gymnasium.spec(GYMNASIUM_ID).vector_entry_point
@@ -19,6 +20,8 @@ concurrently); keyword arguments go to them.
 from importlib.metadata import PackageNotFoundError, version
 
 import gymnasium
+
+from oasis_torchrl.video_fallback import shorten_video_fallback
 
 try:
     __version__ = version("oasis-torchrl")
@@ -34,3 +37,5 @@ if GYMNASIUM_ID not in gymnasium.registry:
         entry_point="oasis_torchrl.envs.gym_adapter:OasisGymEnv",
         vector_entry_point="oasis_torchrl.envs.gym_vector:OasisVectorEnv",
     )
+
+shorten_video_fallback()

@@ -6,15 +6,23 @@ every module left out, each with the reason. ``tests/docs/test_api_registry.py``
 module under ``oasis_torchrl/`` is in neither, or when either names a module that is gone. The
 nav in ``mkdocs.yml`` lists the pages in the same order (the strict build fails on a page that
 is missing from it or a nav entry with no page).
+
+The guides link to the source (``../../oasis_torchrl/client/``,
+``../../oasis_torchrl/envs/specs.py``), which a forge shows as it is; on the site
+:func:`on_page_markdown` points each such link at the module's section of its API page instead
+(the pages exist only on the site).
 """
 
 from __future__ import annotations
 
+import posixpath
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import File, Files
+from mkdocs.structure.pages import Page
 
 PACKAGE = "oasis_torchrl"
 ROOT = Path(__file__).resolve().parents[2]
@@ -191,6 +199,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.data.loading",
             "oasis_torchrl.data.video_frames",
             "oasis_torchrl.data.quiet",
+            "oasis_torchrl.video_fallback",
             "oasis_torchrl.data.combine",
             "oasis_torchrl.compat",
         ),
@@ -382,3 +391,57 @@ def on_files(files: Files, config: MkDocsConfig) -> Files:
     for name, page in API_PAGES.items():
         files.append(File.generated(config, f"api/{name}.md", content=page_markdown(page)))
     return files
+
+
+SOURCE_LINK = re.compile(
+    r"\]\((?P<target>(?:\.\./)+" + PACKAGE + r"/[^)#\s]*)(?:#(?P<name>[\w.]+))?\)"
+)
+"""A Markdown link into the package's source, relative to the page, with an optional
+``#Name`` of a member (a forge opens the file; the site goes to the member's section)."""
+
+
+def module_of(path: str) -> str:
+    """The dotted module a source path names: a package's folder or ``__init__.py``, a file.
+
+    Examples:
+        >>> module_of("oasis_torchrl/client/")
+        'oasis_torchrl.client'
+        >>> module_of("oasis_torchrl/envs/specs.py")
+        'oasis_torchrl.envs.specs'
+    """
+    parts = path.strip("/").removesuffix(".py").split("/")
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def site_link(page_uri: str, target: str) -> str | None:
+    """The site's link for a source link ``target`` of the page ``page_uri``: the module's
+    section of the API page that renders it (None: no page renders it).
+
+    Examples:
+        >>> site_link("guides/env.md", "../../oasis_torchrl/envs/specs.py")
+        '../api/envs.md#oasis_torchrl.envs.specs'
+        >>> site_link("index.md", "../oasis_torchrl/client/")
+        'api/client.md#oasis_torchrl.client'
+        >>> site_link("guides/env.md", "../../oasis_torchrl/sim/render/") is None
+        True
+    """
+    source = posixpath.normpath(posixpath.join("docs", posixpath.dirname(page_uri), target))
+    module = module_of(source)
+    for name, page in API_PAGES.items():
+        if module in page.modules:
+            start = posixpath.dirname(page_uri) or "."
+            return f"{posixpath.relpath(f'api/{name}.md', start)}#{module}"
+    return None
+
+
+def on_page_markdown(markdown: str, page: Page, **_: object) -> str:
+    """Point the page's links into the source at the API pages (unknown ones are left as they
+    are, for the strict build to report)."""
+
+    def replace(match: re.Match[str]) -> str:
+        link = site_link(page.file.src_uri, match["target"])
+        if link is None:
+            return match.group(0)
+        return f"]({link}.{match['name']})" if match["name"] else f"]({link})"
+
+    return SOURCE_LINK.sub(replace, markdown)

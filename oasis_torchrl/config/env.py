@@ -96,6 +96,11 @@ class EnvConfig:
     reward: RewardConfig = option(default_factory=RewardConfig, help="the reward")
 
     def __post_init__(self) -> None:
+        if not self.endpoint:
+            raise ValueError(
+                "env.endpoint must be 'local' or an A2V endpoint URL, got an empty one (is "
+                "DECART_ROBOTICS_ENDPOINT set but empty?)"
+            )
         if not self.prompts:
             raise ValueError("env.prompts must hold at least one prompt")
         validate_front_crop(self.front_crop)

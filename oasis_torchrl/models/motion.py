@@ -169,5 +169,3 @@ def hazard_loss(hazard_logits: torch.Tensor, time_to: torch.Tensor) -> torch.Ten
     log_hit = F.logsigmoid(hazard_logits)
     total = (log_survive * survived).sum(1) + (log_hit * hit).sum(1)
     return -total.mean()
-
-

@@ -16,8 +16,8 @@ none   ``0, 0`` (coasting: drag slows the car)  ``0, 0``
 
 W with S, or A with D, cancel out. The names are the oasis robot's (and the project's
 datasets'): LeRobot's stock ``keyboard_rover`` emits ``linear_velocity`` / ``angular_velocity``
-instead, which the robot does not take (``throttle.vel = linear_velocity``, ``steering.vel =
--angular_velocity`` is the mapping; the car has no turn in place).
+instead, which the robot maps itself (``throttle.vel = linear_velocity``, ``steering.vel =
+-angular_velocity``; the car has no turn in place).
 """
 
 from __future__ import annotations

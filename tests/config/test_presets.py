@@ -10,6 +10,7 @@ from omegaconf import OmegaConf
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config, to_object
 from oasis_torchrl.config.presets import preset_file, preset_names, presets
+from oasis_torchrl.protocol import DEFAULT_ENDPOINT, ENDPOINT_ENV_VAR
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMANDS = {
@@ -75,3 +76,19 @@ def test_an_unknown_name_is_one_line_listing_the_names(caplog: pytest.LogCapture
     (line,) = [record.getMessage() for record in caplog.records if "preset" in record.getMessage()]
     assert "no preset named 'hostd'; presets: clone_256, demo, hosted, ppo_scratch" in line
     assert "\n" not in line
+
+
+def test_the_hosted_preset_takes_its_endpoint_from_the_environment(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """As ``A2VClient.from_env`` does: ``DECART_ROBOTICS_ENDPOINT``, else the hosted service;
+    a flag or override still wins."""
+    monkeypatch.delenv(ENDPOINT_ENV_VAR, raising=False)
+    assert load_config("eval", file="hosted").env.endpoint == DEFAULT_ENDPOINT
+    monkeypatch.setenv(ENDPOINT_ENV_VAR, "http://127.0.0.1:50051")
+    assert load_config("eval", file="hosted").env.endpoint == "http://127.0.0.1:50051"
+    overridden = load_config("eval", ["env.endpoint=http://10.0.0.2:1"], file="hosted")
+    assert overridden.env.endpoint == "http://10.0.0.2:1"
+    monkeypatch.setenv(ENDPOINT_ENV_VAR, "")
+    with pytest.raises(ValueError, match="DECART_ROBOTICS_ENDPOINT set but empty"):
+        load_config("eval", file="hosted")

@@ -20,6 +20,10 @@ from oasis_torchrl.train.cards import hours, load_card
 from ._hooks import ROOT
 
 README = (ROOT / "README.md").read_text()
+BENCHMARKS = (ROOT / "BENCHMARKS.md").read_text()
+FIGURE = re.compile(r"(?<![\w.])\d+\.\d+ ?(?:m|h|x|ms|s|%)(?!\w)")
+"""A measured figure: a decimal number with its unit (metres, hours, a ratio, time, a share)."""
+SHIPPED_TABLE = "<!-- shipped-policies -->\n"
 QUICK_START = re.compile(r"<!-- quick-start -->\n```(?P<lang>\w+)\n(?P<code>.*?)```", re.DOTALL)
 CARD_ROW = re.compile(
     r"^\s*\| `(?P<key>[^`]+)` \| `(?P<spec>[^`]+)` "
@@ -152,10 +156,35 @@ def table_cells(line: str) -> list[str]:
     return [cell.strip() for cell in line.strip().strip("|").split("|")]
 
 
+def shipped_table(text: str) -> list[str]:
+    """The lines of the shipped policies' table that follows its marker."""
+    assert SHIPPED_TABLE in text
+    return text.split(SHIPPED_TABLE, 1)[1].split("\n\n", 1)[0].splitlines()
+
+
+def test_the_readme_quotes_the_shipped_policies_table_of_benchmarks() -> None:
+    assert shipped_table(README) == shipped_table(BENCHMARKS)
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/index.md"])
+def test_every_figure_on_the_front_pages_is_one_of_benchmarks(page: str) -> None:
+    """One figure, one place: a measured figure the README or the docs' home page gives is
+    BENCHMARKS.md's, to the digit (a re-measured figure is changed there, then quoted)."""
+    text = (ROOT / page).read_text()
+    missing = sorted({figure for figure in FIGURE.findall(text) if figure not in BENCHMARKS})
+    assert not missing, f"{page} gives figures BENCHMARKS.md does not: {missing}"
+
+
+def test_the_figure_pattern_finds_figures() -> None:
+    found = FIGURE.findall("310.0 m, **1.44x**, 2.7 h, 5.9%, v0.6.1, 768x512, 3.5 s")
+    assert found == ["310.0 m", "1.44x", "2.7 h", "5.9%", "3.5 s"]
+
+
 def test_the_shipped_policies_table_holds_their_cards_figures() -> None:
-    """A column per shipped policy, each cell its card's figure (the best constant's column
-    the same on every card: the same episodes), and the card's command and wall time."""
-    table = README.split("<!-- shipped-policies -->\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    """BENCHMARKS.md's table: a column per shipped policy, each cell its card's figure (the best
+    constant's column the same on every card: the same episodes), and the card's command and
+    wall time."""
+    table = shipped_table(BENCHMARKS)
     header, rows = table_cells(table[0]), [table_cells(line) for line in table[2:]]
     by_scene = {row[0]: row for row in rows}
     shipped = shipped_policies()
