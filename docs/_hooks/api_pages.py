@@ -62,6 +62,8 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.rewards",
             "oasis_torchrl.rewards.base",
+            "oasis_torchrl.rewards.motion",
+            "oasis_torchrl.rewards.motion_net",
             "oasis_torchrl.rewards.depth_collision",
             "oasis_torchrl.rewards.depth_sources",
             "oasis_torchrl.rewards.depth_net",
@@ -132,6 +134,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.models.privileged",
             "oasis_torchrl.models.checkpoint",
             "oasis_torchrl.models.depth",
+            "oasis_torchrl.models.motion",
         ),
     ),
     "train": ApiPage(
@@ -156,6 +159,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.perception_warmup",
             "oasis_torchrl.train.shift",
             "oasis_torchrl.train.depth",
+            "oasis_torchrl.train.motion",
             "oasis_torchrl.allocator",
             "oasis_torchrl.atomic",
         ),

@@ -65,5 +65,9 @@ HELD_OUT_SCENES = (
 HELD_OUT_SEEDS = (4241, 6029)
 """Seeds no config, preset or benchmark uses: the shipped policies' unseen episodes."""
 
+REWARD_CHECK_SEEDS = (3301, 5507)
+"""Seeds the frames-only reward's checks drive on (``benchmarks/frames_reward.py``): no training
+run of its network, and no config, uses them."""
+
 REPORT_SEED = 1000
 """The seed every report is judged on (the main job's and the benchmarks' ``eval.seeds``)."""

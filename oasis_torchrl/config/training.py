@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
+from oasis_torchrl.config.scenes import HELD_OUT_SCENES
 from oasis_torchrl.options import option
 
 LOGGER_BACKENDS = ("csv", "tensorboard")
@@ -441,15 +442,6 @@ class BCConfig(BCSettings):
 
 # -- the frames-only reward's motion network -----------------------------------------------
 
-JUDGED_PROMPTS = (
-    "highway at night in the rain",
-    "urban street at sunset in the snow",
-    "rural road at night in the fog",
-    "highway at sunset in the rain",
-)
-"""The held-out scenes every learned policy and the frames-only reward are judged on: no
-training prompt of the project is one of them."""
-
 MOTION_TRAINING_PROMPTS = (
     "urban street",
     "city street at night",
@@ -469,7 +461,7 @@ MOTION_TRAINING_PROMPTS = (
     "highway at night",
 )
 """The scenes ``train motion`` draws from: every layout, lighting and weather, none of
-:data:`JUDGED_PROMPTS`."""
+:data:`~oasis_torchrl.config.scenes.HELD_OUT_SCENES`, where it is judged."""
 
 
 @dataclass
@@ -513,7 +505,7 @@ class MotionTrainConfig:
     num_envs: int = option(8, help="episodes driven at once (one round)")
     episodes: int = option(256, help="episodes driven (a multiple of num_envs)")
     steps: int = option(60, help="chunks per episode (a collision does not end it)")
-    epochs: int = option(12, help="passes over the chunks")
+    epochs: int = option(8, help="passes over the chunks")
     batch_size: int = option(64, help="chunks per step")
     lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
     weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
@@ -525,6 +517,11 @@ class MotionTrainConfig:
         None,
         help="keep the driven chunks here: read when the file exists (no driving), else written "
         "after driving (null: not kept)",
+    )
+    init_from: str | None = option(
+        None,
+        help="fine-tune these weights (small: the shipped ones, or a weights file; their shape "
+        "wins over channels) instead of starting afresh",
     )
     output: str = option("outputs/motion/motion_small.pt", help="the weights file written")
     progress: bool = option(True, help="tqdm progress bars")
@@ -546,9 +543,9 @@ class MotionTrainConfig:
             raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
         if not self.drivers or not self.prompts:
             raise ValueError("drivers and prompts must each name at least one")
-        judged = sorted(set(self.prompts) & set(JUDGED_PROMPTS))
+        judged = sorted(set(self.prompts) & set(HELD_OUT_SCENES))
         if judged:
-            raise ValueError(f"prompts must not hold the judged scenes {judged}")
+            raise ValueError(f"prompts must not hold the held-out scenes {judged}")
 
 
 # -- the small depth network -------------------------------------------------------------------

@@ -35,7 +35,7 @@ from oasis_torchrl.models.depth import parameter_count
 from oasis_torchrl.models.motion import MotionNet, MotionNetConfig, hazard_loss
 from oasis_torchrl.protocol import FRONT, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards.base import NoReward
-from oasis_torchrl.rewards.motion_net import save_motion_weights
+from oasis_torchrl.rewards.motion_net import load_motion_net, save_motion_weights
 from oasis_torchrl.sim.config import ServerConfig
 
 logger = logging.getLogger(__name__)
@@ -260,6 +260,30 @@ def evaluate_losses(net: MotionNet, data: MotionChunks, batch_size: int = 256) -
     return {name: total / len(data) for name, total in sums.items()}
 
 
+def initial_net(settings: MotionTrainConfig) -> MotionNet:
+    """The network training starts from: the weights ``init_from`` names, else a fresh one.
+
+    Example:
+        >>> initial_net(MotionTrainConfig(init_from="small")).cfg.horizon
+        5
+    """
+    if settings.init_from is not None:
+        net = load_motion_net(settings.init_from)
+        if net.cfg.horizon != settings.horizon:
+            raise ValueError(
+                f"init_from {settings.init_from!r} predicts {net.cfg.horizon} chunks ahead, "
+                f"horizon is {settings.horizon}: set horizon={net.cfg.horizon}"
+            )
+        return net.train()
+    return MotionNet(
+        MotionNetConfig(
+            image_size=tuple(settings.image_size),
+            channels=tuple(settings.channels),
+            horizon=settings.horizon,
+        )
+    )
+
+
 def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
     """Drive (or read) the chunks, fit :class:`~oasis_torchrl.models.motion.MotionNet`, write it.
 
@@ -277,12 +301,7 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
     data = chunks_for(settings)
     driven = time.monotonic() - started
     train, held = split_rounds(data, settings.validation)
-    net_cfg = MotionNetConfig(
-        image_size=tuple(settings.image_size),
-        channels=tuple(settings.channels),
-        horizon=settings.horizon,
-    )
-    net = MotionNet(net_cfg)
+    net = initial_net(settings)
     optimizer = torch.optim.AdamW(net.parameters(), settings.lr, weight_decay=settings.weight_decay)
     steps = settings.epochs * math.ceil(len(train) / settings.batch_size)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, max(steps, 1))

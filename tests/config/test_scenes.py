@@ -16,7 +16,10 @@ from oasis_torchrl.config.scenes import (
     HELD_OUT_SCENES,
     HELD_OUT_SEEDS,
     LEARNING_HELD_OUT_SEED,
+    REPORT_SEED,
+    REWARD_CHECK_SEEDS,
 )
+from oasis_torchrl.config.training import MOTION_TRAINING_PROMPTS
 from oasis_torchrl.sim.scene import LAYOUTS, LIGHTINGS, WEATHERS, parse_style
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -51,6 +54,13 @@ def test_no_held_out_scene_is_a_training_combination() -> None:
     assert len(set(held_out)) == len(HELD_OUT_SCENES) == 4
     assert not set(held_out) & training
     assert all(lighting != "day" and weather != "clear" for _, lighting, weather in held_out)
+
+
+def test_the_motion_network_trains_on_no_held_out_scene_and_is_judged_on_unused_seeds() -> None:
+    training = {scene(prompt) for prompt in MOTION_TRAINING_PROMPTS}
+    assert not training & {scene(prompt) for prompt in HELD_OUT_SCENES}
+    assert {s[1] for s in training} == set(LIGHTINGS) and {s[2] for s in training} == set(WEATHERS)
+    assert not set(REWARD_CHECK_SEEDS) & {*HELD_OUT_SEEDS, LEARNING_HELD_OUT_SEED, REPORT_SEED}
 
 
 def test_no_config_preset_or_benchmark_uses_the_held_out_seeds() -> None:

@@ -10,7 +10,7 @@ import pytest
 from oasis_torchrl.config import load_config
 from oasis_torchrl.envs import make_env
 from oasis_torchrl.envs.capabilities import Capabilities, probe
-from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward
+from oasis_torchrl.rewards import DepthCollisionReward, GroundTruthReward, MotionReward
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.train.ppo import with_capabilities
 
@@ -35,9 +35,14 @@ def test_auto_settings_follow_the_endpoint_and_explicit_ones_are_refused_on_fram
     env = make_env(cfg.env)
     try:
         reward = env.base_env.reward_module
-        assert isinstance(reward, DepthCollisionReward) and not env.base_env.ground_truth
+        assert isinstance(reward, MotionReward) and not env.base_env.ground_truth
     finally:
         env.close()
+    reference = make_env(load_config("ppo", [*frames, "env.reward.kind=depth"]).env)
+    try:
+        assert isinstance(reference.base_env.reward_module, DepthCollisionReward)
+    finally:
+        reference.close()
     with pytest.raises(ValueError, match="the hosted-like embedded server does not send"):
         make_env(cfg.env, privileged=True)
     explicit = load_config("ppo", [*frames, "env.reward.kind=ground_truth"])
