@@ -12,9 +12,12 @@ from the front camera's 4 frames through :class:`~oasis_torchrl.models.motion.Mo
   ``deadband`` metres shaved off either way (a car standing still earns nothing, whatever its
   throttle: the reward never reads the throttle to pay).
 - ``crash``: 1 on the first step the frames show a crash, which also ends the episode: the
-  collided head says so, or the car is *stuck*: it has not been seen to move (less than
-  ``stuck_metres`` a chunk) for ``stuck_chunks`` chunks in a row while the mean throttle was at
-  least ``stuck_throttle``. A car that collided stands still, whatever the policy asks.
+  collided head says so, or the car is *stuck*: after it was seen moving (``arm_metres`` in a
+  chunk), it has not been seen to move (less than ``stuck_metres`` a chunk) for
+  ``stuck_chunks`` chunks in a row while the mean throttle was at least ``stuck_throttle``. A car
+  that collided stands still, whatever the policy asks; a car pulling away from rest moves too
+  little to be seen for a chunk or two, so standing still with the throttle released disarms
+  the rule until the car is seen moving again.
 - the collision-ahead cost reads the chunk's actions with the frames (off by default).
 
 It needs all 4 frames of a chunk: the env hands them over whatever it observes
@@ -51,6 +54,7 @@ class MotionRewardConfig:
     stuck_metres: float = 0.06
     stuck_throttle: float = 0.5
     stuck_chunks: int = 2
+    arm_metres: float = 0.5
     collided_threshold: float = 0.5
 
     def __post_init__(self) -> None:
@@ -60,6 +64,11 @@ class MotionRewardConfig:
             raise ValueError(
                 f"deadband and stuck_metres must be >= 0 and stuck_chunks >= 1, got "
                 f"{self.deadband}, {self.stuck_metres}, {self.stuck_chunks}"
+            )
+        if self.arm_metres < self.stuck_metres:
+            raise ValueError(
+                f"arm_metres ({self.arm_metres}) must be at least stuck_metres "
+                f"({self.stuck_metres}): a car seen still cannot be seen moving"
             )
         if not 0.0 < self.collided_threshold < 1.0:
             raise ValueError(f"collided_threshold must be in (0, 1), got {self.collided_threshold}")
@@ -96,6 +105,7 @@ class MotionReward:
         self.config = config or MotionRewardConfig()
         self.camera = camera
         self._still = RowState("chunks seen still under throttle")
+        self._armed = RowState("seen moving", dtype=torch.bool)
         self._crashed = RowState("crashed", dtype=torch.bool)
 
     def __call__(self, td: TensorDictBase) -> TensorDict:
@@ -108,12 +118,8 @@ class MotionReward:
         cfg = self.config
         moved = out.progress.float().cpu()
         seen = torch.sign(moved) * (moved.abs() - cfg.deadband).clamp_min(0.0)
-        throttle = action[..., 0].mean(-1)
-        still = (moved.abs() < cfg.stuck_metres) & (throttle >= cfg.stuck_throttle)
-        count = (self._still.read(batch, moved.device) + 1) * still
-        self._still.write(count)
         collided = torch.sigmoid(out.collided.float().cpu()) >= cfg.collided_threshold
-        crashed_now = collided | (count >= cfg.stuck_chunks)
+        crashed_now = collided | self._stuck(moved, action[..., 0].mean(-1))
         before = self._crashed.read(batch, moved.device)
         crash = (crashed_now & ~before).float()
         self._crashed.write(before | crashed_now)
@@ -124,9 +130,24 @@ class MotionReward:
         terms = dict(zip(self.terms, (seen, crash, ahead), strict=True))
         return reward_output(reward, terms, terminated=crashed_now)
 
+    def _stuck(self, moved: torch.Tensor, throttle: torch.Tensor) -> torch.Tensor:
+        """Per row, whether the car seen moving earlier has now been seen still under throttle
+        for ``stuck_chunks`` chunks (and count the chunks)."""
+        cfg = self.config
+        batch = moved.shape[0]
+        pushed = throttle >= cfg.stuck_throttle
+        seen_still = moved.abs() < cfg.stuck_metres
+        armed = self._armed.read(batch, moved.device) | (moved.abs() >= cfg.arm_metres)
+        count = (self._still.read(batch, moved.device) + 1) * (seen_still & pushed & armed)
+        self._armed.write(armed & ~(seen_still & ~pushed))
+        self._still.write(count)
+        return count >= cfg.stuck_chunks
+
     def reset(self, mask: torch.Tensor | None = None) -> None:
-        """Forget the still count and the crashed flag of the rows where ``mask`` is True."""
+        """Forget the still count, the armed and crashed flags of the rows where ``mask`` is
+        True."""
         self._still.reset(mask)
+        self._armed.reset(mask)
         self._crashed.reset(mask)
 
     def _chunk_frames(self, td: TensorDictBase, batch: int) -> torch.Tensor:

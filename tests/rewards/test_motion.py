@@ -49,8 +49,18 @@ def test_pays_the_metres_seen_less_the_deadband_never_the_throttle() -> None:
         assert still(step_td(1, throttle))["reward"].item() <= 0.0
 
 
-def test_a_car_seen_still_under_throttle_crashes_once_after_stuck_chunks() -> None:
-    reward = MotionReward(fixed_net(0.0), MotionRewardConfig(stuck_chunks=2))
+def seen_moving(net: MotionNet, metres: float) -> MotionNet:
+    """``net`` now seeing ``metres`` of progress in any chunk."""
+    with torch.no_grad():
+        net.progress_head.bias.fill_(metres)
+    return net
+
+
+def test_a_car_seen_moving_then_still_under_throttle_crashes_once_after_stuck_chunks() -> None:
+    net = fixed_net(2.0)
+    reward = MotionReward(net, MotionRewardConfig(stuck_chunks=2))
+    assert not reward(step_td(1, throttle=1.0))["terminated"].item()  # moving: armed
+    seen_moving(net, 0.0)
     first = reward(step_td(1, throttle=1.0))
     assert not first["terminated"].item() and first["reward"].item() == 0.0
     second = reward(step_td(1, throttle=1.0))
@@ -61,10 +71,18 @@ def test_a_car_seen_still_under_throttle_crashes_once_after_stuck_chunks() -> No
     assert not reward(step_td(1, throttle=1.0))["terminated"].item()
 
 
-def test_a_car_held_still_without_throttle_is_parked_not_crashed() -> None:
-    reward = MotionReward(fixed_net(0.0))
-    for _ in range(5):
-        assert not reward(step_td(1, throttle=0.2))["terminated"].item()
+def test_a_car_pulling_away_from_rest_is_not_stuck() -> None:
+    net = fixed_net(0.0)
+    reward = MotionReward(net)
+    for _ in range(4):  # never seen moving yet: under throttle, still is not a crash
+        assert not reward(step_td(1, throttle=1.0))["terminated"].item()
+    seen_moving(net, 2.0)
+    reward(step_td(1, throttle=1.0))
+    seen_moving(net, 0.0)
+    for _ in range(3):  # stopped with the throttle released: parked, and disarmed
+        assert not reward(step_td(1, throttle=0.0))["terminated"].item()
+    for _ in range(3):  # pulling away again
+        assert not reward(step_td(1, throttle=1.0))["terminated"].item()
 
 
 def test_the_collided_head_ends_the_episode_at_once() -> None:
