@@ -642,8 +642,8 @@ class Evaluator:
             prompts=row_prompts,
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
-            # Recorders keep every frame; the metrics and the policies need the last alone.
-            all_frames=bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger),
+            # A dataset keeps every frame; the metrics, the policies and rerun the last alone.
+            all_frames=bool(eval_cfg.get("lerobot")),
             frame_stack=frame_stack,
             expert=expert,
             front_crop=front_crop,

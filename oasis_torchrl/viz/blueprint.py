@@ -1,7 +1,10 @@
-"""The default rerun layout: a summary tab, then one tab per row: the cameras side by side, the
-plots below them (one unit each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view,
-depth maps and the event log beside them. The time panel opens at the start of the ``frame``
-timeline."""
+"""The default rerun layout: a summary tab, then one tab per row, named after its episodes
+(:mod:`~oasis_torchrl.viz.titles`): the cameras side by side, the plots below them (one unit
+each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view, depth maps and the event log
+beside them. The time panel opens at the start of the ``frame`` timeline.
+
+Views take a ``label`` (``"autopilot: "``) that a side-by-side layout puts before their names,
+so every panel says whose it is."""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ import rerun.blueprint as rrb
 from oasis_torchrl.viz.palette import PLOTS
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, chart_path
+from oasis_torchrl.viz.titles import RowEpisodes, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 BACKGROUND = (30, 34, 30)
@@ -21,7 +25,9 @@ BACKGROUND = (30, 34, 30)
 PLOTS_PER_LINE = 3
 
 
-def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical | None:
+def plot_views(
+    paths: RowPaths, signals: Collection[str] | None = None, label: str = ""
+) -> rrb.Vertical | None:
     """The row's plots that show at least one of ``signals`` (palette keys such as
     ``truth/speed``; None: every plot), three to a line; None if there is none.
 
@@ -32,7 +38,7 @@ def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.V
     """
     chosen = [plot for plot in PLOTS if signals is None or any(plot.shows(key) for key in signals)]
     views = [
-        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=plot.title)
+        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=label + plot.title)
         for plot in chosen
     ]
     if not views:
@@ -41,7 +47,9 @@ def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.V
     return rrb.Vertical(*(rrb.Horizontal(*line) for line in lines))
 
 
-def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatial2DView:
+def topdown_view(
+    paths: RowPaths, window: Window = DEFAULT_WINDOW, label: str = ""
+) -> rrb.Spatial2DView:
     """The top-down view: its bounds are the window around the car (the map is logged in the
     car's frame, so the window follows the car).
 
@@ -51,21 +59,25 @@ def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatia
     """
     return rrb.Spatial2DView(
         origin=paths.topdown(),
-        name="top-down",
+        name=f"{label}top-down",
         visual_bounds=rrb.VisualBounds2D(x_range=window.x_range, y_range=window.y_range),
         background=BACKGROUND,
     )
 
 
-def camera_views(paths: RowPaths, cameras: Sequence[str]) -> rrb.Horizontal:
-    """The row's cameras, left to right.
+def camera_views(paths: RowPaths, cameras: Sequence[str], label: str = "") -> rrb.Horizontal:
+    """The row's cameras, left to right (each image scaled to its panel by the viewer).
 
     Example:
-        >>> len(camera_views(RowPaths("env", 0), ["left_forward", "front"]).contents)
-        2
+        >>> views = camera_views(RowPaths("env", 0), ["left_forward", "front"], "autopilot: ")
+        >>> [view.name for view in views.contents]
+        ['autopilot: left_forward', 'autopilot: front']
     """
     return rrb.Horizontal(
-        *(rrb.Spatial2DView(origin=paths.camera(camera), name=camera) for camera in cameras)
+        *(
+            rrb.Spatial2DView(origin=paths.camera(camera), name=f"{label}{camera}")
+            for camera in cameras
+        )
     )
 
 
@@ -89,8 +101,10 @@ def row_layout(
     depth_cameras: Sequence[str] = (),
     topdown: Window | None = DEFAULT_WINDOW,
     signals: Collection[str] | None = None,
+    title: str | None = None,
 ) -> rrb.Horizontal:
-    """The layout of one row: cameras over plots (those with signals), side panel on the right.
+    """The layout of one row, titled ``title`` (default ``row <row>``): cameras over plots (those
+    with signals), side panel on the right.
 
     Example:
         >>> layout = row_layout(RowPaths("env", 0), ["left_forward", "front", "right_forward"])
@@ -105,7 +119,7 @@ def row_layout(
         main,
         _side_panel(paths, depth_cameras, topdown),
         column_shares=[3, 1],
-        name=f"{paths.root} {paths.row}",
+        name=title or tab_title(paths.row, {}),
     )
 
 
@@ -117,7 +131,10 @@ def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
         'summary'
     """
     charts = [
-        rrb.BarChartView(origin=chart_path(root), name=f"{root}: distance in m (or return)")
+        rrb.BarChartView(
+            origin=chart_path(root),
+            name=f"{root}: distance driven in m (or return), by episode in table order",
+        )
         for root in roots
     ]
     table = rrb.TextDocumentView(origin=TABLE, name="episodes")
@@ -151,6 +168,7 @@ def default_blueprint(
     signals: Collection[str] | None = None,
     summary: bool = False,
     fps: float | None = None,
+    titles: Sequence[str] | None = None,
 ) -> rrb.Blueprint:
     """A summary tab (when ``summary``) and one tab per logged row (a single row and no summary
     get no tabs).
@@ -164,6 +182,7 @@ def default_blueprint(
         signals: the logged signals' palette keys (which plots to show; None: all).
         summary: add the summary tab (ended episodes exist).
         fps: the frame timeline's playback rate (frames per second).
+        titles: each row's tab title (default ``row <row>``).
 
     Example:
         >>> blueprint = default_blueprint([0, 5], ["front"])
@@ -172,8 +191,10 @@ def default_blueprint(
     """
     if not rows:
         raise ValueError("default_blueprint needs at least one row")
+    titles = titles or [None] * len(rows)
     layouts = [
-        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals) for row in rows
+        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals, title)
+        for row, title in zip(rows, titles, strict=True)
     ]
     if summary:
         layouts.insert(0, summary_layout([root]))
@@ -183,7 +204,8 @@ def default_blueprint(
 
 @dataclass(frozen=True)
 class RowsLayout:
-    """What a writer has logged so far, all its layout depends on.
+    """What a writer has logged so far, all its layout depends on (``episodes``: each row's,
+    for its tab's title).
 
     Example:
         >>> layout = RowsLayout("env", (0,), ("front",), (), None, frozenset(), False)
@@ -198,6 +220,13 @@ class RowsLayout:
     topdown: Window | None
     signals: frozenset[str]
     summary: bool
+    episodes: tuple[RowEpisodes, ...] = ()
+
+    def row_episodes(self, row: int) -> RowEpisodes:
+        """The episodes row ``row`` has shown (none if unknown)."""
+        if row not in self.rows or not self.episodes:
+            return RowEpisodes()
+        return self.episodes[self.rows.index(row)]
 
     def blueprint(self, fps: float | None = None) -> rrb.Blueprint:
         """The default blueprint of these rows."""
@@ -210,4 +239,5 @@ class RowsLayout:
             signals=self.signals,
             summary=self.summary,
             fps=fps,
+            titles=[tab_title(row, {self.root: self.row_episodes(row)}) for row in self.rows],
         )

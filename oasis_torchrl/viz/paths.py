@@ -34,8 +34,9 @@ holds its static ``SeriesLines`` style (:mod:`oasis_torchrl.viz.palette`).
 The top-down layers are in the car's frame (x metres to its right, y metres behind it), logged
 every step, so the view's fixed bounds follow the car.
 
-Timelines: ``frame`` (sequence: world frames, 4 per env step) and ``sim_time`` (duration:
-``frame / fps``).
+Timelines: ``frame`` (sequence: world frames, 4 per env step), ``step`` (sequence: env steps,
+``frame // 4``, the steps events speak of) and ``sim_time`` (duration: ``frame / fps``), set
+together by :mod:`oasis_torchrl.viz.timelines`.
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ FRAME_TIMELINE = "frame"
 """Sequence timeline: the world frame index."""
 TIME_TIMELINE = "sim_time"
 """Duration timeline: simulated seconds (``frame / fps``)."""
+STEP_TIMELINE = "step"
+"""Sequence timeline: the env step (``frame // 4``; a dataset's own steps when replayed)."""
 ENV_ROOT = "env"
 """Root of live env rows."""
 EPISODE_ROOT = "episode"

@@ -4,11 +4,16 @@ Each logger owns its own ``rr.RecordingStream`` (never rerun's global recording)
 loggers coexist in one process. Memory stays bounded on long runs: an ``.rrd`` sink streams to
 disk; a viewer drops its oldest data at its memory limit (``memory_limit`` for a spawned viewer,
 ``rerun --memory-limit 4GB`` for one you start yourself).
+
+A layout goes to a viewer as soon as it changes, to a file once, when it is flushed
+(:class:`LayoutSender`): a file is read whole, and each layout of a recording with many tabs
+weighs as much as seconds of its video.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 import rerun as rr
@@ -81,3 +86,50 @@ def open_recording(
         recording.save(path, default_blueprint=blueprint)
     logger.info("rerun recording -> %s", target)
     return recording
+
+
+def is_live(target: str | Path) -> bool:
+    """Whether ``target`` is a viewer (spawned or over gRPC) rather than an ``.rrd`` file.
+
+    Example:
+        >>> is_live("spawn"), is_live("runs/eval.rrd")
+        (True, False)
+    """
+    return describe_target(target) != "file"
+
+
+class LayoutSender:
+    """Sends a recording's layout (blueprint): at once to a live viewer; to a file, the latest
+    one at :meth:`flush`. Blueprints are built only when sent.
+
+    Example:
+        >>> sender = LayoutSender(rr.RecordingStream("doc"), live=False)
+        >>> sender.send(lambda: rrb.Blueprint(rrb.TextLogView(origin="events")))
+        >>> sender.pending
+        True
+        >>> sender.flush(); sender.pending
+        False
+    """
+
+    def __init__(self, recording: rr.RecordingStream, live: bool) -> None:
+        self.recording = recording
+        self.live = live
+        self._pending: Callable[[], rrb.Blueprint] | None = None
+
+    @property
+    def pending(self) -> bool:
+        """Whether a layout waits for :meth:`flush`."""
+        return self._pending is not None
+
+    def send(self, blueprint: Callable[[], rrb.Blueprint]) -> None:
+        """Send the layout ``blueprint()`` builds (now if live, else at the next flush)."""
+        if self.live:
+            self.recording.send_blueprint(blueprint())
+        else:
+            self._pending = blueprint
+
+    def flush(self) -> None:
+        """Send the layout that waits, if any."""
+        blueprint, self._pending = self._pending, None
+        if blueprint is not None:
+            self.recording.send_blueprint(blueprint())

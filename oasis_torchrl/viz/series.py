@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
+from collections.abc import Callable
 
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.palette import series_style
-from oasis_torchrl.viz.paths import FRAME_TIMELINE, TIME_TIMELINE
+from oasis_torchrl.viz.timelines import time_columns
+
+Styler = Callable[[str], rr.AsComponents]
+"""The static style (``SeriesLines`` or ``SeriesPoints``) of the series at an entity path."""
 
 
 def send_series(
@@ -25,26 +30,23 @@ def send_series(
     values: np.ndarray,
     fps: float,
     *,
-    style: bool = True,
+    style: Styler | None = series_style,
+    frames_per_step: int = CHUNK,
 ) -> None:
     """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
-    With ``style``, the signal's fixed name and colour (:mod:`~oasis_torchrl.viz.palette`) are
-    logged with it (static).
+    With a ``style``, the signal's fixed name and colour (:mod:`~oasis_torchrl.viz.palette`)
+    are logged with it (static).
 
     Example:
         >>> recording = rr.RecordingStream("doc")
         >>> send_series(recording, "env/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
     """
-    if style:
-        recording.log(path, series_style(path), static=True)
-    frames = np.asarray(frames, dtype=np.int64).reshape(-1)
+    if style is not None:
+        recording.log(path, style(path), static=True)
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     recording.send_columns(
         path,
-        indexes=[
-            rr.TimeColumn(FRAME_TIMELINE, sequence=frames),
-            rr.TimeColumn(TIME_TIMELINE, duration=frames / fps),
-        ],
+        indexes=time_columns(frames, fps, frames_per_step),
         columns=rr.Scalars.columns(scalars=np.where(np.isfinite(values), values, np.nan)),
     )
 
@@ -55,6 +57,7 @@ class SeriesBuffer:
     Args:
         recording: where to send.
         fps: frame rate (``sim_time = frame / fps``).
+        style: the static style of each entity, logged once (default: its palette signal).
         max_delay_s: send once the oldest buffered value is this old (wall clock).
         max_values: send once this many values are buffered.
 
@@ -72,11 +75,13 @@ class SeriesBuffer:
         self,
         recording: rr.RecordingStream,
         fps: float,
+        style: Styler = series_style,
         max_delay_s: float = 1.0,
         max_values: int = 4096,
     ) -> None:
         self.recording = recording
         self.fps = fps
+        self.style = style
         self.max_delay_s = max_delay_s
         self.max_values = max_values
         self._frames: defaultdict[str, list[np.ndarray]] = defaultdict(list)
@@ -99,7 +104,7 @@ class SeriesBuffer:
         """Send every buffered value."""
         for path, frames in self._frames.items():
             values = np.concatenate(self._values[path])
-            style = path not in self._styled
+            style = None if path in self._styled else self.style
             self._styled.add(path)
             send_series(self.recording, path, np.concatenate(frames), values, self.fps, style=style)
         self._frames.clear()
