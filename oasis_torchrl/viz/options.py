@@ -18,7 +18,8 @@ class LogOptions:
 
     Args:
         rows: env rows to log (default: all). Each logged row gets its own tab.
-        cameras: cameras to log (default: every ``("pixels", camera)``).
+        cameras: cameras to log (default: every ``("pixels", camera)`` but the front crop, a
+            part of the front camera's frame; name it here to log it).
         jpeg_quality: JPEG quality 1-100 of logged frames (at the env's size: the viewer
             scales them to its panels); None logs raw images (large).
         all_frames: when the env returns all 4 frames of a chunk, log every one (four times the

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from oasis_torchrl.protocol import CHUNK
+from oasis_torchrl.protocol import CHUNK, FRONT_CROP
 
 PIXELS, DEPTH, TRUTH, TERMS = "pixels", "depth", "truth", "reward_terms"
 
@@ -78,6 +78,11 @@ def _group(td: TensorDictBase, group: str, index: np.ndarray) -> dict[str, np.nd
     return {name: _numpy(sub.get(name), index) for name in sub.keys(leaves_only=True)}
 
 
+def _wanted(camera: str, cameras: Sequence[str] | None) -> bool:
+    """Whether to read ``camera``: one of ``cameras``, or by default any but the front crop."""
+    return camera != FRONT_CROP if cameras is None else camera in cameras
+
+
 def _frames(
     td: TensorDictBase, index: np.ndarray, cameras: Sequence[str] | None
 ) -> dict[str, np.ndarray]:
@@ -86,7 +91,7 @@ def _frames(
         return {}
     out = {}
     for camera in pixels.keys(leaves_only=True):
-        if cameras is not None and camera not in cameras:
+        if not _wanted(camera, cameras):
             continue
         frames = pixels.get(camera)
         if frames.dtype != torch.uint8 or frames.shape[-1] != 3 or frames.ndim not in (4, 5):
@@ -143,7 +148,8 @@ def read_step(
         rows: env rows to read.
         start: ``td`` is a reset observation (the rows start new episodes).
         action: the action ``[N, 4, 2]`` or ``[N, 2]`` that led to ``td``.
-        cameras: cameras to read (default: all under ``"pixels"``).
+        cameras: cameras to read (default: all under ``"pixels"`` but the front crop, a part
+            of the front camera's frame).
         depth: read ``("depth", camera)`` maps.
 
     Example:

@@ -22,13 +22,14 @@ DIVERGES = 2
 
 
 def _drive(rerun_logger: RolloutLogger, steer_away: bool) -> None:
-    """One episode that crashes at its last step; the second policy steers away and has one more
-    camera (as a policy that reads the front crop)."""
+    """One episode that crashes at its last step; the second policy steers away, and its env
+    serves the front crop (not logged by default: a part of the front frame) and a camera more."""
     td = rollout(1, STEPS, {0: [STEPS - 1]})
     if steer_away:
         td["action"][:, DIVERGES:, :, 1] += 0.5
         for key in ("pixels", ("next", "pixels")):
             td[key]["front_crop"] = td[key]["front"].clone()
+            td[key]["rear"] = td[key]["front"].clone()
     rerun_logger.log_rollout(td)
 
 
@@ -50,8 +51,9 @@ def _check_side_by_side(readback: Readback, path: Path, roots: tuple[str, str]) 
     views = blueprint_views(path)
     for root in roots:
         # Every panel says whose it is; both lines show the same cameras
-        for camera in (*CAMERAS, "front_crop"):
+        for camera in (*CAMERAS, "rear"):
             assert ("2D", f"{root}: {camera}", f"{root}/0/camera/{camera}") in views
+        assert f"{root}/0/camera/front_crop" not in readback.entities()
         assert ("2D", f"{root}: top-down", f"{root}/0/topdown") in views
         assert ("TextLog", f"{root}: events", f"{root}/0/events") in views
         assert ("TimeSeries", f"{root}: actions (-1 to 1)", f"{root}/0") in views
