@@ -4,6 +4,8 @@ entity is styled once with its fixed name and colour (:mod:`~oasis_torchrl.viz.p
 
 :class:`SeriesBuffer` holds values for at most ``max_delay_s`` seconds (so a live plot lags at
 most that much) and at most ``max_values`` values (so memory stays bounded), then sends them.
+Each send is a chunk per entity, schema included: a file, which nobody watches while it is
+written, takes them in fewer, larger ones (:data:`FILE_DELAY_S`).
 """
 
 from __future__ import annotations
@@ -18,6 +20,11 @@ import rerun as rr
 from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.palette import series_style
 from oasis_torchrl.viz.timelines import time_columns
+
+LIVE_DELAY_S, LIVE_MAX_VALUES = 1.0, 4096
+"""How long and how many values a live viewer's series wait to be sent."""
+FILE_DELAY_S, FILE_MAX_VALUES = 30.0, 1 << 16
+"""The same for a file (512 KiB of values at most)."""
 
 Styler = Callable[[str], rr.AsComponents]
 """The static style (``SeriesLines`` or ``SeriesPoints``) of the series at an entity path."""
@@ -76,8 +83,8 @@ class SeriesBuffer:
         recording: rr.RecordingStream,
         fps: float,
         style: Styler = series_style,
-        max_delay_s: float = 1.0,
-        max_values: int = 4096,
+        max_delay_s: float = LIVE_DELAY_S,
+        max_values: int = LIVE_MAX_VALUES,
     ) -> None:
         self.recording = recording
         self.fps = fps

@@ -37,7 +37,13 @@ from oasis_torchrl.viz.palette import Policy, series_style, signal_key
 from oasis_torchrl.viz.paths import ENV_ROOT, RowPaths
 from oasis_torchrl.viz.recording import LayoutSender
 from oasis_torchrl.viz.records import StepRecord
-from oasis_torchrl.viz.series import SeriesBuffer
+from oasis_torchrl.viz.series import (
+    FILE_DELAY_S,
+    FILE_MAX_VALUES,
+    LIVE_DELAY_S,
+    LIVE_MAX_VALUES,
+    SeriesBuffer,
+)
 from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
 from oasis_torchrl.viz.timelines import set_frame
 from oasis_torchrl.viz.titles import EpisodeMark, RowEpisodes
@@ -130,7 +136,10 @@ class RecordWriter:
         self._layouts = LayoutSender(recording, live)
         self._send_layout = send_layout or self._send_default_blueprint
         style = functools.partial(series_style, policy=policy)
-        self._series = SeriesBuffer(recording, options.fps, style=style)
+        delay, values = (LIVE_DELAY_S, LIVE_MAX_VALUES) if live else (FILE_DELAY_S, FILE_MAX_VALUES)
+        self._series = SeriesBuffer(
+            recording, options.fps, style=style, max_delay_s=delay, max_values=values
+        )
         self._rows: dict[int, _RowState] = {}
         self._next_episode = 0
         self._cameras: list[str] = []

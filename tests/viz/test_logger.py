@@ -20,7 +20,7 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz import LogOptions, RerunFrameConsumer, RerunTransform, RolloutLogger
 
-from ._readback import Readback, blueprint_count, blueprint_views, printed
+from ._readback import Readback, RrdReader, blueprint_count, blueprint_views, printed
 from ._rollouts import CAMERAS, SIZE, TERMS, action, color, reward, rollout
 
 FPS = 20.0
@@ -357,3 +357,20 @@ def test_a_logger_left_open_is_closed_at_exit(tmp_path: Path) -> None:
     assert run.returncode == 0, run.stderr
     assert "Exception ignored" not in run.stderr
     assert Readback(out).images("env/0/camera/front")[0] == [3, 7, 11]
+
+
+@pytest.mark.skipif(RrdReader is None, reason="reads chunks with rerun-sdk 0.32 or newer")
+def test_a_file_gets_few_large_chunks(tmp_path: Path) -> None:
+    """Steps logged slower than rerun's default batching (200 ms) and a live viewer's series (1 s)
+    still share chunks: each chunk carries its schema, which would otherwise outweigh a frame."""
+    import time
+
+    td = rollout(1, 5)
+    with RolloutLogger(tmp_path / "slow.rrd", LogOptions(background=False)) as rerun_logger:
+        for t in range(5):
+            rerun_logger.log_rollout(td[:, t : t + 1], new_episodes=t == 0)
+            time.sleep(0.3)
+    chunks = [chunk.entity_path for chunk in RrdReader(tmp_path / "slow.rrd").stream()]
+    assert chunks.count("/env/0/camera/front") == 1  # the batcher's chunks
+    assert chunks.count("/env/0/action/throttle") == 2  # its style (static), its values
+    assert Readback(tmp_path / "slow.rrd").images("env/0/camera/front")[0] == [3, 7, 11, 15, 19, 23]
