@@ -12,7 +12,7 @@ import numpy as np
 import rerun as rr
 from PIL import Image
 
-DEFAULT_JPEG_QUALITY = 75
+DEFAULT_JPEG_QUALITY = 70
 """JPEG quality of logged frames (Huffman tables optimized per frame)."""
 JPEG_MEDIA_TYPE = "image/jpeg"
 

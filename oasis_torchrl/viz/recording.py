@@ -29,8 +29,8 @@ SPAWN = "spawn"
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 APPLICATION_ID = "oasis_torchrl"
 DEFAULT_MEMORY_LIMIT = "25%"
-FILE_BATCHING = rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=10), flush_num_bytes=16 << 20)
-"""How an ``.rrd`` file's data is batched into chunks: 10 s or 16 MiB at most, whichever comes
+FILE_BATCHING = rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=60), flush_num_bytes=16 << 20)
+"""How an ``.rrd`` file's data is batched into chunks: 60 s or 16 MiB at most, whichever comes
 first (what the logger holds in memory before it writes)."""
 
 

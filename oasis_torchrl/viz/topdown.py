@@ -47,6 +47,8 @@ CAR_SIZE = (4.5, 1.9)
 EDGE_RADIUS = 0.2
 LANE_RADIUS = 0.12
 PATH_RADIUS = 0.3
+PATH_EVERY = 2
+"""The path is drawn through every other position of the car (10 a second)."""
 DASH = (3.0, 6.0)
 """Lane-line dashes: metres painted, metres gap."""
 MAP_SPACING = 5.0

@@ -53,6 +53,7 @@ from oasis_torchrl.viz.topdown import (
     CRASHED_COLOR,
     DRAW_ORDER,
     PATH_COLOR,
+    PATH_EVERY,
     PATH_RADIUS,
     ROAD_COLOR,
     SCALE_COLOR,
@@ -400,6 +401,7 @@ class RecordWriter:
         path = car_frame(state.trail.points(), car, heading)
         outside = np.flatnonzero(~window.contains(path, margin=PATH_RADIUS))
         path = path[outside[-1] + 1 :] if len(outside) else path
+        path = path[(len(path) - 1) % PATH_EVERY :: PATH_EVERY]  # ends at the car
         self._log_layer(paths, "path", [path], [PATH_RADIUS], [PATH_COLOR])
         size = state.road.car_size if state.road is not None else CAR_SIZE
         self._log_capsules(
