@@ -5,15 +5,19 @@ Every env row (or replayed dataset episode) lives under ``<root>/<row>``:
 =====================================  ==============  ==========================================
 entity                                 archetype       what
 =====================================  ==============  ==========================================
-``<root>/<row>/camera/<camera>``       EncodedImage    camera frames (JPEG by default) or Image
+``<root>/<row>/camera/<camera>``       EncodedImage    camera frames (JPEG by default, as served)
+                                                       or Image
 ``<root>/<row>/depth/<camera>``        DepthImage      metric depth (metres; sky and unknown 0)
 ``<root>/<row>/action/<name>``         Scalars         ``throttle`` and ``steering``, one per frame
 ``<root>/<row>/reward/total``          Scalars         the step reward
 ``<root>/<row>/reward/<term>``         Scalars         each reward term (``collision_risk``, ...)
 ``<root>/<row>/truth/<field>``         Scalars         embedded-server ground truth per frame
+``<root>/<row>/collision/<field>``     Scalars         ``speed`` and ``obstacle_distance`` at a
+                                                       collision's frame (a cross on their plots)
 ``<root>/<row>/state/<name>``          Scalars         ``observation.state`` of replayed datasets
 ``<root>/<row>/events``                TextLog         episode starts (prompt, seed), episode
-                                                       ends (cause, figures)
+                                                       ends (cause, figures; on the episode's
+                                                       last frame)
 ``<root>/<row>/topdown/road``          LineStrips2D    the road surface near the car (one thick
                                                        strip along the centreline)
 ``<root>/<row>/topdown/lanes``         LineStrips2D    road edges and lane lines (dashed)
