@@ -12,7 +12,7 @@ from tensordict import TensorDict
 from oasis_torchrl.viz import LogOptions, RolloutLogger
 from oasis_torchrl.viz.palette import SIGNALS
 
-from ._readback import Readback
+from ._readback import Readback, printed
 from ._rollouts import observation
 
 STEPS = 6
@@ -145,3 +145,29 @@ def test_frames_only_recordings_have_no_truth_and_still_end(tmp_path: Path) -> N
     ]
     table = readback.static("summary/table", "TextDocument:text")[0]
     assert "| 0 | 0 | road 0-0 | 0 | - | terminated at step 2, return 2.00, frames 0-11 |" in table
+
+
+def test_periodic_evaluations_number_their_episodes_on(tmp_path: Path) -> None:
+    """PPO evaluates with one evaluator, again and again, into one recording: each evaluation's
+    episodes get the next numbers, and a row's tab names both of its episodes."""
+    from oasis_torchrl.config import load_config
+    from oasis_torchrl.drivers import ScriptedDriver
+    from oasis_torchrl.train.evaluate import Evaluator
+
+    path = tmp_path / "evaluations.rrd"
+    settings = ["episodes=2", "max_steps=2", "env.image_size=[64,96]", f"rerun={path}"]
+    cfg = load_config("eval", settings)
+    with Evaluator(cfg.env, cfg, progress=False) as evaluator:
+        for _ in range(2):
+            evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
+    readback = Readback(path)
+
+    frames, texts = readback.texts("env/1/events")
+    assert [text.split(":")[0] for text in texts] == [
+        "episode 1 starts",
+        "episode 1 ends",
+        "episode 3 starts",
+        "episode 3 ends",
+    ]
+    assert frames == [0, 11, 12, 23]  # the second evaluation from tick max_steps + 1
+    assert "[episode 1: time limit at step 2; episode 3: time limit at step 2]" in printed(path)
