@@ -150,8 +150,16 @@ class RolloutLogger:
 
     # -- ways in -----------------------------------------------------------------------------
 
-    def log_reset(self, obs: TensorDictBase, rows: Sequence[int] | None = None) -> None:
-        """Log a reset observation (batch ``[N]``): ``rows`` (default all) start new episodes."""
+    def log_reset(
+        self,
+        obs: TensorDictBase,
+        rows: Sequence[int] | None = None,
+        *,
+        episodes: Sequence[int] | None = None,
+    ) -> None:
+        """Log a reset observation (batch ``[N]``): ``rows`` (default all) start new episodes,
+        numbered ``episodes`` (one per row, e.g. a dataset's episode indices; default: the next
+        numbers, in row order)."""
         n = batch_rows(obs)
         rows = list(range(n) if rows is None else rows)
         outside = [row for row in rows if not 0 <= row < n]
@@ -159,7 +167,11 @@ class RolloutLogger:
             raise ValueError(f"reset rows {outside} are outside the batch of {n} env rows")
         self._pending(n)[rows] = False
         self._ended_rows(n)[rows] = False
-        self._submit(read_step(obs, self._logged(n, rows), start=True, **self._read_options()))
+        record = read_step(obs, self._logged(n, rows), start=True, **self._read_options())
+        if episodes is not None:
+            numbers = dict(zip(rows, episodes, strict=True))
+            record.episodes = [int(numbers[row]) for row in record.rows]
+        self._submit(record)
 
     def log_step(self, next_obs: TensorDictBase, action: torch.Tensor | None = None) -> None:
         """Log one step: ``next_obs`` is the step's ``"next"`` TensorDict (batch ``[N]``) and

@@ -27,7 +27,8 @@ class StepRecord:
     ``images[camera]``: uint8 ``[R, F, H, W, 3]`` (``F`` = 1, the last frame, or 4);
     ``depth[camera]``: float32 ``[R, H, W]``; ``actions``: float32 ``[R, 4, 2]``; ``reward``,
     ``terms[name]``: ``[R]``; ``truth[field]``: ``[R, 4]``; ``terminated``/``truncated``/``done``:
-    bool ``[R]``; ``prompts``/``seeds``: per row, for episode starts.
+    bool ``[R]``; ``prompts``/``seeds``: per row, for episode starts; ``episodes``: per row, the
+    numbers of the episodes a start begins when the caller names them.
 
     Example:
         >>> record = StepRecord(rows=[0], start=True)
@@ -48,6 +49,7 @@ class StepRecord:
     done: np.ndarray | None = None
     prompts: list[str] | None = None
     seeds: list[int] | None = None
+    episodes: list[int] | None = None
 
 
 def batch_rows(td: TensorDictBase) -> int:

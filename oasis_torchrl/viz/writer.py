@@ -10,7 +10,8 @@ top-down view is drawn in the car's frame at every step (:mod:`oasis_torchrl.viz
 road comes from ``scenes(prompt, seed)`` once per episode.
 
 Episodes are numbered in the order they start (rows in order at a shared reset: an evaluation's
-batch ``b`` of ``n`` rows holds episodes ``b * n`` to ``b * n + n - 1``, its report's order). An
+batch ``b`` of ``n`` rows holds episodes ``b * n`` to ``b * n + n - 1``, its report's order),
+unless the reset names them (the robot's: its dataset episode). An
 episode's end is one event, with its cause and final figures, on the frame of its last logged
 data (the last frame of its last step); a collision is also marked where it happened, on the
 speed and distance plots. The end also makes an
@@ -221,7 +222,8 @@ class RecordWriter:
     def _start_episode(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
     ) -> None:
-        state.episode, self._next_episode = self._next_episode, self._next_episode + 1
+        state.episode = record.episodes[i] if record.episodes else self._next_episode
+        self._next_episode = max(self._next_episode, state.episode + 1)
         state.episodes = state.episodes.add(EpisodeMark(state.episode))
         state.step = 0
         state.episode_return = 0.0

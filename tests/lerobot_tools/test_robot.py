@@ -139,15 +139,17 @@ def test_the_robots_rerun_recording_is_the_shared_one(tmp_path: Path) -> None:
     robot.connect()
     try:
         _drive(robot, 8)  # two chunks
+        robot.start_episode(3)  # LeRobot's dataset episode 3: the events say so
+        _drive(robot, 4)
     finally:
         robot.disconnect()
     readback = Readback(path)
 
     frames, images = readback.images("env/0/camera/front")
-    assert frames == [3, 7, 11]  # the reset, then the last frame of each chunk
+    assert frames == [3, 7, 11, 15, 19]  # a reset, then the last frame of each chunk
     assert images[0].shape == (64, 96, 3)  # as served: the viewer scales it
     steps, _ = readback.column("env/0/action/throttle", "Scalars:scalars", index="step")
-    assert steps == [1, 2]
-    [start] = readback.texts("env/0/events")[1]
-    assert start.startswith("episode 0 starts: 'urban', seed ")
-    assert "[episode 0: running]" in printed(path)
+    assert steps == [1, 2, 4]
+    starts = [text.split(":")[0] for text in readback.texts("env/0/events")[1]]
+    assert starts == ["episode 0 starts", "episode 3 starts"]
+    assert "[episode 0: running; episode 3: running]" in printed(path)
