@@ -52,7 +52,10 @@ the collision markers: the speed and the distance ahead at the frame of a collis
 
 MARKERS = frozenset({"collision/speed", "collision/obstacle_distance"})
 """Signals drawn as points (a cross at a collision), not lines."""
-COMPARED = frozenset({"truth/speed", "truth/obstacle_distance"}) | MARKERS
+COMPARED = (
+    frozenset({"truth/speed", "truth/obstacle_distance", "truth/lateral_offset", "reward/total"})
+    | MARKERS
+)
 """Signals that policies side by side share a plot for: drawn in the policy's colour."""
 MARKER_SIZE = 8.0
 
@@ -181,3 +184,19 @@ class Policy:
     def at(cls, name: str, index: int) -> Policy:
         """The policy in column ``index`` of a recording."""
         return cls(name, POLICY_COLORS[index % len(POLICY_COLORS)])
+
+
+SHARED_PLOTS: tuple[Plot, ...] = tuple(
+    Plot(plot.title, tuple(sorted(key for key in COMPARED if plot.shows(key))))
+    for plot in PLOTS
+    if any(plot.shows(key) for key in COMPARED)
+)
+"""The plots that policies side by side draw on together, their :data:`COMPARED` signals only
+(speed, distance to the obstacle ahead, lateral offset, reward).
+
+Example:
+    >>> [plot.title for plot in SHARED_PLOTS]
+    ['reward', 'distance to obstacle ahead (m)', 'speed (m/s)', 'lateral offset (m)']
+    >>> SHARED_PLOTS[2].include
+    ('collision/speed', 'truth/speed')
+"""

@@ -38,7 +38,7 @@ from oasis_torchrl.viz.blueprint import (
 )
 from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
-from oasis_torchrl.viz.palette import COMPARED, PLOTS, Plot, Policy, series_style
+from oasis_torchrl.viz.palette import COMPARED, SHARED_PLOTS, Plot, Policy, series_style
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.recording import LayoutSender, is_live, open_recording
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
@@ -53,8 +53,6 @@ DIVERGENCE_ROOT = "divergence"
 """Root of the divergence events (``divergence/<row>``)."""
 DEFAULT_THRESHOLD = 0.25
 """Actions further apart than this (throttle or steering) mark a divergence."""
-SHARED_PLOTS = tuple(plot for plot in PLOTS if set(plot.include) <= COMPARED)
-"""The plots every policy of a row draws on (speed, distance to the obstacle ahead)."""
 SIGNAL_GROUPS = ("action", "reward", "truth", "collision", "state")
 
 
@@ -154,12 +152,12 @@ def _shared_plot(layouts: Sequence[RowsLayout], row: int, plot: Plot) -> rrb.Tim
 def _row_tab(layouts: Sequence[RowsLayout], row: int, cameras: Sequence[str]) -> rrb.Vertical:
     lines = [_policy_line(layout, row, cameras) for layout in layouts]
     signals = {key for layout in layouts for key in layout.signals}
-    plots = [
+    shared = [
         _shared_plot(layouts, row, plot)
         for plot in SHARED_PLOTS
         if any(plot.shows(key) for key in signals)
     ]
-    plots += [
+    actions = [
         rrb.TimeSeriesView(
             origin=RowPaths(layout.root, row).base,
             contents=["+ $origin/action/**"],
@@ -168,9 +166,11 @@ def _row_tab(layouts: Sequence[RowsLayout], row: int, cameras: Sequence[str]) ->
         for layout in layouts
     ]
     divergence = rrb.TextLogView(origin=f"{DIVERGENCE_ROOT}/{row}", name="divergence")
-    bottom = rrb.Horizontal(*plots, divergence)
     title = tab_title(row, {layout.root: layout.row_episodes(row) for layout in layouts})
-    return rrb.Vertical(*lines, bottom, row_shares=[3] * len(lines) + [2], name=title)
+    bottom = [rrb.Horizontal(*shared)] if shared else []
+    bottom.append(rrb.Horizontal(*actions, divergence))
+    shares = [3] * len(lines) + [2] * len(bottom)
+    return rrb.Vertical(*lines, *bottom, row_shares=shares, name=title)
 
 
 class SideBySide:

@@ -57,9 +57,13 @@ def _check_side_by_side(readback: Readback, path: Path, roots: tuple[str, str]) 
         assert ("2D", f"{root}: top-down", f"{root}/0/topdown") in views
         assert ("TextLog", f"{root}: events", f"{root}/0/events") in views
         assert ("TimeSeries", f"{root}: actions (-1 to 1)", f"{root}/0") in views
-    # Speed and distance ahead: one plot each, every policy on the same axes
-    assert ("TimeSeries", "speed (m/s)", "/") in views
-    assert ("TimeSeries", "distance to obstacle ahead (m)", "/") in views
+    # Speed, distance ahead and reward: one plot each, every policy on the same axes
+    for plot in ("speed (m/s)", "distance to obstacle ahead (m)", "reward"):
+        assert ("TimeSeries", plot, "/") in views
+    assert ("TimeSeries", "lateral offset (m)", "/") not in views  # not in these rollouts
+    # Both policies' lines (and collision marks) in the speed plot (the printout cuts it there)
+    speed = f"[+ /{first}/0/collision/speed, + /{first}/0/truth/speed, + /{second}/0/collision/"
+    assert speed in printed(path)
     assert ("TextLog", "divergence", "divergence/0") in views
     assert ("TextDocument", "episodes", "summary/table") in views
 
