@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +43,7 @@ from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.recording import LayoutSender, is_live, open_recording
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
 from oasis_torchrl.viz.timelines import set_frame
-from oasis_torchrl.viz.titles import tab_title
+from oasis_torchrl.viz.titles import episodes_of, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW
 from oasis_torchrl.viz.writer import ACTION_NAMES
 
@@ -292,7 +292,7 @@ def align_recordings(
             chunks = list(RrdReader(name).stream())
             kept = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
             send_chunks(kept, recording=recording)
-            layouts.append(_layout_of(root, [chunk.entity_path for chunk in chunks]))
+            layouts.append(_layout_of(root, chunks))
             _restyle(recording, layouts[-1], Policy.at(root, index))
             actions[root] = _actions_by_frame(chunks)
             tables.append(f"## {root} ({name})\n\n{_table_of(chunks)}")
@@ -338,10 +338,10 @@ def _rerooted(chunk: object, root: str) -> object:
     return chunk.with_entity_path(f"/{root}/" + path.removeprefix(f"/{ENV_ROOT}/"))
 
 
-def _layout_of(root: str, entity_paths: Iterable[str]) -> RowsLayout:
-    """The layout of one copied recording, from its entity paths."""
+def _layout_of(root: str, chunks: Sequence[object]) -> RowsLayout:
+    """The layout of one copied recording, from its entity paths and its rows' events."""
     rows, cameras, signals, topdown = set(), [], set(), False
-    for path in entity_paths:
+    for path in (chunk.entity_path for chunk in chunks):
         parts = path.strip("/").split("/")
         if len(parts) < 3 or parts[0] != ENV_ROOT or not parts[1].isdigit():
             continue
@@ -352,9 +352,21 @@ def _layout_of(root: str, entity_paths: Iterable[str]) -> RowsLayout:
             signals.add(f"{parts[2]}/{parts[3]}")
         topdown |= parts[2] == "topdown"
     window = DEFAULT_WINDOW if topdown else None
-    return RowsLayout(
-        root, tuple(sorted(rows)), tuple(cameras), (), window, frozenset(signals), True
-    )
+    ordered = tuple(sorted(rows))
+    episodes = tuple(episodes_of(_events_of(chunks, row)) for row in ordered)
+    return RowsLayout(root, ordered, tuple(cameras), (), window, frozenset(signals), True, episodes)
+
+
+def _events_of(chunks: Sequence[object], row: int) -> list[str]:
+    """A row's event texts, in frame order."""
+    found = []
+    for chunk in chunks:
+        if chunk.entity_path != f"/{RowPaths(ENV_ROOT, row).events}":
+            continue
+        batch = chunk.to_record_batch()
+        texts = batch.column("TextLog:text").to_pylist()
+        found += zip(batch.column(FRAME_TIMELINE).to_pylist(), texts, strict=True)
+    return [text[0] for _, text in sorted(found, key=lambda pair: pair[0]) if text]
 
 
 def _actions_by_frame(chunks: Sequence[object]) -> dict[int, dict[int, np.ndarray]]:

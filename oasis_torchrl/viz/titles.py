@@ -7,11 +7,14 @@ side, each policy's outcome is named after it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 LISTED = 2
 """A row with more episodes than this is titled by their range and the latest."""
+_START = re.compile(r"episode (\d+) starts")
+_END = re.compile(r"episode (\d+) ends: (.+?)(?: \(.*\))? after (\d+) steps")
 
 
 @dataclass(frozen=True)
@@ -91,3 +94,22 @@ def _outcomes(number: int, episodes: Mapping[str, RowEpisodes]) -> str:
         if mark is not None:
             parts.append(f"{name} {mark.describe()}" if named else mark.describe())
     return ", ".join(parts)
+
+
+def episodes_of(events: Iterable[str]) -> RowEpisodes:
+    """A row's episodes read back from its event texts, in order (a saved recording's, which
+    ``oasis-torchrl view A.rrd B.rrd`` lays out again).
+
+    Example:
+        >>> events = ["episode 3 starts: 'urban', seed 7",
+        ...           "episode 3 ends: collision (hit an obstacle) after 59 steps, return 1.000"]
+        >>> episodes_of(events).latest
+        (EpisodeMark(number=3, cause='collision', steps=59),)
+    """
+    episodes = RowEpisodes()
+    for text in events:
+        if start := _START.match(text):
+            episodes = episodes.add(EpisodeMark(int(start[1])))
+        elif (end := _END.match(text)) and episodes.count:
+            episodes = episodes.ended(EpisodeMark(int(end[1]), end[2], int(end[3])))
+    return episodes

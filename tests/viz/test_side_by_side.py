@@ -96,6 +96,8 @@ def test_view_aligns_two_saved_recordings(tmp_path: Path) -> None:
     assert main(args) == 0
 
     _check_side_by_side(Readback(out), out, ("before", "after"))
+    # The tab is named after the episode, read back from each recording's events
+    assert "[episode 0: before collision at step 4, after collision at step 4]" in printed(out)
     assert main(["view", str(tmp_path / "before.rrd"), str(tmp_path), "--save", str(out)]) == 2
 
 
