@@ -3,8 +3,8 @@
 each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view, depth maps and the event log
 beside them. The time panel opens at the start of the ``frame`` timeline.
 
-Views take a ``label`` (``"autopilot: "``) that a side-by-side layout puts before their names,
-so every panel says whose it is."""
+Camera and top-down views take a ``label`` (``"autopilot: "``) that a side-by-side layout puts
+before their names, so every panel says whose it is."""
 
 from __future__ import annotations
 
@@ -25,9 +25,7 @@ BACKGROUND = (30, 34, 30)
 PLOTS_PER_LINE = 3
 
 
-def plot_views(
-    paths: RowPaths, signals: Collection[str] | None = None, label: str = ""
-) -> rrb.Vertical | None:
+def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical | None:
     """The row's plots that show at least one of ``signals`` (palette keys such as
     ``truth/speed``; None: every plot), three to a line; None if there is none.
 
@@ -38,7 +36,7 @@ def plot_views(
     """
     chosen = [plot for plot in PLOTS if signals is None or any(plot.shows(key) for key in signals)]
     views = [
-        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=label + plot.title)
+        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=plot.title)
         for plot in chosen
     ]
     if not views:

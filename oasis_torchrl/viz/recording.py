@@ -6,10 +6,10 @@ disk; a viewer drops its oldest data at its memory limit (``memory_limit`` for a
 ``rerun --memory-limit 4GB`` for one you start yourself).
 
 A file's data is batched into chunks of up to :data:`FILE_BATCHING` (every chunk carries its
-schema: batched by rerun's default 200 ms, an evaluation's recording held 2 rows a chunk and was
-mostly schemas); a viewer gets data as it comes. A layout goes to a viewer as soon as it
-changes, to a file once, when it is flushed (:class:`LayoutSender`): a file is read whole, and
-each layout of a recording with many tabs weighs as much as seconds of its video.
+schema: rerun's default batching, 200 ms, leaves a slowly stepped evaluation's file with chunks
+of a row or two, mostly schemas); a viewer gets data as it comes. A layout goes to a viewer as
+soon as it changes, to a file once, when it is flushed (:class:`LayoutSender`): a file is read
+whole, and each layout of a recording with many tabs weighs as much as seconds of its video.
 """
 
 from __future__ import annotations

@@ -53,8 +53,7 @@ DASH = (3.0, 6.0)
 """Lane-line dashes: metres painted, metres gap."""
 MAP_SPACING = 5.0
 """Metres between the points the road and its lines are drawn through (a scene reports one
-every 2 m; a bend of 50 m radius strays 6 cm from chords of 5 m, and each step's map is a third
-of the size)."""
+every 2 m; a bend of 50 m radius strays 6 cm from chords of 5 m)."""
 SCALE_COLOR: Color = (235, 235, 235)
 SCALE_RADIUS = 0.15
 DRAW_ORDER = {"road": 1.0, "lanes": 2.0, "obstacles": 3.0, "path": 4.0, "car": 5.0, "scale": 6.0}

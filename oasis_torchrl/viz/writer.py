@@ -4,18 +4,19 @@ Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 *
 ``4 * tick + 3``: action ``k`` and ground truth ``k`` sit on frame ``4 * tick + k`` (frame ``k``
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
 frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
-at most a second late). Each row keeps a little state (episode number, step count, return,
-collision, its road map, a fixed-size path buffer and the episode's actions), never frames. The
-top-down view is drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the
-road comes from ``scenes(prompt, seed)`` once per episode.
+at most a second late to a viewer, 30 s to a file). Each row keeps a little state (episode
+number, step count, return, collision, its road map, a fixed-size path buffer and the episode's
+actions), never frames. The top-down view is drawn in the car's frame at every step
+(:mod:`oasis_torchrl.viz.topdown`); the road comes from ``scenes(prompt, seed)`` once per
+episode.
 
 Episodes are numbered in the order they start (rows in order at a shared reset: an evaluation's
 batch ``b`` of ``n`` rows holds episodes ``b * n`` to ``b * n + n - 1``, its report's order),
-unless the reset names them (the robot's: its dataset episode). An
-episode's end is one event, with its cause and final figures, on the frame of its last logged
-data (the last frame of its last step); a collision is also marked where it happened, on the
-speed and distance plots. The end also makes an
-:class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the summary tab and names the row's tab.
+unless the reset names them (the robot's: its dataset episode). An episode's end is one event,
+with its cause and final figures, on the frame of its last logged data (the last frame of its
+last step); a collision is also marked where it happened, on the speed and distance plots. The
+end also makes an :class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the summary tab and
+names the row's tab.
 """
 
 from __future__ import annotations
