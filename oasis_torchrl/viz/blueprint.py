@@ -148,9 +148,10 @@ def time_panel(fps: float | None = None) -> rrb.TimePanel:
         'TimePanel'
     """
     # rerun-sdk 0.26's time panel takes a cursor; newer ones have none, but a panel set to
-    # "playing" starts from the beginning.
+    # "playing" starts from the beginning, and looping brings a cursor left at the end (a file's
+    # layout comes last) back to it.
     if "play_state" in inspect.signature(rrb.TimePanel).parameters:
-        start: dict = {"play_state": "playing"}
+        start: dict = {"play_state": "playing", "loop_mode": "all"}
     else:
         start = {"sequence_cursor": 0}
     return rrb.TimePanel(timeline=FRAME_TIMELINE, fps=fps, **start)

@@ -118,6 +118,7 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     assert ("BarChart", chart, "summary/env") in views
     text = printed(path)
     assert "TimePanelBlueprint:play_state" in text  # opens at the start, playing
+    assert "TimePanelBlueprint:loop_mode" in text  # and back to the start from the end
     # Tabs are named after their episodes (row 0's still runs); a file gets one layout, at close
     assert "[episode 0: running]" in text and "[episode 1: collision at step 2]" in text
     assert blueprint_count(path) == 1
