@@ -131,7 +131,7 @@ def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
     charts = [
         rrb.BarChartView(
             origin=chart_path(root),
-            name=f"{root}: distance driven in m (or return), by episode in table order",
+            name=f"{root}: distance driven in m (or return) by episode number",
         )
         for root in roots
     ]

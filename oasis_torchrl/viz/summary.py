@@ -5,8 +5,8 @@ Each ended episode is an :class:`EpisodeOutcome`; an :class:`EpisodeSummary` rew
 static data, a table (``summary/table``, a markdown ``TextDocument``: one line per episode, one
 column per policy giving how it ended, at which step, and the frames it has, a crash in bold and
 the crashed policies in a column of their own) and a bar chart per policy (``summary/<policy>``,
-one bar per episode in the table's order), the comparison the main job's ``comparison.png``
-draws, episode by episode.
+one bar per episode at its number, in the policy's colour), the comparison the main job's
+``comparison.png`` draws, episode by episode.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import rerun as rr
 
-from oasis_torchrl.viz.palette import POLICY_COLORS
+from oasis_torchrl.viz.palette import Policy
 
 SUMMARY_ROOT = "summary"
 """Root of the summary entities."""
@@ -136,11 +136,13 @@ class EpisodeSummary:
         )
         cells = {(o.root, o.scene()): o for o in self.outcomes}
         scenes = self.scenes()
+        episodes = np.array([scene[1] for scene in scenes], dtype=np.int64)
         for index, root in enumerate(self.roots):
             found = [cells.get((root, scene)) for scene in scenes]
             values = np.array([_bar(outcome) for outcome in found], dtype=np.float64)
-            color = POLICY_COLORS[index % len(POLICY_COLORS)]
-            self.recording.log(chart_path(root), rr.BarChart(values, color=color), static=True)
+            color = Policy.at(root, index).color
+            chart = rr.BarChart(values, color=color, abscissa=episodes)
+            self.recording.log(chart_path(root), chart, static=True)
 
 
 def chart_path(root: str) -> str:

@@ -110,7 +110,9 @@ def test_nothing_is_logged_for_a_row_after_its_episode_ends(tmp_path: Path, way_
         "| 2 | 2 | road 2-0 | 200 | - | time limit at step 6, 13.0 m, frames 0-27 |",
     ]
     assert table.splitlines()[2:] == lines
-    assert readback.static("summary/env", "BarChart:values") is not None
+    # A bar per episode, at its number: the distance it drove
+    assert readback.static("summary/env", "BarChart:abscissa")[0]["buffer"] == [0, 1, 2]
+    assert readback.static("summary/env", "BarChart:values")[0]["buffer"] == [5.0, 9.0, 13.0]
 
 
 def test_every_signal_has_its_fixed_name_and_colour(tmp_path: Path) -> None:

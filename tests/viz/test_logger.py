@@ -114,7 +114,7 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     assert not any(origin.startswith("env/1") for _, _, origin in views)
     # Row 2's episode ended: the summary tab appeared
     assert ("TextDocument", "episodes", "summary/table") in views
-    chart = "env: distance driven in m (or return), by episode in table order"
+    chart = "env: distance driven in m (or return) by episode number"
     assert ("BarChart", chart, "summary/env") in views
     text = printed(path)
     assert "TimePanelBlueprint:play_state" in text  # opens at the start, playing
