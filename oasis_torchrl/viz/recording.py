@@ -30,8 +30,8 @@ GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 APPLICATION_ID = "oasis_torchrl"
 DEFAULT_MEMORY_LIMIT = "25%"
 FILE_BATCHING = rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=60), flush_num_bytes=16 << 20)
-"""How an ``.rrd`` file's data is batched into chunks: 60 s or 16 MiB at most, whichever comes
-first (what the logger holds in memory before it writes)."""
+"""How an ``.rrd`` file's data is batched into chunks: a batch is written after 60 s or at
+16 MiB, whichever comes first (what the logger holds in memory before it writes)."""
 
 
 def describe_target(target: str | Path) -> str:
