@@ -228,6 +228,8 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.viz.replay",
             "oasis_torchrl.viz.lerobot_replay",
             "oasis_torchrl.viz.paths",
+            "oasis_torchrl.viz.timelines",
+            "oasis_torchrl.viz.titles",
             "oasis_torchrl.viz.worker",
             "oasis_torchrl.viz.writer",
         ),

@@ -656,16 +656,15 @@ class Evaluator:
         row_prompts = [str(prompt) for prompt in eval_cfg.prompts for _ in range(eval_cfg.episodes)]
         frames_scored = resolve_reward_kind(env_cfg.reward.kind, env_capabilities(env_cfg))
         self.reference = None if frames_scored != "ground_truth" else ReferenceScore(env_cfg.reward)
-        recorded = bool(eval_cfg.get("rerun") or eval_cfg.get("lerobot") or rerun_logger)
         self.env = make_env(
             env_cfg,
             num_envs=len(row_prompts),
             prompts=row_prompts,
             max_steps=eval_cfg.max_steps,
             image_size=image_size,
-            # Recorders keep every frame, and the frames-only reward scored beside reads them;
-            # the policies need the last alone.
-            all_frames=recorded or self.reference is not None,
+            # A dataset keeps every frame, and the frames-only reward scored beside reads them;
+            # the metrics, the policies and rerun need the last alone.
+            all_frames=bool(eval_cfg.get("lerobot")) or self.reference is not None,
             frame_stack=frame_stack,
             expert=expert,
             front_crop=front_crop,

@@ -10,7 +10,7 @@ Needs the ``rerun`` extra (``rerun-sdk``).
 
 >>> from oasis_torchrl.viz import LogOptions
 >>> LogOptions().jpeg_quality
-85
+70
 """
 
 from oasis_torchrl.viz.blueprint import default_blueprint

@@ -1,7 +1,10 @@
-"""The default rerun layout: a summary tab, then one tab per row: the cameras side by side, the
-plots below them (one unit each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view,
-depth maps and the event log beside them. The time panel opens at the start of the ``frame``
-timeline."""
+"""The default rerun layout: a summary tab, then one tab per row, named after its episodes
+(:mod:`~oasis_torchrl.viz.titles`): the cameras side by side, the plots below them (one unit
+each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view, depth maps and the event log
+beside them. The time panel opens at the start of the ``frame`` timeline.
+
+Camera and top-down views take a ``label`` (``"autopilot: "``) that a side-by-side layout puts
+before their names, so every panel says whose it is."""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ import rerun.blueprint as rrb
 from oasis_torchrl.viz.palette import PLOTS
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, chart_path
+from oasis_torchrl.viz.titles import RowEpisodes, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 BACKGROUND = (30, 34, 30)
@@ -41,7 +45,9 @@ def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.V
     return rrb.Vertical(*(rrb.Horizontal(*line) for line in lines))
 
 
-def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatial2DView:
+def topdown_view(
+    paths: RowPaths, window: Window = DEFAULT_WINDOW, label: str = ""
+) -> rrb.Spatial2DView:
     """The top-down view: its bounds are the window around the car (the map is logged in the
     car's frame, so the window follows the car).
 
@@ -51,21 +57,25 @@ def topdown_view(paths: RowPaths, window: Window = DEFAULT_WINDOW) -> rrb.Spatia
     """
     return rrb.Spatial2DView(
         origin=paths.topdown(),
-        name="top-down",
+        name=f"{label}top-down",
         visual_bounds=rrb.VisualBounds2D(x_range=window.x_range, y_range=window.y_range),
         background=BACKGROUND,
     )
 
 
-def camera_views(paths: RowPaths, cameras: Sequence[str]) -> rrb.Horizontal:
-    """The row's cameras, left to right.
+def camera_views(paths: RowPaths, cameras: Sequence[str], label: str = "") -> rrb.Horizontal:
+    """The row's cameras, left to right (each image scaled to its panel by the viewer).
 
     Example:
-        >>> len(camera_views(RowPaths("env", 0), ["left_forward", "front"]).contents)
-        2
+        >>> views = camera_views(RowPaths("env", 0), ["left_forward", "front"], "autopilot: ")
+        >>> [view.name for view in views.contents]
+        ['autopilot: left_forward', 'autopilot: front']
     """
     return rrb.Horizontal(
-        *(rrb.Spatial2DView(origin=paths.camera(camera), name=camera) for camera in cameras)
+        *(
+            rrb.Spatial2DView(origin=paths.camera(camera), name=f"{label}{camera}")
+            for camera in cameras
+        )
     )
 
 
@@ -89,8 +99,10 @@ def row_layout(
     depth_cameras: Sequence[str] = (),
     topdown: Window | None = DEFAULT_WINDOW,
     signals: Collection[str] | None = None,
+    title: str | None = None,
 ) -> rrb.Horizontal:
-    """The layout of one row: cameras over plots (those with signals), side panel on the right.
+    """The layout of one row, titled ``title`` (default ``row <row>``): cameras over plots (those
+    with signals), side panel on the right.
 
     Example:
         >>> layout = row_layout(RowPaths("env", 0), ["left_forward", "front", "right_forward"])
@@ -105,7 +117,7 @@ def row_layout(
         main,
         _side_panel(paths, depth_cameras, topdown),
         column_shares=[3, 1],
-        name=f"{paths.root} {paths.row}",
+        name=title or tab_title(paths.row, {}),
     )
 
 
@@ -117,7 +129,10 @@ def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
         'summary'
     """
     charts = [
-        rrb.BarChartView(origin=chart_path(root), name=f"{root}: distance in m (or return)")
+        rrb.BarChartView(
+            origin=chart_path(root),
+            name=f"{root}: distance driven in m (or return) by episode number",
+        )
         for root in roots
     ]
     table = rrb.TextDocumentView(origin=TABLE, name="episodes")
@@ -133,9 +148,10 @@ def time_panel(fps: float | None = None) -> rrb.TimePanel:
         'TimePanel'
     """
     # rerun-sdk 0.26's time panel takes a cursor; newer ones have none, but a panel set to
-    # "playing" starts from the beginning.
+    # "playing" starts from the beginning, and looping brings a cursor left at the end (a file's
+    # layout comes last) back to it.
     if "play_state" in inspect.signature(rrb.TimePanel).parameters:
-        start: dict = {"play_state": "playing"}
+        start: dict = {"play_state": "playing", "loop_mode": "all"}
     else:
         start = {"sequence_cursor": 0}
     return rrb.TimePanel(timeline=FRAME_TIMELINE, fps=fps, **start)
@@ -151,6 +167,7 @@ def default_blueprint(
     signals: Collection[str] | None = None,
     summary: bool = False,
     fps: float | None = None,
+    titles: Sequence[str] | None = None,
 ) -> rrb.Blueprint:
     """A summary tab (when ``summary``) and one tab per logged row (a single row and no summary
     get no tabs).
@@ -164,6 +181,7 @@ def default_blueprint(
         signals: the logged signals' palette keys (which plots to show; None: all).
         summary: add the summary tab (ended episodes exist).
         fps: the frame timeline's playback rate (frames per second).
+        titles: each row's tab title (default ``row <row>``).
 
     Example:
         >>> blueprint = default_blueprint([0, 5], ["front"])
@@ -172,8 +190,10 @@ def default_blueprint(
     """
     if not rows:
         raise ValueError("default_blueprint needs at least one row")
+    titles = titles or [None] * len(rows)
     layouts = [
-        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals) for row in rows
+        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals, title)
+        for row, title in zip(rows, titles, strict=True)
     ]
     if summary:
         layouts.insert(0, summary_layout([root]))
@@ -183,7 +203,8 @@ def default_blueprint(
 
 @dataclass(frozen=True)
 class RowsLayout:
-    """What a writer has logged so far, all its layout depends on.
+    """What a writer has logged so far, all its layout depends on (``episodes``: each row's,
+    for its tab's title).
 
     Example:
         >>> layout = RowsLayout("env", (0,), ("front",), (), None, frozenset(), False)
@@ -198,6 +219,13 @@ class RowsLayout:
     topdown: Window | None
     signals: frozenset[str]
     summary: bool
+    episodes: tuple[RowEpisodes, ...] = ()
+
+    def row_episodes(self, row: int) -> RowEpisodes:
+        """The episodes row ``row`` has shown (none if unknown)."""
+        if row not in self.rows or not self.episodes:
+            return RowEpisodes()
+        return self.episodes[self.rows.index(row)]
 
     def blueprint(self, fps: float | None = None) -> rrb.Blueprint:
         """The default blueprint of these rows."""
@@ -210,4 +238,5 @@ class RowsLayout:
             signals=self.signals,
             summary=self.summary,
             fps=fps,
+            titles=[tab_title(row, {self.root: self.row_episodes(row)}) for row in self.rows],
         )

@@ -1,4 +1,8 @@
-"""Camera frames and depth maps as rerun archetypes (JPEG by default, to keep recordings small)."""
+"""Camera frames and depth maps as rerun archetypes (JPEG by default, to keep recordings small).
+
+Frames are logged at the size the env serves them: the viewer scales an image to its panel, so
+more pixels in the file would add size, not detail.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +12,9 @@ import numpy as np
 import rerun as rr
 from PIL import Image
 
-DEFAULT_JPEG_QUALITY = 85
+DEFAULT_JPEG_QUALITY = 70
+"""JPEG quality of logged frames (Huffman tables optimized per frame)."""
 JPEG_MEDIA_TYPE = "image/jpeg"
-DEFAULT_DISPLAY_WIDTH = 384
-"""Frames narrower than this are upscaled for display (a policy's 96x64 becomes 384x256)."""
 
 
 def check_frame(frame: np.ndarray, name: str) -> np.ndarray:
@@ -38,39 +41,18 @@ def encode_jpeg(frame: np.ndarray, quality: int) -> bytes:
         b'\\xff\\xd8'
     """
     buffer = io.BytesIO()
-    Image.fromarray(frame).save(buffer, format="JPEG", quality=quality)
+    Image.fromarray(frame).save(buffer, format="JPEG", quality=quality, optimize=True)
     return buffer.getvalue()
 
 
-def display_size(frame: np.ndarray, min_width: int | None) -> np.ndarray:
-    """``frame`` upscaled by the smallest whole factor that makes it at least ``min_width``
-    pixels wide (bilinear), for display only; as it is when wide enough or ``min_width`` is None.
-
-    Example:
-        >>> display_size(np.zeros((64, 96, 3), np.uint8), 384).shape
-        (256, 384, 3)
-        >>> display_size(np.zeros((512, 768, 3), np.uint8), 384).shape
-        (512, 768, 3)
-    """
-    width = frame.shape[1]
-    if min_width is None or width >= min_width:
-        return frame
-    factor = -(-min_width // width)
-    size = (width * factor, frame.shape[0] * factor)
-    return np.asarray(Image.fromarray(frame).resize(size, Image.Resampling.BILINEAR))
-
-
-def image_archetype(
-    frame: np.ndarray, jpeg_quality: int | None, min_width: int | None = None
-) -> rr.EncodedImage | rr.Image:
-    """A JPEG ``EncodedImage`` (``jpeg_quality`` 1-100) or, with None, a raw ``Image``, of the
-    frame upscaled to at least ``min_width`` pixels wide (:func:`display_size`).
+def image_archetype(frame: np.ndarray, jpeg_quality: int | None) -> rr.EncodedImage | rr.Image:
+    """A JPEG ``EncodedImage`` (``jpeg_quality`` 1-100) of the frame or, with None, a raw
+    ``Image`` (rerun's encoded image: the same on every supported rerun-sdk).
 
     Example:
         >>> type(image_archetype(np.zeros((8, 8, 3), np.uint8), 85)).__name__
         'EncodedImage'
     """
-    frame = display_size(frame, min_width)
     if jpeg_quality is None:
         return rr.Image(frame)
     return rr.EncodedImage(contents=encode_jpeg(frame, jpeg_quality), media_type=JPEG_MEDIA_TYPE)

@@ -4,7 +4,9 @@ as live rollouts (cameras, actions, state, reward, events; no ground truth, so n
 Tabular columns are read with LeRobot's own reader and sent as whole columns; videos are decoded
 sequentially with PyAV (:func:`~oasis_torchrl.data.video_frames.frames_at`) and logged frame by
 frame, so memory stays flat however long an episode is.
-Timelines: ``frame`` = the dataset's ``frame_index``, ``sim_time`` = ``frame_index / fps``.
+Timelines: ``frame`` = the dataset's ``frame_index``, ``step`` = the env step it belongs to (4
+frames a step in a dataset of one row per frame, 1 in one of a row per step), ``sim_time`` =
+``frame_index / fps``. Each episode's tab is named after it (``episode 3``).
 Needs the ``lerobot`` extra.
 """
 
@@ -21,15 +23,12 @@ import rerun as rr
 from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.data.loading import default_repo_id, is_dataset_root
 from oasis_torchrl.data.video_frames import episode_frames
+from oasis_torchrl.protocol import CHUNK, FPS
 from oasis_torchrl.viz.blueprint import default_blueprint
-from oasis_torchrl.viz.images import (
-    DEFAULT_DISPLAY_WIDTH,
-    DEFAULT_JPEG_QUALITY,
-    check_frame,
-    image_archetype,
-)
-from oasis_torchrl.viz.paths import EPISODE_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY, check_frame, image_archetype
+from oasis_torchrl.viz.paths import EPISODE_ROOT, RowPaths
 from oasis_torchrl.viz.series import send_series
+from oasis_torchrl.viz.timelines import set_frame
 
 logger = logging.getLogger(__name__)
 
@@ -107,7 +106,12 @@ class DatasetReplay:
         chosen = self.check_episodes(episodes)
         self.recording.send_blueprint(
             default_blueprint(
-                chosen, self.cameras, root=EPISODE_ROOT, topdown=None, signals=self._signals()
+                chosen,
+                self.cameras,
+                root=EPISODE_ROOT,
+                topdown=None,
+                signals=self._signals(),
+                titles=[f"episode {episode}" for episode in chosen],
             )
         )
         dataset = LeRobotDataset(
@@ -139,9 +143,13 @@ class DatasetReplay:
         for key in self.meta.camera_keys:
             self._log_camera(paths, episode, key, rows, frames)
 
+    @property
+    def frames_per_step(self) -> int:
+        """Dataset rows per env step: 4 at the world's frame rate, 1 at its step rate."""
+        return max(1, round(CHUNK * float(self.meta.fps) / FPS))
+
     def _at(self, frame: int) -> None:
-        self.recording.set_time(FRAME_TIMELINE, sequence=int(frame))
-        self.recording.set_time(TIME_TIMELINE, duration=int(frame) / self.meta.fps)
+        set_frame(self.recording, frame, float(self.meta.fps), self.frames_per_step)
 
     def _log_events(
         self, paths: RowPaths, episode: int, rows: dict[str, np.ndarray], frames: np.ndarray
@@ -154,7 +162,8 @@ class DatasetReplay:
         if DONE in rows:
             for frame in frames[np.asarray(rows[DONE]).reshape(-1).astype(bool)]:
                 self._at(frame)
-                self.recording.log(paths.events, rr.TextLog("episode ends", level="INFO"))
+                ends = rr.TextLog(f"episode {episode} ends", level="INFO")
+                self.recording.log(paths.events, ends)
 
     def _log_series(self, paths: RowPaths, rows: dict[str, np.ndarray], frames: np.ndarray) -> None:
         fps = float(self.meta.fps)
@@ -165,10 +174,24 @@ class DatasetReplay:
             names = _names(self.meta.features[key], values.shape[1])
             for column, name in enumerate(names):
                 path = paths.scalar(group, name)
-                send_series(self.recording, path, frames, values[:, column], fps)
+                send_series(
+                    self.recording,
+                    path,
+                    frames,
+                    values[:, column],
+                    fps,
+                    frames_per_step=self.frames_per_step,
+                )
         if REWARD in rows:
             reward = np.asarray(rows[REWARD], dtype=np.float64).reshape(-1)
-            send_series(self.recording, paths.scalar("reward", "total"), frames, reward, fps)
+            send_series(
+                self.recording,
+                paths.scalar("reward", "total"),
+                frames,
+                reward,
+                fps,
+                frames_per_step=self.frames_per_step,
+            )
 
     def _log_camera(
         self,
@@ -182,10 +205,7 @@ class DatasetReplay:
         images = self._images(episode, key, rows, len(frames))
         for frame, image in zip(frames, images, strict=False):
             self._at(frame)
-            self.recording.log(
-                entity,
-                image_archetype(check_frame(image, key), self.jpeg_quality, DEFAULT_DISPLAY_WIDTH),
-            )
+            self.recording.log(entity, image_archetype(check_frame(image, key), self.jpeg_quality))
 
     def _images(
         self, episode: int, key: str, rows: dict[str, np.ndarray], count: int

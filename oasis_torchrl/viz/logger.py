@@ -35,8 +35,14 @@ from tensordict import TensorDictBase
 from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.viz.blueprint import RowsLayout
 from oasis_torchrl.viz.options import LogOptions
+from oasis_torchrl.viz.palette import Policy
 from oasis_torchrl.viz.paths import ENV_ROOT
-from oasis_torchrl.viz.recording import APPLICATION_ID, DEFAULT_MEMORY_LIMIT, open_recording
+from oasis_torchrl.viz.recording import (
+    APPLICATION_ID,
+    DEFAULT_MEMORY_LIMIT,
+    is_live,
+    open_recording,
+)
 from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
 from oasis_torchrl.viz.summary import EpisodeSummary
 from oasis_torchrl.viz.worker import BoundedWorker
@@ -63,6 +69,10 @@ class RolloutLogger:
         root: the entity root of the rows (``env``; a policy's own in a side-by-side recording).
         summary: where ended episodes go (the summary tab; default: this logger's own).
         send_layout: sends the layout when it changes (default: the default blueprint).
+        live: whether a shared recording stream goes to a viewer (layouts are sent as they
+            change) rather than a file (the last layout at :meth:`flush` and :meth:`close`);
+            the logger's own target says it otherwise.
+        policy: the policy whose episodes these are, in a side-by-side recording.
 
     Example:
         >>> import tempfile, os
@@ -89,9 +99,12 @@ class RolloutLogger:
         root: str = ENV_ROOT,
         summary: EpisodeSummary | None = None,
         send_layout: Callable[[RowsLayout], None] | None = None,
+        live: bool = True,
+        policy: Policy | None = None,
     ) -> None:
         self.options = options if options is not None else LogOptions()
         self._owns_recording = not isinstance(target, rr.RecordingStream)
+        live = is_live(target) if self._owns_recording else live
         recording = (
             open_recording(
                 target,
@@ -103,7 +116,14 @@ class RolloutLogger:
             else target
         )
         self._writer: RecordWriter | None = RecordWriter(
-            recording, self.options, scenes, root=root, summary=summary, send_layout=send_layout
+            recording,
+            self.options,
+            scenes,
+            root=root,
+            summary=summary,
+            send_layout=send_layout,
+            live=live,
+            policy=policy,
         )
         self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
         self._tick = 0
@@ -130,8 +150,16 @@ class RolloutLogger:
 
     # -- ways in -----------------------------------------------------------------------------
 
-    def log_reset(self, obs: TensorDictBase, rows: Sequence[int] | None = None) -> None:
-        """Log a reset observation (batch ``[N]``): ``rows`` (default all) start new episodes."""
+    def log_reset(
+        self,
+        obs: TensorDictBase,
+        rows: Sequence[int] | None = None,
+        *,
+        episodes: Sequence[int] | None = None,
+    ) -> None:
+        """Log a reset observation (batch ``[N]``): ``rows`` (default all) start new episodes,
+        numbered ``episodes`` (one per row, e.g. a dataset's episode indices; default: the next
+        numbers, in row order)."""
         n = batch_rows(obs)
         rows = list(range(n) if rows is None else rows)
         outside = [row for row in rows if not 0 <= row < n]
@@ -139,7 +167,11 @@ class RolloutLogger:
             raise ValueError(f"reset rows {outside} are outside the batch of {n} env rows")
         self._pending(n)[rows] = False
         self._ended_rows(n)[rows] = False
-        self._submit(read_step(obs, self._logged(n, rows), start=True, **self._read_options()))
+        record = read_step(obs, self._logged(n, rows), start=True, **self._read_options())
+        if episodes is not None:
+            numbers = dict(zip(rows, episodes, strict=True))
+            record.episodes = [int(numbers[row]) for row in record.rows]
+        self._submit(record)
 
     def log_step(self, next_obs: TensorDictBase, action: torch.Tensor | None = None) -> None:
         """Log one step: ``next_obs`` is the step's ``"next"`` TensorDict (batch ``[N]``) and

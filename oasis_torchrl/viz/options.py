@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from oasis_torchrl.protocol import FPS
-from oasis_torchrl.viz.images import DEFAULT_DISPLAY_WIDTH, DEFAULT_JPEG_QUALITY
+from oasis_torchrl.viz.images import DEFAULT_JPEG_QUALITY
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 DEFAULT_TRUTH_SERIES = ("speed", "lateral_offset", "obstacle_distance")
@@ -18,11 +18,12 @@ class LogOptions:
 
     Args:
         rows: env rows to log (default: all). Each logged row gets its own tab.
-        cameras: cameras to log (default: every ``("pixels", camera)``).
-        jpeg_quality: JPEG quality 1-100 of logged frames; None logs raw images (large).
-        display_width: frames narrower than this are upscaled (by a whole factor) before they
-            are logged, for display only; None logs them at the env's size.
-        all_frames: when the env returns all 4 frames of a chunk, log every one (else the last).
+        cameras: cameras to log (default: every ``("pixels", camera)`` but the front crop, a
+            part of the front camera's frame; name it here to log it).
+        jpeg_quality: JPEG quality 1-100 of logged frames (at the env's size: the viewer
+            scales them to its panels); None logs raw images (large).
+        all_frames: when the env returns all 4 frames of a chunk, log every one (four times the
+            size); by default the last, the frame a policy acts on.
         depth: log ``("depth", camera)`` maps when the env provides them.
         topdown: draw the top-down view when the env provides ground-truth poses (the road
             and obstacles when the logger has a scene source, else the car and its path).
@@ -46,8 +47,7 @@ class LogOptions:
     rows: tuple[int, ...] | None = None
     cameras: tuple[str, ...] | None = None
     jpeg_quality: int | None = DEFAULT_JPEG_QUALITY
-    display_width: int | None = DEFAULT_DISPLAY_WIDTH
-    all_frames: bool = True
+    all_frames: bool = False
     depth: bool = True
     topdown: bool = True
     truth_series: tuple[str, ...] = DEFAULT_TRUTH_SERIES
@@ -60,8 +60,6 @@ class LogOptions:
     def __post_init__(self) -> None:
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be within 1-100 or None, got {self.jpeg_quality}")
-        if self.display_width is not None and self.display_width < 1:
-            raise ValueError(f"display_width must be >= 1 or None, got {self.display_width}")
         if self.rows is not None and (not self.rows or min(self.rows) < 0):
             raise ValueError(f"rows must be non-empty and non-negative, got {self.rows}")
         if not self.fps > 0:

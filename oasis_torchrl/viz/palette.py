@@ -29,8 +29,8 @@ class Signal:
 
 
 SIGNALS: dict[str, Signal] = {
-    "action/throttle": Signal("throttle", (66, 133, 244)),
-    "action/steering": Signal("steering", (255, 152, 0)),
+    "action/throttle": Signal("throttle", (0, 230, 118)),
+    "action/steering": Signal("steering", (255, 235, 59)),
     "reward/total": Signal("reward", (240, 240, 240)),
     "reward/forward": Signal("forward", (76, 175, 80)),
     "reward/straightness_penalty": Signal("straightness penalty", (233, 30, 99)),
@@ -44,8 +44,20 @@ SIGNALS: dict[str, Signal] = {
     "truth/obstacle_distance": Signal("distance to obstacle", (0, 150, 136)),
     "truth/speed": Signal("speed", (3, 169, 244)),
     "truth/lateral_offset": Signal("lateral offset", (205, 220, 57)),
+    "collision/speed": Signal("collision", (255, 23, 68)),
+    "collision/obstacle_distance": Signal("collision", (255, 23, 68)),
 }
-"""The known signals (the env's actions, every reward module's terms, the plotted truth)."""
+"""The known signals (the env's actions, every reward module's terms, the plotted truth, and
+the collision markers: the speed and the distance ahead at the frame of a collision)."""
+
+MARKERS = frozenset({"collision/speed", "collision/obstacle_distance"})
+"""Signals drawn as points (a cross at a collision), not lines."""
+COMPARED = (
+    frozenset({"truth/speed", "truth/obstacle_distance", "truth/lateral_offset", "reward/total"})
+    | MARKERS
+)
+"""Signals that policies side by side share a plot for: drawn in the policy's colour."""
+MARKER_SIZE = 8.0
 
 SPARE_COLORS: tuple[Color, ...] = (
     (141, 110, 99),
@@ -87,14 +99,25 @@ def signal(path: str) -> Signal:
     return Signal(name, SPARE_COLORS[zlib.crc32(key.encode()) % len(SPARE_COLORS)])
 
 
-def series_style(path: str) -> rr.SeriesLines:
-    """The ``SeriesLines`` (name, colour, width) to log statically at ``path``.
+def series_style(path: str, policy: Policy | None = None) -> rr.SeriesLines | rr.SeriesPoints:
+    """The ``SeriesLines`` (name, colour, width) or, for a marker, ``SeriesPoints`` to log
+    statically at ``path``; with a ``policy``, a signal policies share a plot for
+    (:data:`COMPARED`) takes the policy's name and colour.
 
     Example:
         >>> type(series_style("env/0/reward/total")).__name__
         'SeriesLines'
+        >>> type(series_style("env/0/collision/speed")).__name__
+        'SeriesPoints'
     """
     drawn = signal(path)
+    key = signal_key(path)
+    if policy is not None and key in COMPARED:
+        drawn = Signal(f"{policy.name} {drawn.name}", policy.color)
+    if key in MARKERS:
+        return rr.SeriesPoints(
+            colors=[drawn.color], names=[drawn.name], markers=["cross"], marker_sizes=[MARKER_SIZE]
+        )
     return rr.SeriesLines(colors=[drawn.color], names=[drawn.name], widths=[LINE_WIDTH])
 
 
@@ -131,11 +154,49 @@ PLOTS: tuple[Plot, ...] = (
     Plot("state", ("state/*",)),
     Plot("reward", ("reward/*",), ("reward/collision_risk", *DEPTH_INTERNALS)),
     Plot("collision risk (depth, 0 to 1)", ("reward/collision_risk",)),
-    Plot("distance to obstacle (m)", ("truth/obstacle_distance",)),
-    Plot("speed (m/s)", ("truth/speed",)),
+    Plot(
+        "distance to obstacle ahead (m)",
+        ("truth/obstacle_distance", "collision/obstacle_distance"),
+    ),
+    Plot("speed (m/s)", ("truth/speed", "collision/speed")),
     Plot("lateral offset (m)", ("truth/lateral_offset",)),
 )
 """Every plot, in layout order; a row's layout holds those with at least one signal logged."""
 
-POLICY_COLORS: tuple[Color, ...] = ((66, 133, 244), (255, 152, 0), (76, 175, 80), (233, 30, 99))
-"""Colours of the policies of a summary, in order (repeating after the fourth)."""
+POLICY_COLORS: tuple[Color, ...] = ((66, 133, 244), (255, 112, 67), (171, 71, 188), (0, 172, 193))
+"""Colours of the policies of a recording, in order (repeating after the fourth): their bars in
+the summary, their lines where they share a plot. No signal plotted beside them has one."""
+
+
+@dataclass(frozen=True)
+class Policy:
+    """A policy as every view of a side-by-side recording shows it: its name and colour.
+
+    Example:
+        >>> Policy.at("autopilot", 0)
+        Policy(name='autopilot', color=(66, 133, 244))
+    """
+
+    name: str
+    color: Color
+
+    @classmethod
+    def at(cls, name: str, index: int) -> Policy:
+        """The policy in column ``index`` of a recording."""
+        return cls(name, POLICY_COLORS[index % len(POLICY_COLORS)])
+
+
+SHARED_PLOTS: tuple[Plot, ...] = tuple(
+    Plot(plot.title, tuple(sorted(key for key in COMPARED if plot.shows(key))))
+    for plot in PLOTS
+    if any(plot.shows(key) for key in COMPARED)
+)
+"""The plots that policies side by side draw on together, their :data:`COMPARED` signals only
+(speed, distance to the obstacle ahead, lateral offset, reward).
+
+Example:
+    >>> [plot.title for plot in SHARED_PLOTS]
+    ['reward', 'distance to obstacle ahead (m)', 'speed (m/s)', 'lateral offset (m)']
+    >>> SHARED_PLOTS[2].include
+    ('collision/speed', 'truth/speed')
+"""

@@ -5,15 +5,19 @@ Every env row (or replayed dataset episode) lives under ``<root>/<row>``:
 =====================================  ==============  ==========================================
 entity                                 archetype       what
 =====================================  ==============  ==========================================
-``<root>/<row>/camera/<camera>``       EncodedImage    camera frames (JPEG by default) or Image
+``<root>/<row>/camera/<camera>``       EncodedImage    camera frames (JPEG by default, as served)
+                                                       or Image
 ``<root>/<row>/depth/<camera>``        DepthImage      metric depth (metres; sky and unknown 0)
 ``<root>/<row>/action/<name>``         Scalars         ``throttle`` and ``steering``, one per frame
 ``<root>/<row>/reward/total``          Scalars         the step reward
 ``<root>/<row>/reward/<term>``         Scalars         each reward term (``collision_risk``, ...)
 ``<root>/<row>/truth/<field>``         Scalars         embedded-server ground truth per frame
+``<root>/<row>/collision/<field>``     Scalars         ``speed`` and ``obstacle_distance`` at a
+                                                       collision's frame (a cross on their plots)
 ``<root>/<row>/state/<name>``          Scalars         ``observation.state`` of replayed datasets
 ``<root>/<row>/events``                TextLog         episode starts (prompt, seed), episode
-                                                       ends (cause, figures)
+                                                       ends (cause, figures; on the episode's
+                                                       last frame)
 ``<root>/<row>/topdown/road``          LineStrips2D    the road surface near the car (one thick
                                                        strip along the centreline)
 ``<root>/<row>/topdown/lanes``         LineStrips2D    road edges and lane lines (dashed)
@@ -34,8 +38,9 @@ holds its static ``SeriesLines`` style (:mod:`oasis_torchrl.viz.palette`).
 The top-down layers are in the car's frame (x metres to its right, y metres behind it), logged
 every step, so the view's fixed bounds follow the car.
 
-Timelines: ``frame`` (sequence: world frames, 4 per env step) and ``sim_time`` (duration:
-``frame / fps``).
+Timelines: ``frame`` (sequence: world frames, 4 per env step), ``step`` (sequence: env steps,
+``frame // 4``, the steps events speak of) and ``sim_time`` (duration: ``frame / fps``), set
+together by :mod:`oasis_torchrl.viz.timelines`.
 """
 
 from __future__ import annotations
@@ -46,6 +51,8 @@ FRAME_TIMELINE = "frame"
 """Sequence timeline: the world frame index."""
 TIME_TIMELINE = "sim_time"
 """Duration timeline: simulated seconds (``frame / fps``)."""
+STEP_TIMELINE = "step"
+"""Sequence timeline: the env step (``frame // 4``; a dataset's own steps when replayed)."""
 ENV_ROOT = "env"
 """Root of live env rows."""
 EPISODE_ROOT = "episode"

@@ -4,11 +4,19 @@ Each logger owns its own ``rr.RecordingStream`` (never rerun's global recording)
 loggers coexist in one process. Memory stays bounded on long runs: an ``.rrd`` sink streams to
 disk; a viewer drops its oldest data at its memory limit (``memory_limit`` for a spawned viewer,
 ``rerun --memory-limit 4GB`` for one you start yourself).
+
+A file's data is batched into chunks of up to :data:`FILE_BATCHING` (every chunk carries its
+schema: rerun's default batching, 200 ms, leaves a slowly stepped evaluation's file with chunks
+of a row or two, mostly schemas); a viewer gets data as it comes. A layout goes to a viewer as
+soon as it changes, to a file once, when it is flushed (:class:`LayoutSender`): a file is read
+whole, and each layout of a recording with many tabs weighs as much as seconds of its video.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from datetime import timedelta
 from pathlib import Path
 
 import rerun as rr
@@ -21,6 +29,9 @@ SPAWN = "spawn"
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 APPLICATION_ID = "oasis_torchrl"
 DEFAULT_MEMORY_LIMIT = "25%"
+FILE_BATCHING = rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=60), flush_num_bytes=16 << 20)
+"""How an ``.rrd`` file's data is batched into chunks: a batch is written after 60 s or at
+16 MiB, whichever comes first (what the logger holds in memory before it writes)."""
 
 
 def describe_target(target: str | Path) -> str:
@@ -70,7 +81,11 @@ def open_recording(
         True
     """
     kind = describe_target(target)
-    recording = rr.RecordingStream(application_id, recording_id=recording_id)
+    recording = rr.RecordingStream(
+        application_id,
+        recording_id=recording_id,
+        batcher_config=FILE_BATCHING if kind == "file" else None,
+    )
     if kind == "spawn":
         recording.spawn(memory_limit=memory_limit, default_blueprint=blueprint)
     elif kind == "grpc":
@@ -81,3 +96,50 @@ def open_recording(
         recording.save(path, default_blueprint=blueprint)
     logger.info("rerun recording -> %s", target)
     return recording
+
+
+def is_live(target: str | Path) -> bool:
+    """Whether ``target`` is a viewer (spawned or over gRPC) rather than an ``.rrd`` file.
+
+    Example:
+        >>> is_live("spawn"), is_live("runs/eval.rrd")
+        (True, False)
+    """
+    return describe_target(target) != "file"
+
+
+class LayoutSender:
+    """Sends a recording's layout (blueprint): at once to a live viewer; to a file, the latest
+    one at :meth:`flush`. Blueprints are built only when sent.
+
+    Example:
+        >>> sender = LayoutSender(rr.RecordingStream("doc"), live=False)
+        >>> sender.send(lambda: rrb.Blueprint(rrb.TextLogView(origin="events")))
+        >>> sender.pending
+        True
+        >>> sender.flush(); sender.pending
+        False
+    """
+
+    def __init__(self, recording: rr.RecordingStream, live: bool) -> None:
+        self.recording = recording
+        self.live = live
+        self._pending: Callable[[], rrb.Blueprint] | None = None
+
+    @property
+    def pending(self) -> bool:
+        """Whether a layout waits for :meth:`flush`."""
+        return self._pending is not None
+
+    def send(self, blueprint: Callable[[], rrb.Blueprint]) -> None:
+        """Send the layout ``blueprint()`` builds (now if live, else at the next flush)."""
+        if self.live:
+            self.recording.send_blueprint(blueprint())
+        else:
+            self._pending = blueprint
+
+    def flush(self) -> None:
+        """Send the layout that waits, if any."""
+        blueprint, self._pending = self._pending, None
+        if blueprint is not None:
+            self.recording.send_blueprint(blueprint())

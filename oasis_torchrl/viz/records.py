@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from oasis_torchrl.protocol import CHUNK
+from oasis_torchrl.protocol import CHUNK, FRONT_CROP
 
 PIXELS, DEPTH, TRUTH, TERMS = "pixels", "depth", "truth", "reward_terms"
 
@@ -27,7 +27,8 @@ class StepRecord:
     ``images[camera]``: uint8 ``[R, F, H, W, 3]`` (``F`` = 1, the last frame, or 4);
     ``depth[camera]``: float32 ``[R, H, W]``; ``actions``: float32 ``[R, 4, 2]``; ``reward``,
     ``terms[name]``: ``[R]``; ``truth[field]``: ``[R, 4]``; ``terminated``/``truncated``/``done``:
-    bool ``[R]``; ``prompts``/``seeds``: per row, for episode starts.
+    bool ``[R]``; ``prompts``/``seeds``: per row, for episode starts; ``episodes``: per row, the
+    numbers of the episodes a start begins when the caller names them.
 
     Example:
         >>> record = StepRecord(rows=[0], start=True)
@@ -48,6 +49,7 @@ class StepRecord:
     done: np.ndarray | None = None
     prompts: list[str] | None = None
     seeds: list[int] | None = None
+    episodes: list[int] | None = None
 
 
 def batch_rows(td: TensorDictBase) -> int:
@@ -78,6 +80,11 @@ def _group(td: TensorDictBase, group: str, index: np.ndarray) -> dict[str, np.nd
     return {name: _numpy(sub.get(name), index) for name in sub.keys(leaves_only=True)}
 
 
+def _wanted(camera: str, cameras: Sequence[str] | None) -> bool:
+    """Whether to read ``camera``: one of ``cameras``, or by default any but the front crop."""
+    return camera != FRONT_CROP if cameras is None else camera in cameras
+
+
 def _frames(
     td: TensorDictBase, index: np.ndarray, cameras: Sequence[str] | None
 ) -> dict[str, np.ndarray]:
@@ -86,7 +93,7 @@ def _frames(
         return {}
     out = {}
     for camera in pixels.keys(leaves_only=True):
-        if cameras is not None and camera not in cameras:
+        if not _wanted(camera, cameras):
             continue
         frames = pixels.get(camera)
         if frames.dtype != torch.uint8 or frames.shape[-1] != 3 or frames.ndim not in (4, 5):
@@ -143,7 +150,8 @@ def read_step(
         rows: env rows to read.
         start: ``td`` is a reset observation (the rows start new episodes).
         action: the action ``[N, 4, 2]`` or ``[N, 2]`` that led to ``td``.
-        cameras: cameras to read (default: all under ``"pixels"``).
+        cameras: cameras to read (default: all under ``"pixels"`` but the front crop, a part
+            of the front camera's frame).
         depth: read ``("depth", camera)`` maps.
 
     Example:

@@ -4,18 +4,30 @@ entity is styled once with its fixed name and colour (:mod:`~oasis_torchrl.viz.p
 
 :class:`SeriesBuffer` holds values for at most ``max_delay_s`` seconds (so a live plot lags at
 most that much) and at most ``max_values`` values (so memory stays bounded), then sends them.
+Each send is a chunk per entity, schema included: a file, which nobody watches while it is
+written, takes them in fewer, larger ones (:data:`FILE_DELAY_S`).
 """
 
 from __future__ import annotations
 
 import time
 from collections import defaultdict
+from collections.abc import Callable
 
 import numpy as np
 import rerun as rr
 
+from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.palette import series_style
-from oasis_torchrl.viz.paths import FRAME_TIMELINE, TIME_TIMELINE
+from oasis_torchrl.viz.timelines import time_columns
+
+LIVE_DELAY_S, LIVE_MAX_VALUES = 1.0, 4096
+"""How long and how many values a live viewer's series wait to be sent."""
+FILE_DELAY_S, FILE_MAX_VALUES = 30.0, 1 << 16
+"""The same for a file (512 KiB of values at most)."""
+
+Styler = Callable[[str], rr.AsComponents]
+"""The static style (``SeriesLines`` or ``SeriesPoints``) of the series at an entity path."""
 
 
 def send_series(
@@ -25,26 +37,23 @@ def send_series(
     values: np.ndarray,
     fps: float,
     *,
-    style: bool = True,
+    style: Styler | None = series_style,
+    frames_per_step: int = CHUNK,
 ) -> None:
     """Send a scalar time series (one value per frame) in one call; non-finite values become NaN.
-    With ``style``, the signal's fixed name and colour (:mod:`~oasis_torchrl.viz.palette`) are
-    logged with it (static).
+    With a ``style``, the signal's fixed name and colour (:mod:`~oasis_torchrl.viz.palette`)
+    are logged with it (static).
 
     Example:
         >>> recording = rr.RecordingStream("doc")
         >>> send_series(recording, "env/0/reward/total", np.arange(3), np.ones(3), fps=20.0)
     """
-    if style:
-        recording.log(path, series_style(path), static=True)
-    frames = np.asarray(frames, dtype=np.int64).reshape(-1)
+    if style is not None:
+        recording.log(path, style(path), static=True)
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     recording.send_columns(
         path,
-        indexes=[
-            rr.TimeColumn(FRAME_TIMELINE, sequence=frames),
-            rr.TimeColumn(TIME_TIMELINE, duration=frames / fps),
-        ],
+        indexes=time_columns(frames, fps, frames_per_step),
         columns=rr.Scalars.columns(scalars=np.where(np.isfinite(values), values, np.nan)),
     )
 
@@ -55,6 +64,7 @@ class SeriesBuffer:
     Args:
         recording: where to send.
         fps: frame rate (``sim_time = frame / fps``).
+        style: the static style of each entity, logged once (default: its palette signal).
         max_delay_s: send once the oldest buffered value is this old (wall clock).
         max_values: send once this many values are buffered.
 
@@ -72,11 +82,13 @@ class SeriesBuffer:
         self,
         recording: rr.RecordingStream,
         fps: float,
-        max_delay_s: float = 1.0,
-        max_values: int = 4096,
+        style: Styler = series_style,
+        max_delay_s: float = LIVE_DELAY_S,
+        max_values: int = LIVE_MAX_VALUES,
     ) -> None:
         self.recording = recording
         self.fps = fps
+        self.style = style
         self.max_delay_s = max_delay_s
         self.max_values = max_values
         self._frames: defaultdict[str, list[np.ndarray]] = defaultdict(list)
@@ -99,7 +111,7 @@ class SeriesBuffer:
         """Send every buffered value."""
         for path, frames in self._frames.items():
             values = np.concatenate(self._values[path])
-            style = path not in self._styled
+            style = None if path in self._styled else self.style
             self._styled.add(path)
             send_series(self.recording, path, np.concatenate(frames), values, self.fps, style=style)
         self._frames.clear()

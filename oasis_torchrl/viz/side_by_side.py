@@ -4,10 +4,12 @@ Each policy logs its rows under a root of its own (``<policy>/<row>/...``, the n
 entity name) through its own :class:`~oasis_torchrl.viz.RolloutLogger` sharing one recording
 stream; their episodes start at the same ticks (:meth:`~oasis_torchrl.viz.RolloutLogger.align`),
 so one timeline shows them together. The layout has the summary tab (every episode's outcome and
-distance per policy) and one tab per env row: a line per policy with its cameras, top-down view
-and events, and below them each policy's actions and the ``divergence/<row>`` events: the first
-step of each episode where a policy's actions differ from the first policy's by more than a
-threshold.
+distance per policy) and one tab per env row, named after its episode and each policy's
+outcome: a line per policy with its cameras (the same cameras in every line), top-down view and
+events, every panel titled with its policy; below them the speed and the distance to the
+obstacle ahead of every policy on shared axes (a line each in the policy's colour, a cross at a
+collision), each policy's actions and the ``divergence/<row>`` events: the first step of each
+episode where a policy's actions differ from the first policy's by more than a threshold.
 
 ``oasis-torchrl view A.rrd B.rrd`` (:func:`align_recordings`) lays out saved recordings the same
 way, copying each under its own root (needs rerun-sdk 0.32 or newer, whose chunk reader this
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,9 +38,12 @@ from oasis_torchrl.viz.blueprint import (
 )
 from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
-from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
-from oasis_torchrl.viz.recording import open_recording
+from oasis_torchrl.viz.palette import COMPARED, SHARED_PLOTS, Plot, Policy, series_style
+from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
+from oasis_torchrl.viz.recording import LayoutSender, is_live, open_recording
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
+from oasis_torchrl.viz.timelines import set_frame
+from oasis_torchrl.viz.titles import episodes_of, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW
 from oasis_torchrl.viz.writer import ACTION_NAMES
 
@@ -48,6 +53,7 @@ DIVERGENCE_ROOT = "divergence"
 """Root of the divergence events (``divergence/<row>``)."""
 DEFAULT_THRESHOLD = 0.25
 """Actions further apart than this (throttle or steering) mark a divergence."""
+SIGNAL_GROUPS = ("action", "reward", "truth", "collision", "state")
 
 
 def policy_roots(names: Sequence[str]) -> dict[str, str]:
@@ -103,31 +109,68 @@ def side_by_side_blueprint(
         'Blueprint'
     """
     rows = sorted({row for layout in layouts for row in layout.rows})
+    cameras = aligned_cameras(layouts)
     tabs = [summary_layout([layout.root for layout in layouts])]
-    tabs += [_row_tab(layouts, row) for row in rows]
+    tabs += [_row_tab(layouts, row, cameras) for row in rows]
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), time_panel(fps))
 
 
-def _row_tab(layouts: Sequence[RowsLayout], row: int) -> rrb.Vertical:
-    lines, plots = [], []
+def aligned_cameras(layouts: Sequence[RowsLayout]) -> list[str]:
+    """Every policy's cameras, in the first policy's order and then as they come: each line of
+    a row shows the same ones, so the same camera is in the same column.
+
+    Example:
+        >>> layouts = [RowsLayout("a", (0,), ("left", "front"), (), None, frozenset(), True),
+        ...            RowsLayout("b", (0,), ("front", "front_crop"), (), None, frozenset(), True)]
+        >>> aligned_cameras(layouts)
+        ['left', 'front', 'front_crop']
+    """
+    cameras: list[str] = []
     for layout in layouts:
-        paths = RowPaths(layout.root, row)
-        views = [camera_views(paths, layout.cameras)]
-        if layout.topdown is not None:
-            views.append(topdown_view(paths, layout.topdown))
-        views.append(rrb.TextLogView(origin=paths.events, name=f"{layout.root} events"))
-        shares = [3, 1, 1] if layout.topdown is not None else [3, 1]
-        lines.append(rrb.Horizontal(*views, column_shares=shares, name=layout.root))
-        plots.append(
-            rrb.TimeSeriesView(
-                origin=paths.base,
-                contents=["+ $origin/action/**"],
-                name=f"{layout.root} actions (-1 to 1)",
-            )
+        cameras += [camera for camera in layout.cameras if camera not in cameras]
+    return cameras
+
+
+def _policy_line(layout: RowsLayout, row: int, cameras: Sequence[str]) -> rrb.Horizontal:
+    paths, label = RowPaths(layout.root, row), f"{layout.root}: "
+    views = [camera_views(paths, cameras, label)]
+    if layout.topdown is not None:
+        views.append(topdown_view(paths, layout.topdown, label))
+    views.append(rrb.TextLogView(origin=paths.events, name=f"{label}events"))
+    shares = [3, 1, 1] if layout.topdown is not None else [3, 1]
+    return rrb.Horizontal(*views, column_shares=shares, name=layout.root)
+
+
+def _shared_plot(layouts: Sequence[RowsLayout], row: int, plot: Plot) -> rrb.TimeSeriesView:
+    """One plot with every policy's lines of the row (each in its policy's colour)."""
+    contents = [
+        f"+ /{RowPaths(layout.root, row).base}/{key}" for layout in layouts for key in plot.include
+    ]
+    return rrb.TimeSeriesView(origin="/", contents=contents, name=plot.title)
+
+
+def _row_tab(layouts: Sequence[RowsLayout], row: int, cameras: Sequence[str]) -> rrb.Vertical:
+    lines = [_policy_line(layout, row, cameras) for layout in layouts]
+    signals = {key for layout in layouts for key in layout.signals}
+    shared = [
+        _shared_plot(layouts, row, plot)
+        for plot in SHARED_PLOTS
+        if any(plot.shows(key) for key in signals)
+    ]
+    actions = [
+        rrb.TimeSeriesView(
+            origin=RowPaths(layout.root, row).base,
+            contents=["+ $origin/action/**"],
+            name=f"{layout.root}: actions (-1 to 1)",
         )
+        for layout in layouts
+    ]
     divergence = rrb.TextLogView(origin=f"{DIVERGENCE_ROOT}/{row}", name="divergence")
-    bottom = rrb.Horizontal(*plots, divergence)
-    return rrb.Vertical(*lines, bottom, row_shares=[3] * len(lines) + [2], name=f"row {row}")
+    title = tab_title(row, {layout.root: layout.row_episodes(row) for layout in layouts})
+    bottom = [rrb.Horizontal(*shared)] if shared else []
+    bottom.append(rrb.Horizontal(*actions, divergence))
+    shares = [3] * len(lines) + [2] * len(bottom)
+    return rrb.Vertical(*lines, *bottom, row_shares=shares, name=title)
 
 
 class SideBySide:
@@ -160,24 +203,30 @@ class SideBySide:
         self.threshold = threshold
         self.options = options if options is not None else LogOptions()
         self.recording = open_recording(target)
+        self.live = is_live(target)
         self.summary = EpisodeSummary(self.recording, tuple(self.roots.values()))
         self._layouts: dict[str, RowsLayout] = {}
+        self._sender = LayoutSender(self.recording, self.live)
 
     def logger(self, name: str, scenes: SceneLookup | None = None) -> RolloutLogger:
         """A logger for policy ``name``'s episodes (close it when its evaluation is done)."""
+        root = self.roots[name]
         return RolloutLogger(
             self.recording,
             self.options,
             scenes=scenes,
-            root=self.roots[name],
+            root=root,
             summary=self.summary,
             send_layout=self._send_layout,
+            live=self.live,
+            policy=Policy.at(root, list(self.roots.values()).index(root)),
         )
 
     def close(self) -> None:
-        """Mark the divergences, then finish the recording."""
+        """Mark the divergences, send the final layout, then finish the recording."""
         try:
             self._log_divergences()
+            self._sender.flush()
         finally:
             self.recording.flush()
             self.recording.disconnect()
@@ -185,7 +234,7 @@ class SideBySide:
     def _send_layout(self, layout: RowsLayout) -> None:
         self._layouts[layout.root] = layout
         ordered = [self._layouts[root] for root in self.roots.values() if root in self._layouts]
-        self.recording.send_blueprint(side_by_side_blueprint(ordered, self.options.fps))
+        self._sender.send(lambda: side_by_side_blueprint(ordered, self.options.fps))
 
     def _log_divergences(self) -> None:
         reference, *others = self.roots.values()
@@ -206,8 +255,7 @@ class SideBySide:
 
 
 def _log_event(recording: rr.RecordingStream, row: int, frame: int, text: str, fps: float) -> None:
-    recording.set_time(FRAME_TIMELINE, sequence=frame)
-    recording.set_time(TIME_TIMELINE, duration=frame / fps)
+    set_frame(recording, frame, fps)
     recording.log(f"{DIVERGENCE_ROOT}/{row}", rr.TextLog(text, level="WARN"))
 
 
@@ -240,11 +288,12 @@ def align_recordings(
     layouts, actions = [], {}
     try:
         tables = []
-        for name, root in roots.items():
+        for index, (name, root) in enumerate(roots.items()):
             chunks = list(RrdReader(name).stream())
             kept = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
             send_chunks(kept, recording=recording)
-            layouts.append(_layout_of(root, [chunk.entity_path for chunk in chunks]))
+            layouts.append(_layout_of(root, chunks))
+            _restyle(recording, layouts[-1], Policy.at(root, index))
             actions[root] = _actions_by_frame(chunks)
             tables.append(f"## {root} ({name})\n\n{_table_of(chunks)}")
         document = rr.TextDocument("\n\n".join(tables), media_type="text/markdown")
@@ -255,6 +304,14 @@ def align_recordings(
         recording.flush()
         recording.disconnect()
     return roots
+
+
+def _restyle(recording: rr.RecordingStream, layout: RowsLayout, policy: Policy) -> None:
+    """Give a copied recording's shared-plot signals its policy's name and colour."""
+    for row in layout.rows:
+        for key in sorted(layout.signals & COMPARED):
+            path = f"{RowPaths(layout.root, row).base}/{key}"
+            recording.log(path, series_style(path, policy), static=True)
 
 
 def _kept(chunk: object) -> bool:
@@ -281,19 +338,35 @@ def _rerooted(chunk: object, root: str) -> object:
     return chunk.with_entity_path(f"/{root}/" + path.removeprefix(f"/{ENV_ROOT}/"))
 
 
-def _layout_of(root: str, entity_paths: Iterable[str]) -> RowsLayout:
-    """The layout of one copied recording, from its entity paths."""
-    rows, cameras, topdown = set(), [], False
-    for path in entity_paths:
+def _layout_of(root: str, chunks: Sequence[object]) -> RowsLayout:
+    """The layout of one copied recording, from its entity paths and its rows' events."""
+    rows, cameras, signals, topdown = set(), [], set(), False
+    for path in (chunk.entity_path for chunk in chunks):
         parts = path.strip("/").split("/")
         if len(parts) < 3 or parts[0] != ENV_ROOT or not parts[1].isdigit():
             continue
         rows.add(int(parts[1]))
         if parts[2] == "camera" and len(parts) > 3 and parts[3] not in cameras:
             cameras.append(parts[3])
+        if parts[2] in SIGNAL_GROUPS and len(parts) == 4:
+            signals.add(f"{parts[2]}/{parts[3]}")
         topdown |= parts[2] == "topdown"
     window = DEFAULT_WINDOW if topdown else None
-    return RowsLayout(root, tuple(sorted(rows)), tuple(cameras), (), window, frozenset(), True)
+    ordered = tuple(sorted(rows))
+    episodes = tuple(episodes_of(_events_of(chunks, row)) for row in ordered)
+    return RowsLayout(root, ordered, tuple(cameras), (), window, frozenset(signals), True, episodes)
+
+
+def _events_of(chunks: Sequence[object], row: int) -> list[str]:
+    """A row's event texts, in frame order."""
+    found = []
+    for chunk in chunks:
+        if chunk.entity_path != f"/{RowPaths(ENV_ROOT, row).events}":
+            continue
+        batch = chunk.to_record_batch()
+        texts = batch.column("TextLog:text").to_pylist()
+        found += zip(batch.column(FRAME_TIMELINE).to_pylist(), texts, strict=True)
+    return [text[0] for _, text in sorted(found, key=lambda pair: pair[0]) if text]
 
 
 def _actions_by_frame(chunks: Sequence[object]) -> dict[int, dict[int, np.ndarray]]:

@@ -3,8 +3,10 @@ policy, so a person picks the episode to open.
 
 Each ended episode is an :class:`EpisodeOutcome`; an :class:`EpisodeSummary` rewrites, as
 static data, a table (``summary/table``, a markdown ``TextDocument``: one line per episode, one
-column per policy) and a bar chart per policy (``summary/<policy>``, one bar per episode in the
-table's order), the comparison the main job's ``comparison.png`` draws, episode by episode.
+column per policy giving how it ended, at which step, and the frames it has, a crash in bold and
+the crashed policies in a column of their own) and a bar chart per policy (``summary/<policy>``,
+one bar per episode at its number, in the policy's colour), the comparison the main job's
+``comparison.png`` draws, episode by episode.
 """
 
 from __future__ import annotations
@@ -16,12 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import rerun as rr
 
-from oasis_torchrl.viz.palette import POLICY_COLORS
+from oasis_torchrl.viz.palette import Policy
 
 SUMMARY_ROOT = "summary"
 """Root of the summary entities."""
 TABLE = f"{SUMMARY_ROOT}/table"
 """The summary table (markdown)."""
+CRASHES = ("collision", "likely collision")
+"""Causes that are crashes."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,11 @@ class EpisodeOutcome:
         """The cause, with its detail when there is one."""
         return f"{self.cause} ({self.detail})" if self.detail else self.cause
 
+    @property
+    def crashed(self) -> bool:
+        """Whether the episode ended in a crash (a collision, or the depth risk reaching 1)."""
+        return self.cause in CRASHES
+
     def scene(self) -> tuple[int, int, str | None, int | None]:
         """What pairs episodes across policies: row, episode number, prompt and seed."""
         return (self.row, self.episode, self.prompt, self.seed)
@@ -80,8 +89,9 @@ class EpisodeSummary:
         >>> summary = EpisodeSummary(rr.RecordingStream("doc"))
         >>> summary.add(EpisodeOutcome("env", 0, 0, "urban", 7, 0, 239, 59, "collision",
         ...                            "hit an obstacle", 118.2, 7.98))
-        >>> print(summary.table().splitlines()[-1])
-        | 0 | 0 | urban | 7 | 0-239 | 118.2 m, collision (hit an obstacle) |
+        >>> print(summary.table().splitlines()[-1].replace(" at step", "\\n  at step"))
+        | 0 | 0 | urban | 7 | env | **collision (hit an obstacle)**
+          at step 59, 118.2 m, frames 0-239 |
     """
 
     def __init__(self, recording: rr.RecordingStream, roots: tuple[str, ...] = ()) -> None:
@@ -99,23 +109,25 @@ class EpisodeSummary:
             self._write()
 
     def scenes(self) -> list[tuple[int, int, str | None, int | None]]:
-        """The episodes' scenes, in table order (row, then episode)."""
-        return sorted({outcome.scene() for outcome in self.outcomes}, key=lambda s: s[:2])
+        """The episodes' scenes, in table order (by episode number)."""
+        return sorted({outcome.scene() for outcome in self.outcomes}, key=lambda s: (s[1], s[0]))
 
     def table(self) -> str:
         """The markdown table: one line per scene, one column per root."""
         cells = {(o.root, o.scene()): o for o in self.outcomes}
         lines = [
-            "| row | episode | prompt | seed | frames | " + " | ".join(self.roots) + " |",
+            "| episode | row | prompt | seed | crashed | " + " | ".join(self.roots) + " |",
             "|" + "---|" * (5 + len(self.roots)),
         ]
         for scene in self.scenes():
             found = [cells.get((root, scene)) for root in self.roots]
-            first = next(outcome for outcome in found if outcome is not None)
+            crashed = [o.root for o in found if o is not None and o.crashed]
             row, episode, prompt, seed = scene
-            frames = f"{first.start_frame}-{first.end_frame}"
             results = " | ".join(_cell(outcome) for outcome in found)
-            lines.append(f"| {row} | {episode} | {prompt} | {seed} | {frames} | {results} |")
+            lines.append(
+                f"| {episode} | {row} | {prompt} | {seed} | {', '.join(crashed) or '-'} "
+                f"| {results} |"
+            )
         return "\n".join(lines)
 
     def _write(self) -> None:
@@ -124,11 +136,13 @@ class EpisodeSummary:
         )
         cells = {(o.root, o.scene()): o for o in self.outcomes}
         scenes = self.scenes()
+        episodes = np.array([scene[1] for scene in scenes], dtype=np.int64)
         for index, root in enumerate(self.roots):
             found = [cells.get((root, scene)) for scene in scenes]
             values = np.array([_bar(outcome) for outcome in found], dtype=np.float64)
-            color = POLICY_COLORS[index % len(POLICY_COLORS)]
-            self.recording.log(chart_path(root), rr.BarChart(values, color=color), static=True)
+            color = Policy.at(root, index).color
+            chart = rr.BarChart(values, color=color, abscissa=episodes)
+            self.recording.log(chart_path(root), chart, static=True)
 
 
 def chart_path(root: str) -> str:
@@ -149,8 +163,15 @@ def _bar(outcome: EpisodeOutcome | None) -> float:
 
 
 def _cell(outcome: EpisodeOutcome | None) -> str:
+    """How one policy's episode ended (a crash in bold), at which step, its distance (or return)
+    and the frames it has."""
     if outcome is None:
         return "-"
-    if math.isnan(outcome.distance):
-        return f"return {outcome.episode_return:.2f}, {outcome.outcome()}"
-    return f"{outcome.distance:.1f} m, {outcome.outcome()}"
+    how = f"**{outcome.outcome()}**" if outcome.crashed else outcome.outcome()
+    figure = (
+        f"return {outcome.episode_return:.2f}"
+        if math.isnan(outcome.distance)
+        else f"{outcome.distance:.1f} m"
+    )
+    frames = f"frames {outcome.start_frame}-{outcome.end_frame}"
+    return f"{how} at step {outcome.steps}, {figure}, {frames}"

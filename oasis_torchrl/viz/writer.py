@@ -4,16 +4,24 @@ Step ``tick`` (every logged reset or step is one tick) covers world frames ``4 *
 ``4 * tick + 3``: action ``k`` and ground truth ``k`` sit on frame ``4 * tick + k`` (frame ``k``
 is the world after action ``k``), the chunk's last image, reward, terms and depth on the last
 frame. Scalars go through a :class:`~oasis_torchrl.viz.series.SeriesBuffer` (sent as columns,
-at most a second late). Each row keeps a little state (episode number, step count, return,
-collision, its road map, a fixed-size path buffer and the episode's actions), never frames. The
-top-down view is drawn in the car's frame at every step (:mod:`oasis_torchrl.viz.topdown`); the
-road comes from ``scenes(prompt, seed)`` once per episode. An episode's end is one event with
-its cause and final figures, and an :class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the
-summary tab.
+at most a second late to a viewer, 30 s to a file). Each row keeps a little state (episode
+number, step count, return, collision, its road map, a fixed-size path buffer and the episode's
+actions), never frames. The top-down view is drawn in the car's frame at every step
+(:mod:`oasis_torchrl.viz.topdown`); the road comes from ``scenes(prompt, seed)`` once per
+episode.
+
+Episodes are numbered in the order they start (rows in order at a shared reset: an evaluation's
+batch ``b`` of ``n`` rows holds episodes ``b * n`` to ``b * n + n - 1``, its report's order),
+unless the reset names them (the robot's: its dataset episode). An episode's end is one event,
+with its cause and final figures, on the frame of its last logged data (the last frame of its
+last step); a collision is also marked where it happened, on the speed and distance plots. The
+end also makes an :class:`~oasis_torchrl.viz.summary.EpisodeOutcome` for the summary tab and
+names the row's tab.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Callable
@@ -27,17 +35,27 @@ from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.blueprint import RowsLayout
 from oasis_torchrl.viz.images import depth_archetype, image_archetype
 from oasis_torchrl.viz.options import LogOptions
-from oasis_torchrl.viz.palette import signal_key
-from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, TIME_TIMELINE, RowPaths
+from oasis_torchrl.viz.palette import Policy, series_style, signal_key
+from oasis_torchrl.viz.paths import ENV_ROOT, RowPaths
+from oasis_torchrl.viz.recording import LayoutSender
 from oasis_torchrl.viz.records import StepRecord
-from oasis_torchrl.viz.series import SeriesBuffer
+from oasis_torchrl.viz.series import (
+    FILE_DELAY_S,
+    FILE_MAX_VALUES,
+    LIVE_DELAY_S,
+    LIVE_MAX_VALUES,
+    SeriesBuffer,
+)
 from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
+from oasis_torchrl.viz.timelines import set_frame
+from oasis_torchrl.viz.titles import EpisodeMark, RowEpisodes
 from oasis_torchrl.viz.topdown import (
     CAR_COLOR,
     CAR_SIZE,
     CRASHED_COLOR,
     DRAW_ORDER,
     PATH_COLOR,
+    PATH_EVERY,
     PATH_RADIUS,
     ROAD_COLOR,
     SCALE_COLOR,
@@ -71,6 +89,7 @@ class _RowState:
 
     trail: Trail
     episode: int = -1
+    episodes: RowEpisodes = field(default_factory=RowEpisodes)
     step: int = 0
     episode_return: float = 0.0
     collided: bool = False
@@ -90,7 +109,9 @@ class RecordWriter:
     :class:`~oasis_torchrl.client.scenes.SceneSource`; None draws the car and its path only.
     Each episode's end is one event that names its cause and final figures, and an outcome in
     ``summary`` (the summary tab); ``send_layout`` replaces the default blueprint (a side-by-side
-    recording lays several writers out together).
+    recording lays several writers out together), which goes to a ``live`` viewer as it
+    changes, else at :meth:`flush`. ``policy`` names and colours the signals that policies side
+    by side share a plot for.
 
     Example:
         >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
@@ -107,15 +128,23 @@ class RecordWriter:
         root: str = ENV_ROOT,
         summary: EpisodeSummary | None = None,
         send_layout: Callable[[RowsLayout], None] | None = None,
+        live: bool = True,
+        policy: Policy | None = None,
     ) -> None:
         self.recording = recording
         self.options = options
         self.scenes = scenes
         self.root = root
         self.summary = summary if summary is not None else EpisodeSummary(recording)
+        self._layouts = LayoutSender(recording, live)
         self._send_layout = send_layout or self._send_default_blueprint
-        self._series = SeriesBuffer(recording, options.fps)
+        style = functools.partial(series_style, policy=policy)
+        delay, values = (LIVE_DELAY_S, LIVE_MAX_VALUES) if live else (FILE_DELAY_S, FILE_MAX_VALUES)
+        self._series = SeriesBuffer(
+            recording, options.fps, style=style, max_delay_s=delay, max_values=values
+        )
         self._rows: dict[int, _RowState] = {}
+        self._next_episode = 0
         self._cameras: list[str] = []
         self._depth_cameras: list[str] = []
         self._signals: set[str] = set()
@@ -147,14 +176,15 @@ class RecordWriter:
         self._update_blueprint()
 
     def flush(self) -> None:
-        """Send the buffered time series (never while a write runs on another thread)."""
+        """Send the buffered time series and a layout that waits (never while a write runs on
+        another thread)."""
         self._series.flush()
+        self._layouts.flush()
 
     # -- helpers -----------------------------------------------------------------------------
 
     def _at(self, frame: int) -> None:
-        self.recording.set_time(FRAME_TIMELINE, sequence=frame)
-        self.recording.set_time(TIME_TIMELINE, duration=frame / self.options.fps)
+        set_frame(self.recording, frame, self.options.fps)
 
     def _event(self, paths: RowPaths, text: str, level: str) -> None:
         self.recording.log(paths.events, rr.TextLog(text, level=level))
@@ -179,20 +209,23 @@ class RecordWriter:
             self.options.topdown_window if self._topdown else None,
             frozenset(self._signals),
             self._ended,
+            tuple(self._rows[row].episodes for row in sorted(self._rows)),
         )
         if layout != self._layout:
             self._layout = layout
             self._send_layout(layout)
 
     def _send_default_blueprint(self, layout: RowsLayout) -> None:
-        self.recording.send_blueprint(layout.blueprint(self.options.fps))
+        self._layouts.send(lambda: layout.blueprint(self.options.fps))
 
     # -- episodes ----------------------------------------------------------------------------
 
     def _start_episode(
         self, paths: RowPaths, state: _RowState, record: StepRecord, i: int, first: int
     ) -> None:
-        state.episode += 1
+        state.episode = record.episodes[i] if record.episodes else self._next_episode
+        self._next_episode = max(self._next_episode, state.episode + 1)
+        state.episodes = state.episodes.add(EpisodeMark(state.episode))
         state.step = 0
         state.episode_return = 0.0
         state.collided = False
@@ -238,8 +271,11 @@ class RecordWriter:
         collision_frame: int | None,
         first: int,
     ) -> None:
-        """One event for the episode's end (at its collision, if it has one in this step) with
-        its cause and final figures; a collision that does not end it is an event of its own."""
+        """One event for the episode's end, on its last frame (nothing of it is logged later),
+        with its cause and final figures; a collision is marked on the plots at its own frame,
+        and is an event of its own when the episode goes on."""
+        if collision_frame is not None:
+            self._mark_collision(paths, record, i, collision_frame)
         cause = self._end_cause(state, record, i)
         if cause is None:
             if collision_frame is not None:
@@ -261,14 +297,26 @@ class RecordWriter:
             state.episode_return,
             np.concatenate(state.actions) if state.actions else np.zeros((0, 2)),
         )
-        self._at(first + _LAST if collision_frame is None else collision_frame)
+        self._at(outcome.end_frame)
         self._event(
             paths,
             f"episode {state.episode} ends: {outcome.outcome()} after {outcome.figures()}",
             LEVELS[outcome.cause],
         )
+        state.episodes = state.episodes.ended(EpisodeMark(state.episode, cause[0], state.step))
         self._ended = True
         self.summary.add(outcome)
+
+    def _mark_collision(self, paths: RowPaths, record: StepRecord, i: int, frame: int) -> None:
+        """The speed and the distance ahead at a collision's frame, drawn as a cross on their
+        plots (a distance past the sensor's range counts as 0: the car is touching something)."""
+        k = frame % CHUNK
+        for name in ("speed", "obstacle_distance"):
+            values = record.truth.get(name)
+            if values is not None and name in self.options.truth_series:
+                value = float(values[i, k])
+                value = value if math.isfinite(value) else 0.0
+                self._add_series(paths.scalar("collision", name), np.array([frame]), [value])
 
     @staticmethod
     def _end_cause(state: _RowState, record: StepRecord, i: int) -> tuple[str, str] | None:
@@ -304,7 +352,7 @@ class RecordWriter:
     ) -> int | None:
         """Per frame of the chunk: the camera images. Returns the frame of the episode's first
         collision if it is in this chunk (noted in ``state``)."""
-        quality, width = self.options.jpeg_quality, self.options.display_width
+        quality = self.options.jpeg_quality
         collided = record.truth.get("collided")
         off_road = record.truth.get("off_road")
         collision_frame = None
@@ -319,7 +367,7 @@ class RecordWriter:
                 every = frames.shape[1] == CHUNK and self.options.all_frames
                 if every or k == _LAST:
                     image = frames[i, k if every else -1]
-                    self.recording.log(paths.camera(camera), image_archetype(image, quality, width))
+                    self.recording.log(paths.camera(camera), image_archetype(image, quality))
         return collision_frame
 
     def _write_rewards(
@@ -349,13 +397,14 @@ class RecordWriter:
             return
         heading = float(truth["heading"][i, -1]) if "heading" in truth else 0.0
         window = self.options.topdown_window
-        if state.episode == 0 and state.step == 0:
+        if state.episodes.count == 1 and state.step == 0:
             self._log_scale(paths, window)
         if state.road is not None:
             self._write_map(paths, state.road, car, heading)
         path = car_frame(state.trail.points(), car, heading)
         outside = np.flatnonzero(~window.contains(path, margin=PATH_RADIUS))
         path = path[outside[-1] + 1 :] if len(outside) else path
+        path = path[(len(path) - 1) % PATH_EVERY :: PATH_EVERY]  # ends at the car
         self._log_layer(paths, "path", [path], [PATH_RADIUS], [PATH_COLOR])
         size = state.road.car_size if state.road is not None else CAR_SIZE
         self._log_capsules(

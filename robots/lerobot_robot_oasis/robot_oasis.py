@@ -213,5 +213,5 @@ class OasisRobot(Robot):
         self._stepper.reset(seed=seed)
         self._episode, self._untouched = index, True
         if self._rerun is not None:
-            self._rerun.log_reset(self._stepper.last)
+            self._rerun.log_reset(self._stepper.last, episodes=[index])
         logger.info("episode %d: %r, seed %d", index, self.config.prompt, seed)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,3 +127,29 @@ def test_a_robots_steps_run_no_reward(
         _drive(robot, 8)
     finally:
         robot.disconnect()
+
+
+def test_the_robots_rerun_recording_is_the_shared_one(tmp_path: Path) -> None:
+    """``--robot.rerun``: the same recording as an evaluation's (frames as served, a tab named
+    after its episode, the step timeline)."""
+    from viz._readback import Readback, printed
+
+    path = tmp_path / "robot.rrd"
+    robot = make_robot_from_config(OasisRobotConfig(seed=5, rerun=str(path)))
+    robot.connect()
+    try:
+        _drive(robot, 8)  # two chunks
+        robot.start_episode(3)  # LeRobot's dataset episode 3: the events say so
+        _drive(robot, 4)
+    finally:
+        robot.disconnect()
+    readback = Readback(path)
+
+    frames, images = readback.images("env/0/camera/front")
+    assert frames == [3, 7, 11, 15, 19]  # a reset, then the last frame of each chunk
+    assert images[0].shape == (64, 96, 3)  # as served: the viewer scales it
+    steps, _ = readback.column("env/0/action/throttle", "Scalars:scalars", index="step")
+    assert steps == [1, 2, 4]
+    starts = [text.split(":")[0] for text in readback.texts("env/0/events")[1]]
+    assert starts == ["episode 0 starts", "episode 3 starts"]
+    assert "[episode 0: running; episode 3: running]" in printed(path)

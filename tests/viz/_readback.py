@@ -37,6 +37,11 @@ def blueprint_views(path: Path) -> set[tuple[str, str, str]]:
     return set(re.findall(pattern, printed(path)))
 
 
+def blueprint_count(path: Path) -> int:
+    """How many layouts (blueprint stores) the file holds, via the rerun CLI."""
+    return len(set(re.findall(r'StoreId\(\s*Blueprint,\s*"[^"]*",\s*"([^"]*)"', printed(path))))
+
+
 class Readback:
     """One ``.rrd`` recording, queried by entity and component."""
 

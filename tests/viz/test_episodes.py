@@ -12,7 +12,7 @@ from tensordict import TensorDict
 from oasis_torchrl.viz import LogOptions, RolloutLogger
 from oasis_torchrl.viz.palette import SIGNALS
 
-from ._readback import Readback
+from ._readback import Readback, printed
 from ._rollouts import observation
 
 STEPS = 6
@@ -77,25 +77,42 @@ def test_nothing_is_logged_for_a_row_after_its_episode_ends(tmp_path: Path, way_
         readback = Readback(tmp_path / "eval.rrd")
 
     expected = {
-        0: ("ERROR", 10, "collision (hit an obstacle) after 2 steps, 5.0 m, return 2.000"),
-        1: ("WARN", 19, "likely collision (depth risk 1.00) after 4 steps, 9.0 m, return 4.000"),
-        2: ("INFO", 27, "time limit after 6 steps, 13.0 m, return 6.000"),
+        0: ("ERROR", "collision (hit an obstacle) after 2 steps, 5.0 m, return 2.000"),
+        1: ("WARN", "likely collision (depth risk 1.00) after 4 steps, 9.0 m, return 4.000"),
+        2: ("INFO", "time limit after 6 steps, 13.0 m, return 6.000"),
     }
-    for row, (level, end_frame, text) in expected.items():
-        end = ENDS[row][0]
-        assert readback.frames(f"env/{row}")[-1] == _last_frame(end)
-        assert readback.scalars(f"env/{row}/action/throttle")[0][-1] == _last_frame(end)
-        assert readback.scalars(f"env/{row}/reward/total")[0][-1] == _last_frame(end)
+    for row, (level, text) in expected.items():
+        end = _last_frame(ENDS[row][0])
+        # The end event and the episode's last data share its last frame; nothing comes after.
+        assert readback.frames(f"env/{row}")[-1] == end
+        assert readback.scalars(f"env/{row}/action/throttle")[0][-1] == end
+        assert readback.scalars(f"env/{row}/reward/total")[0][-1] == end
+        assert readback.images(f"env/{row}/camera/front")[0][-1] == end
+        assert readback.column(f"env/{row}/topdown/car", "LineStrips2D:strips")[0][-1] == end
         frames, texts = readback.texts(f"env/{row}/events")
-        assert texts == [
-            f"episode 0 starts: 'road {row}-0', seed {100 * row}",
-            f"episode 0 ends: {text}",
+        assert texts == [  # rows start together: episode numbers in row order
+            f"episode {row} starts: 'road {row}-0', seed {100 * row}",
+            f"episode {row} ends: {text}",
         ]
-        assert frames == [0, end_frame]  # a collision's end sits at the collision's frame
+        assert frames == [0, end]
         assert readback.column(f"env/{row}/events", "TextLog:level")[1][-1] == [level]
+    # The collision itself is marked on the speed and distance plots, at its own frame
+    assert readback.scalars("env/0/collision/speed") == ([10], [1.0])
+    assert readback.scalars("env/0/collision/obstacle_distance") == ([10], [0.0])
+    assert "env/1/collision/speed" not in readback.entities()  # no collision: no mark
     table = readback.static("summary/table", "TextDocument:text")[0]
-    assert "| 1 | 0 | road 1-0 | 100 | 0-19 | 9.0 m, likely collision (depth risk 1.00) |" in table
-    assert readback.static("summary/env", "BarChart:values") is not None
+    assert table.splitlines()[0] == "| episode | row | prompt | seed | crashed | env |"
+    lines = [
+        "| 0 | 0 | road 0-0 | 0 | env | **collision (hit an obstacle)** at step 2, 5.0 m, "
+        "frames 0-11 |",
+        "| 1 | 1 | road 1-0 | 100 | env | **likely collision (depth risk 1.00)** at step 4, "
+        "9.0 m, frames 0-19 |",
+        "| 2 | 2 | road 2-0 | 200 | - | time limit at step 6, 13.0 m, frames 0-27 |",
+    ]
+    assert table.splitlines()[2:] == lines
+    # A bar per episode, at its number: the distance it drove
+    assert readback.static("summary/env", "BarChart:abscissa")[0]["buffer"] == [0, 1, 2]
+    assert readback.static("summary/env", "BarChart:values")[0]["buffer"] == [5.0, 9.0, 13.0]
 
 
 def test_every_signal_has_its_fixed_name_and_colour(tmp_path: Path) -> None:
@@ -125,8 +142,34 @@ def test_frames_only_recordings_have_no_truth_and_still_end(tmp_path: Path) -> N
     ends = [readback.texts(f"env/{row}/events")[1][-1] for row in ENDS]
     assert ends == [
         "episode 0 ends: terminated after 2 steps, return 2.000",
-        "episode 0 ends: likely collision (depth risk 1.00) after 4 steps, return 4.000",
-        "episode 0 ends: time limit after 6 steps, return 6.000",
+        "episode 1 ends: likely collision (depth risk 1.00) after 4 steps, return 4.000",
+        "episode 2 ends: time limit after 6 steps, return 6.000",
     ]
     table = readback.static("summary/table", "TextDocument:text")[0]
-    assert "| 0 | 0 | road 0-0 | 0 | 0-11 | return 2.00, terminated |" in table
+    assert "| 0 | 0 | road 0-0 | 0 | - | terminated at step 2, return 2.00, frames 0-11 |" in table
+
+
+def test_periodic_evaluations_number_their_episodes_on(tmp_path: Path) -> None:
+    """PPO evaluates with one evaluator, again and again, into one recording: each evaluation's
+    episodes get the next numbers, and a row's tab names both of its episodes."""
+    from oasis_torchrl.config import load_config
+    from oasis_torchrl.drivers import ScriptedDriver
+    from oasis_torchrl.train.evaluate import Evaluator
+
+    path = tmp_path / "evaluations.rrd"
+    settings = ["episodes=2", "max_steps=2", "env.image_size=[64,96]", f"rerun={path}"]
+    cfg = load_config("eval", settings)
+    with Evaluator(cfg.env, cfg, progress=False) as evaluator:
+        for _ in range(2):
+            evaluator.evaluate(ScriptedDriver.from_spec("throttle=1"))
+    readback = Readback(path)
+
+    frames, texts = readback.texts("env/1/events")
+    assert [text.split(":")[0] for text in texts] == [
+        "episode 1 starts",
+        "episode 1 ends",
+        "episode 3 starts",
+        "episode 3 ends",
+    ]
+    assert frames == [0, 11, 12, 23]  # the second evaluation from tick max_steps + 1
+    assert "[episode 1: time limit at step 2; episode 3: time limit at step 2]" in printed(path)

@@ -20,7 +20,7 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz import LogOptions, RerunFrameConsumer, RerunTransform, RolloutLogger
 
-from ._readback import Readback, blueprint_views, printed
+from ._readback import Readback, RrdReader, blueprint_count, blueprint_views, printed
 from ._rollouts import CAMERAS, SIZE, TERMS, action, color, reward, rollout
 
 FPS = 20.0
@@ -46,7 +46,6 @@ def _row_entities(row: int) -> set[str]:
 
 
 SUMMARY = {"summary/table", "summary/env"}
-DISPLAYED = (256, 384)  # SIZE upscaled 16 times for display
 
 
 def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
@@ -54,8 +53,11 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
     # takes one tick of its own. Ticks: 0 reset, 1-2 steps, 3 reset of row 1, 4-5 steps.
     readback = _log(tmp_path / "run.rrd", rollout(3, 4, {1: [1]}), rows=(0, 1))
 
-    assert readback.entities() == _row_entities(0) | _row_entities(1) | SUMMARY
-    assert {"frame", "sim_time"} <= readback.timelines()
+    marks = {"env/1/collision/speed", "env/1/collision/obstacle_distance"}
+    assert readback.entities() == _row_entities(0) | _row_entities(1) | SUMMARY | marks
+    assert {"frame", "step", "sim_time"} <= readback.timelines()
+    steps, _ = readback.column("env/1/reward/total", "Scalars:scalars", index="step")
+    assert steps == [1, 2, 4, 5]  # frame // 4
     image_frames = {0: [3, 7, 11, 19, 23], 1: [3, 7, 11, 15, 19, 23]}
     image_steps = {0: [(0, True), (0, False), (1, False), (2, False), (3, False)]}
     image_steps[1] = [(0, True), (0, False), (1, False), (2, True), (2, False), (3, False)]
@@ -64,7 +66,7 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
             frames, images = readback.images(f"env/{row}/camera/{camera}")
             assert frames == image_frames[row]
             for image, (t, reset) in zip(images, image_steps[row], strict=True):
-                assert image.shape == (*DISPLAYED, 3)
+                assert image.shape == (*SIZE, 3)  # as served: the viewer scales it
                 error = np.abs(image.astype(int) - color(row, t, index, reset)).max()
                 assert error <= JPEG_TOLERANCE
 
@@ -85,12 +87,13 @@ def test_rollout_entities_frames_values_and_timelines(tmp_path: Path) -> None:
     assert [s.total_seconds() for s in seconds] == pytest.approx([f / FPS for f in [7, 11, 19, 23]])
 
     frames, texts = readback.texts("env/1/events")
-    assert frames == [0, 10, 12]  # the end is logged at the collision's frame
+    assert frames == [0, 11, 12]  # the end is on the last frame of the episode's last step
     assert texts == [
-        "episode 0 starts: 'road 1-0', seed 100",
-        "episode 0 ends: collision (hit an obstacle) after 2 steps, return 2.100",
-        "episode 1 starts: 'road 1-1', seed 101",
+        "episode 1 starts: 'road 1-0', seed 100",
+        "episode 1 ends: collision (hit an obstacle) after 2 steps, return 2.100",
+        "episode 2 starts: 'road 1-1', seed 101",
     ]
+    assert readback.scalars("env/1/collision/speed") == ([10], [2.0])  # the collision's frame
     colors = readback.column("env/1/topdown/car", "LineStrips2D:colors")[1]
     assert [c[0] for c in colors] == [0xFFFFFFFF] * 2 + [0xFF2828FF] + [0xFFFFFFFF] * 3
 
@@ -101,7 +104,7 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     views = blueprint_views(path)
     # One unit per plot; a plot only where its signal is known (no lateral offset here)
     plots = ["actions (-1 to 1)", "reward", "collision risk (depth, 0 to 1)"]
-    plots += ["distance to obstacle (m)", "speed (m/s)"]
+    plots += ["distance to obstacle ahead (m)", "speed (m/s)"]
     for row in (0, 2):
         assert {("2D", camera, f"env/{row}/camera/{camera}") for camera in CAMERAS} <= views
         assert ("2D", "top-down", f"env/{row}/topdown") in views
@@ -111,15 +114,19 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     assert not any(origin.startswith("env/1") for _, _, origin in views)
     # Row 2's episode ended: the summary tab appeared
     assert ("TextDocument", "episodes", "summary/table") in views
-    assert ("BarChart", "env: distance in m (or return)", "summary/env") in views
-    assert "TimePanelBlueprint:play_state" in printed(path)  # opens at the start, playing
+    chart = "env: distance driven in m (or return) by episode number"
+    assert ("BarChart", chart, "summary/env") in views
+    text = printed(path)
+    assert "TimePanelBlueprint:play_state" in text  # opens at the start, playing
+    assert "TimePanelBlueprint:loop_mode" in text  # and back to the start from the end
+    # Tabs are named after their episodes (row 0's still runs); a file gets one layout, at close
+    assert "[episode 0: running]" in text and "[episode 1: collision at step 2]" in text
+    assert blueprint_count(path) == 1
 
 
 def test_all_frames_raw_images_and_depth(tmp_path: Path) -> None:
     td = rollout(1, 2, all_frames=True, depth=True)
-    readback = _log(
-        tmp_path / "raw.rrd", td, jpeg_quality=None, display_width=None, background=False
-    )
+    readback = _log(tmp_path / "raw.rrd", td, jpeg_quality=None, all_frames=True, background=False)
 
     frames, buffers = readback.column("env/0/camera/front", "Image:buffer")
     assert frames == list(range(12))  # 3 ticks x 4 frames
@@ -145,7 +152,7 @@ def test_collector_hook_continues_episodes_across_batches(tmp_path: Path) -> Non
             == (whole.images(f"env/{row}/camera/front")[0])
         )
         assert batches.texts(f"env/{row}/events") == whole.texts(f"env/{row}/events")
-    assert batches.texts("env/0/events")[0] == [0, 14, 16]  # start, end (a collision), start
+    assert batches.texts("env/0/events")[0] == [0, 15, 16]  # start, end (a collision), start
     assert batches.images("env/1/camera/front")[0] == [3, 7, 11, 15, 23, 27, 31]
 
 
@@ -212,8 +219,8 @@ def test_transform_on_a_real_env_matches_the_rollout_function(tmp_path: Path) ->
 
 
 def test_frame_consumer_of_the_sync_client(tmp_path: Path, local_server: LocalServer) -> None:
-    # Logged at the sent size (display_width=None), to compare pixel by pixel
-    with RolloutLogger(tmp_path / "client.rrd", LogOptions(display_width=None)) as rerun_logger:
+    # Every frame of a chunk (all_frames), at the sent size, to compare pixel by pixel
+    with RolloutLogger(tmp_path / "client.rrd", LogOptions(all_frames=True)) as rerun_logger:
         client = A2VClient(
             local_server.endpoint,
             api_key=local_server.api_key,
@@ -351,3 +358,20 @@ def test_a_logger_left_open_is_closed_at_exit(tmp_path: Path) -> None:
     assert run.returncode == 0, run.stderr
     assert "Exception ignored" not in run.stderr
     assert Readback(out).images("env/0/camera/front")[0] == [3, 7, 11]
+
+
+@pytest.mark.skipif(RrdReader is None, reason="reads chunks with rerun-sdk 0.32 or newer")
+def test_a_file_gets_few_large_chunks(tmp_path: Path) -> None:
+    """Steps logged slower than rerun's default batching (200 ms) and a live viewer's series (1 s)
+    still share chunks: each chunk carries its schema, which would otherwise outweigh a frame."""
+    import time
+
+    td = rollout(1, 5)
+    with RolloutLogger(tmp_path / "slow.rrd", LogOptions(background=False)) as rerun_logger:
+        for t in range(5):
+            rerun_logger.log_rollout(td[:, t : t + 1], new_episodes=t == 0)
+            time.sleep(0.3)
+    chunks = [chunk.entity_path for chunk in RrdReader(tmp_path / "slow.rrd").stream()]
+    assert chunks.count("/env/0/camera/front") == 1  # the batcher's chunks
+    assert chunks.count("/env/0/action/throttle") == 2  # its style (static), its values
+    assert Readback(tmp_path / "slow.rrd").images("env/0/camera/front")[0] == [3, 7, 11, 15, 19, 23]

@@ -14,7 +14,7 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz.replay import load_rollout, save_rollout, source_kind
 
-from ._readback import Readback
+from ._readback import Readback, blueprint_views, printed
 from ._rollouts import CAMERAS, color, rollout
 
 DATASET_CAMERAS = ("left_forward", "front")
@@ -95,8 +95,12 @@ def test_dataset_episode_to_rrd(dataset_root: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(readback.scalars("episode/1/reward/total")[1], range(1, 7))
     assert readback.texts("episode/1/events") == (
         [0, 5],
-        ["episode 1 starts: 'task 1', seed 101", "episode ends"],
+        ["episode 1 starts: 'task 1', seed 101", "episode 1 ends"],
     )
+    steps, _ = readback.column("episode/1/reward/total", "Scalars:scalars", index="step")
+    assert steps == [0, 1]  # a 20 fps dataset: a row per frame, frames 0-3 are step 0
+    assert ("2D", "front", "episode/1/camera/front") in blueprint_views(out)
+    assert "[episode 1]" in printed(out)  # the tab, named after its episode
     seconds, _ = readback.column("episode/1/reward/total", "Scalars:scalars", index="sim_time")
     assert [s.total_seconds() for s in seconds] == pytest.approx([f / 20 for f in range(6)])
 
@@ -111,7 +115,8 @@ def test_saved_rollout_rows_to_rrd(tmp_path: Path) -> None:
     rows = {entity.split("/")[1] for entity in readback.entities() if entity.startswith("env/")}
     assert rows == {"2"}
     table = readback.static("summary/table", "TextDocument:text")[0]
-    assert "| 2 | 0 | road 2-0 | 200 | 0-7 | return 2.00, collision (hit an obstacle) |" in table
+    line = "| 0 | 2 | road 2-0 | 200 | env | **collision (hit an obstacle)** at step 1, return 2.00"
+    assert f"{line}, frames 0-7 |" in table
     frames, images = readback.images("env/2/camera/front")
     assert frames == [3, 7, 11, 15, 19]  # reset, step 0 (crash), reset, steps 1-2
     resets = [True, False, True, False, False]

@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.viz import LogOptions, RolloutLogger
+from oasis_torchrl.viz import RolloutLogger
+from oasis_torchrl.viz.palette import POLICY_COLORS
 from oasis_torchrl.viz.side_by_side import SideBySide
 
-from ._readback import Readback, blueprint_views
+from ._readback import Readback, blueprint_count, blueprint_views, printed
 from ._rollouts import CAMERAS, rollout
 
 STEPS = 4
@@ -21,35 +22,55 @@ DIVERGES = 2
 
 
 def _drive(rerun_logger: RolloutLogger, steer_away: bool) -> None:
+    """One episode that crashes at its last step; the second policy steers away, and its env
+    serves the front crop (not logged by default: a part of the front frame) and a camera more."""
     td = rollout(1, STEPS, {0: [STEPS - 1]})
     if steer_away:
         td["action"][:, DIVERGES:, :, 1] += 0.5
+        for key in ("pixels", ("next", "pixels")):
+            td[key]["front_crop"] = td[key]["front"].clone()
+            td[key]["rear"] = td[key]["front"].clone()
     rerun_logger.log_rollout(td)
 
 
 def _check_side_by_side(readback: Readback, path: Path, roots: tuple[str, str]) -> None:
     first, second = roots
-    for root in roots:
+    for index, root in enumerate(roots):
         entities = {f"{root}/0/camera/{camera}" for camera in CAMERAS}
         entities |= {f"{root}/0/topdown/car", f"{root}/0/events", f"summary/{root}"}
         assert entities <= readback.entities()
         # Both start at frame 0: one shared timeline
         assert readback.images(f"{root}/0/camera/front")[0][0] == 3
+        # The signals the policies share a plot for are in the policy's colour, named after it
+        packed = int.from_bytes(bytes([*POLICY_COLORS[index], 255]), "big")
+        assert readback.static(f"{root}/0/truth/speed", "SeriesLines:colors") == [packed]
+        assert readback.static(f"{root}/0/truth/speed", "SeriesLines:names") == [f"{root} speed"]
     frames, texts = readback.texts("divergence/0")
     assert len(texts) == 1 and f"{second} diverges from {first} (by 0.50)" in texts[0]
     assert frames == [4 * (DIVERGES + 1)]  # the first frame of that step
     views = blueprint_views(path)
     for root in roots:
-        assert ("2D", "front", f"{root}/0/camera/front") in views
-        assert ("2D", "top-down", f"{root}/0/topdown") in views
-        assert ("TimeSeries", f"{root} actions (-1 to 1)", f"{root}/0") in views
+        # Every panel says whose it is; both lines show the same cameras
+        for camera in (*CAMERAS, "rear"):
+            assert ("2D", f"{root}: {camera}", f"{root}/0/camera/{camera}") in views
+        assert f"{root}/0/camera/front_crop" not in readback.entities()
+        assert ("2D", f"{root}: top-down", f"{root}/0/topdown") in views
+        assert ("TextLog", f"{root}: events", f"{root}/0/events") in views
+        assert ("TimeSeries", f"{root}: actions (-1 to 1)", f"{root}/0") in views
+    # Speed, distance ahead and reward: one plot each, every policy on the same axes
+    for plot in ("speed (m/s)", "distance to obstacle ahead (m)", "reward"):
+        assert ("TimeSeries", plot, "/") in views
+    assert ("TimeSeries", "lateral offset (m)", "/") not in views  # not in these rollouts
+    # Both policies' lines (and collision marks) in the speed plot (the printout cuts it there)
+    speed = f"[+ /{first}/0/collision/speed, + /{first}/0/truth/speed, + /{second}/0/collision/"
+    assert speed in printed(path)
     assert ("TextLog", "divergence", "divergence/0") in views
     assert ("TextDocument", "episodes", "summary/table") in views
 
 
 def test_two_policies_share_one_recording_and_their_divergence_is_marked(tmp_path: Path) -> None:
     path = tmp_path / "pair.rrd"
-    recording = SideBySide(path, ["autopilot", "bc+ppo"], options=LogOptions(display_width=None))
+    recording = SideBySide(path, ["autopilot", "bc+ppo"])
     for name in ("autopilot", "bc+ppo"):
         with recording.logger(name) as rerun_logger:
             _drive(rerun_logger, steer_away=name == "bc+ppo")
@@ -58,19 +79,25 @@ def test_two_policies_share_one_recording_and_their_divergence_is_marked(tmp_pat
 
     _check_side_by_side(readback, path, ("autopilot", "bc_ppo"))
     table = readback.static("summary/table", "TextDocument:text")[0]
-    assert "| row | episode | prompt | seed | frames | autopilot | bc_ppo |" in table
-    assert table.count("collision (hit an obstacle)") == 2
+    assert "| episode | row | prompt | seed | crashed | autopilot | bc_ppo |" in table
+    assert "| 0 | 0 | road 0-0 | 0 | autopilot, bc_ppo |" in table
+    assert table.count("**collision (hit an obstacle)** at step 4") == 2
+    title = "episode 0: autopilot collision at step 4, bc_ppo collision at step 4"
+    assert f"[{title}]" in printed(path)
+    assert blueprint_count(path) == 1  # a file gets its layout once, complete
 
 
 def test_view_aligns_two_saved_recordings(tmp_path: Path) -> None:
     for name, steer_away in (("before", False), ("after", True)):
-        with RolloutLogger(tmp_path / f"{name}.rrd", LogOptions(display_width=None)) as logger:
+        with RolloutLogger(tmp_path / f"{name}.rrd") as logger:
             _drive(logger, steer_away)
     out = tmp_path / "both.rrd"
     args = ["view", str(tmp_path / "before.rrd"), str(tmp_path / "after.rrd"), "--save", str(out)]
     assert main(args) == 0
 
     _check_side_by_side(Readback(out), out, ("before", "after"))
+    # The tab is named after the episode, read back from each recording's events
+    assert "[episode 0: before collision at step 4, after collision at step 4]" in printed(out)
     assert main(["view", str(tmp_path / "before.rrd"), str(tmp_path), "--save", str(out)]) == 2
 
 
@@ -90,7 +117,7 @@ def test_eval_records_policies_side_by_side_on_the_same_seeds(
     seeds = [readback.texts(f"{root}/0/events")[1][0] for root in roots]
     assert seeds[0] == seeds[1]  # the same prompt and seed
     for root in roots:
-        assert readback.images(f"{root}/0/camera/front")[0][0] == 0  # both from frame 0
+        assert readback.images(f"{root}/0/camera/front")[0][0] == 3  # both from the start
     assert readback.texts("divergence/0")[1] == [
         f"step 1: {roots[1]} diverges from {roots[0]} (by 0.50)"
     ]
