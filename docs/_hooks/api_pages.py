@@ -160,6 +160,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.shift",
             "oasis_torchrl.train.depth",
             "oasis_torchrl.train.motion",
+            "oasis_torchrl.train.driven_rounds",
             "oasis_torchrl.allocator",
             "oasis_torchrl.atomic",
         ),

@@ -40,6 +40,7 @@ from oasis_torchrl.models.depth import (
 )
 from oasis_torchrl.rewards.depth_net import save_weights
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.train.driven_rounds import kept_or_driven, split_rounds
 
 logger = logging.getLogger(__name__)
 
@@ -145,37 +146,6 @@ def collect_depth_frames(settings: DepthTrainConfig) -> DepthFrames:
     return DepthFrames(torch.cat(frames), torch.cat(nearness), torch.cat(round_ids))
 
 
-def frames_for(settings: DepthTrainConfig) -> DepthFrames:
-    """The frames of ``settings.frames_file`` if it exists, else freshly driven ones (kept there
-    when it is set)."""
-    kept = settings.frames_file
-    if kept is not None and Path(kept).exists():
-        logger.info("reading the frames of %s (no driving)", kept)
-        return DepthFrames.load(kept)
-    data = collect_depth_frames(settings)
-    if kept is not None:
-        data.save(kept)
-    return data
-
-
-def split_rounds(data: DepthFrames, validation: float) -> tuple[DepthFrames, DepthFrames | None]:
-    """The training rows and the validation rows: the last ``validation`` share of the rounds
-    (at least one round when the share is positive and there are two or more).
-
-    Example:
-        >>> data = DepthFrames(torch.zeros(4, 1, 1, 3), torch.zeros(4, 1, 1), torch.arange(4))
-        >>> train, held = split_rounds(data, 0.25)
-        >>> train.rounds.tolist(), held.rounds.tolist()
-        ([0, 1, 2], [3])
-    """
-    count = int(data.rounds.max()) + 1
-    held = min(count - 1, max(1, round(count * validation))) if validation > 0 else 0
-    if held <= 0:
-        return data, None
-    is_held = data.rounds >= count - held
-    return data.select(~is_held), data.select(is_held)
-
-
 def batches(
     data: DepthFrames, batch_size: int, generator: torch.Generator, mirror: bool = True
 ) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
@@ -249,7 +219,9 @@ def train_depth(cfg: DepthTrainConfig | DictConfig) -> DepthTrainResult:
     """Collect frames and depth, train the network, write the weights file (``output``)."""
     settings = as_settings(cfg)
     started = time.perf_counter()
-    data = frames_for(settings)
+    data = kept_or_driven(
+        settings.frames_file, DepthFrames.load, lambda: collect_depth_frames(settings)
+    )
     collected = time.perf_counter()
     train, held = split_rounds(data, settings.validation)
     logger.info(

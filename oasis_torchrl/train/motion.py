@@ -37,6 +37,7 @@ from oasis_torchrl.protocol import FRONT, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards.base import NoReward
 from oasis_torchrl.rewards.motion_net import load_motion_net, save_motion_weights
 from oasis_torchrl.sim.config import ServerConfig
+from oasis_torchrl.train.driven_rounds import kept_or_driven, split_rounds
 
 logger = logging.getLogger(__name__)
 
@@ -184,33 +185,6 @@ def _labelled(rollout: torch.Tensor, round_index: int, horizon: int) -> MotionCh
     )
 
 
-def chunks_for(settings: MotionTrainConfig) -> MotionChunks:
-    """The chunks of ``settings.chunks_file`` if it exists, else freshly driven ones (kept there
-    when it is set)."""
-    kept = settings.chunks_file
-    if kept is not None and Path(kept).exists():
-        logger.info("reading the chunks of %s (no driving)", kept)
-        return MotionChunks.load(kept)
-    data = collect_motion_chunks(settings)
-    if kept is not None:
-        data.save(kept)
-    return data
-
-
-def split_rounds(data: MotionChunks, validation: float) -> tuple[MotionChunks, MotionChunks]:
-    """Training rows and the rows of the last ``validation`` share of the rounds.
-
-    Example:
-        >>> data = MotionChunks(*(torch.zeros(4) for _ in range(5)), torch.arange(4))
-        >>> [len(part) for part in split_rounds(data, 0.25)]
-        [3, 1]
-    """
-    count = int(data.rounds.max()) + 1
-    held = min(count - 1, max(1, round(count * validation))) if validation > 0 else 0
-    is_held = data.rounds >= count - held
-    return data.select(~is_held), data.select(is_held)
-
-
 def motion_losses(
     net: MotionNet, batch: MotionChunks, collided_weight: float = 1.0
 ) -> dict[str, torch.Tensor]:
@@ -298,7 +272,9 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
     settings = cfg if isinstance(cfg, MotionTrainConfig) else OmegaConf.to_object(cfg)
     started = time.monotonic()
     torch.manual_seed(settings.seed)
-    data = chunks_for(settings)
+    data = kept_or_driven(
+        settings.chunks_file, MotionChunks.load, lambda: collect_motion_chunks(settings)
+    )
     driven = time.monotonic() - started
     train, held = split_rounds(data, settings.validation)
     net = initial_net(settings)
@@ -324,7 +300,7 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
             bar.update()
             bar.set_postfix(loss=f"{loss.item():.3f}")
     bar.close()
-    validation = evaluate_losses(net, held) if len(held) else {}
+    validation = evaluate_losses(net, held) if held is not None else {}
     path = save_motion_weights(
         net,
         settings.output,

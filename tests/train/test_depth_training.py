@@ -17,8 +17,8 @@ from oasis_torchrl.train.depth import (
     collect_depth_frames,
     evaluate_loss,
     fit,
-    split_rounds,
 )
+from oasis_torchrl.train.driven_rounds import split_rounds
 
 SMOKE = {"num_envs": 2, "steps": 4, "render_scale": 1, "progress": False}
 
@@ -86,11 +86,11 @@ def test_train_depth_writes_a_loadable_file_and_reuses_its_frames(
     assert source.image_size == (64, 96) and source.net.config.channels == (4, 8)
     meta = torch.load(output, weights_only=True)["meta"]
     assert meta["frames"] == 12 and meta["validation_loss"] is not None
-    assert frames_file.exists() and "reading the frames" not in caplog.text
+    assert frames_file.exists() and "reading the rows" not in caplog.text
     again = tmp_path / "again.pt"
     with caplog.at_level("INFO"):
         assert main([*settings, f"output={again}", "epochs=2"]) == 0
-    assert f"reading the frames of {frames_file}" in caplog.text
+    assert f"reading the rows of {frames_file}" in caplog.text
     assert torch.load(again, weights_only=True)["meta"]["frames"] == 12
 
 
