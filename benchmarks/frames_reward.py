@@ -118,7 +118,12 @@ def scorer(rewards: dict[str, object], episodes: Episodes) -> Callable[[TensorDi
 
 
 def drive_policy(
-    spec: str, prompts: tuple[str, ...], episodes: int, steps: int, size: tuple[int, int]
+    spec: str,
+    prompts: tuple[str, ...],
+    episodes: int,
+    steps: int,
+    size: tuple[int, int],
+    reward_cfg: RewardConfig,
 ) -> dict[str, object]:
     """One policy's episodes on every prompt and seed, scored by both rewards."""
     driver = load_driver(spec)
@@ -140,7 +145,7 @@ def drive_policy(
     parts = []
     try:
         for seed in REWARD_CHECK_SEEDS:
-            rewards = {name: make_frames_reward(RewardConfig(), name) for name in REWARDS}
+            rewards = {name: make_frames_reward(reward_cfg, name) for name in REWARDS}
             collected = Episodes(prompts=rows)
             env.set_seed(seed)
             on_step = scorer(rewards, collected)
@@ -303,10 +308,12 @@ def ranking(per_policy: dict[str, dict[str, np.ndarray]]) -> dict[str, object]:
     return {"kendall_tau": tau, "mean_return": returns, "mean_distance": distances}
 
 
-def cpu_cost(size: tuple[int, int], rows: int = 8, repeats: int = 20) -> dict[str, float]:
+def cpu_cost(
+    size: tuple[int, int], reward_cfg: RewardConfig, rows: int = 8, repeats: int = 20
+) -> dict[str, float]:
     """Wall and CPU milliseconds per row per chunk of the motion reward on frames of ``size``
     (a batch of ``rows``, as the env scores it)."""
-    reward = make_frames_reward(RewardConfig(), "motion")
+    reward = make_frames_reward(reward_cfg, "motion")
     frames = torch.randint(0, 255, (rows, 4, *size, 3), dtype=torch.uint8)
     td = make_td(frames)
     reward(td)
@@ -349,8 +356,8 @@ def plot(report: dict[str, object], path: Path) -> None:
     figure.savefig(path, dpi=110)
 
 
-def main() -> None:
-    """Drive every policy, check both rewards, print (and write) the report."""
+def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
+    """The flags of ``argv`` (default: the process's)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=2, help="episodes per prompt and seed")
     parser.add_argument("--steps", type=int, default=100, help="chunks per episode")
@@ -361,25 +368,42 @@ def main() -> None:
         help="episodes per prompt and seed rendered at the hosted 768x512",
     )
     parser.add_argument("--policies", nargs="+", default=list(POLICIES))
+    parser.add_argument(
+        "--motion-model",
+        default="small",
+        help="the motion network checked: small (the shipped one) or a weights file",
+    )
     parser.add_argument("--output", type=Path, help="write <output>.json and <output>.png")
-    args = parser.parse_args()
+    return parser.parse_args(argv)
+
+
+def main() -> None:
+    """Drive every policy, check both rewards, print (and write) the report."""
+    args = parse_arguments()
     # One torch thread: on a shared 2-core machine two OpenMP threads wait on each other (a
     # chunk's reward took 26 times as long in this script beside other jobs).
     torch.set_num_threads(1)
     started = time.monotonic()
+    reward_cfg = RewardConfig(motion_model=args.motion_model)
     report: dict[str, object] = {
         "prompts": list(HELD_OUT_SCENES),
         "seeds": list(REWARD_CHECK_SEEDS),
+        "motion_model": args.motion_model,
     }
     runs = {
-        spec: drive_policy(spec, HELD_OUT_SCENES, args.episodes, args.steps, (64, 96))
+        spec: drive_policy(spec, HELD_OUT_SCENES, args.episodes, args.steps, (64, 96), reward_cfg)
         for spec in args.policies
     }
     report["checks"] = {name: checks(runs, name) for name in REWARDS}
     if args.hosted_episodes:
         hosted = {
             spec: drive_policy(
-                spec, HELD_OUT_SCENES, args.hosted_episodes, args.steps, HOSTED_FRAME_SIZE
+                spec,
+                HELD_OUT_SCENES,
+                args.hosted_episodes,
+                args.steps,
+                HOSTED_FRAME_SIZE,
+                reward_cfg,
             )
             for spec in ("autopilot", "constant:throttle=1.0,steering=0.0")
         }
@@ -388,8 +412,8 @@ def main() -> None:
             for name in REWARDS
         }
     report["cost_per_row_chunk"] = {
-        "96x64": cpu_cost((64, 96)),
-        "768x512": cpu_cost(HOSTED_FRAME_SIZE),
+        "96x64": cpu_cost((64, 96), reward_cfg),
+        "768x512": cpu_cost(HOSTED_FRAME_SIZE, reward_cfg),
     }
     report["seconds"] = round(time.monotonic() - started, 1)
     text = json.dumps(report, indent=2, default=float)

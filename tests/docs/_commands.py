@@ -13,6 +13,7 @@ import importlib.util
 import inspect
 import re
 import shlex
+import sys
 import types
 import typing
 from dataclasses import dataclass
@@ -114,6 +115,7 @@ def check_script(path: str, argv: list[str]) -> None:
     spec = importlib.util.spec_from_file_location(f"docs_script_{script.stem}", script)
     assert spec is not None and spec.loader is not None, path
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # a dataclass of the script looks its module up there
     spec.loader.exec_module(module)
     assert hasattr(module, "parse_arguments"), f"{path} has no parse_arguments(argv) to check"
     try:
