@@ -69,9 +69,11 @@ class RolloutLogger:
         root: the entity root of the rows (``env``; a policy's own in a side-by-side recording).
         summary: where ended episodes go (the summary tab; default: this logger's own).
         send_layout: sends the layout when it changes (default: the default blueprint).
-        live: whether a shared recording stream goes to a viewer (layouts are sent as they
-            change) rather than a file (the last layout at :meth:`flush` and :meth:`close`);
-            the logger's own target says it otherwise.
+        live: whether the recording goes to a viewer (layouts and plotted values sent as they
+            come) rather than a file (values batched, the last layout at :meth:`flush` and
+            :meth:`close`); None: a shared stream is live, the logger's own target says it.
+            True for a file whose process may end by a signal, with no :meth:`close`: what was
+            logged reaches it within a second.
         policy: the policy whose episodes these are, in a side-by-side recording.
 
     Example:
@@ -99,12 +101,13 @@ class RolloutLogger:
         root: str = ENV_ROOT,
         summary: EpisodeSummary | None = None,
         send_layout: Callable[[RowsLayout], None] | None = None,
-        live: bool = True,
+        live: bool | None = None,
         policy: Policy | None = None,
     ) -> None:
         self.options = options if options is not None else LogOptions()
         self._owns_recording = not isinstance(target, rr.RecordingStream)
-        live = is_live(target) if self._owns_recording else live
+        if live is None:
+            live = is_live(target) if self._owns_recording else True
         recording = (
             open_recording(
                 target,

@@ -140,7 +140,9 @@ class OasisRobot(Robot):
             if self.config.rerun:
                 from oasis_torchrl.viz import RolloutLogger
 
-                self._rerun = RolloutLogger(self.config.rerun)
+                # LeRobot's tools end a session by a signal as often as by disconnect(): the
+                # recording takes what is logged as it comes, as a viewer would.
+                self._rerun = RolloutLogger(self.config.rerun, live=True)
             self._begin(0)
         except Exception:
             self.disconnect()

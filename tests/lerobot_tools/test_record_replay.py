@@ -107,7 +107,8 @@ def test_a_person_drives_then_lerobot_replay_rebuilds_the_episode(
     same = np.abs(shown.astype(int) - again.astype(int)).mean()
     n = min(len(shown), len(other))
     elsewhere = np.abs(shown[:n].astype(int) - other[:n].astype(int)).mean()
-    assert same < 8 < elsewhere, (same, elsewhere)  # JPEG and h264 on both sides, seed 8 only
+    # JPEG 70 (the recording) and h264 (the dataset) on both sides; another episode is 4x as far.
+    assert same < 10 < elsewhere, (same, elsewhere)
 
 
 def _replay(root: Path, home: Path, tmp_path: Path, episode: int) -> np.ndarray:
