@@ -74,7 +74,7 @@ class NoReward:
     """A :class:`RewardModule` that scores nothing: reward 0, no terms, never terminates.
 
     For an env whose caller reads no reward (a LeRobot robot): the default reward on frames
-    alone runs a depth network every step.
+    alone runs a network every step.
 
     >>> NoReward()(TensorDict({}, batch_size=[2]))["reward"].tolist()
     [[0.0], [0.0]]
