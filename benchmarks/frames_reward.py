@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.config import EnvConfig
 from oasis_torchrl.config.env import EmbeddedServerConfig, RewardConfig
@@ -330,8 +330,6 @@ def cpu_cost(
 
 def make_td(frames: torch.Tensor) -> TensorDictBase:
     """A step's reward input: the front frames and an action chunk."""
-    from tensordict import TensorDict
-
     rows = frames.shape[0]
     return TensorDict({("pixels", FRONT): frames, "action": torch.zeros(rows, 4, 2)}, [rows])
 

@@ -64,6 +64,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.rewards.base",
             "oasis_torchrl.rewards.motion",
             "oasis_torchrl.rewards.motion_net",
+            "oasis_torchrl.rewards.weights_file",
             "oasis_torchrl.rewards.depth_collision",
             "oasis_torchrl.rewards.depth_sources",
             "oasis_torchrl.rewards.depth_net",

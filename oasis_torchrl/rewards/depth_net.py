@@ -29,6 +29,7 @@ from oasis_torchrl.rewards.depth_sources import (
     error_cause,
     read_pixels,
 )
+from oasis_torchrl.rewards.weights_file import check_fits, read_weights, write_weights
 
 logger = logging.getLogger(__name__)
 
@@ -122,37 +123,8 @@ def save_weights(
     >>> load_small_depth(path=path).image_size
     (8, 12)
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    payload = {
-        "format": WEIGHTS_FORMAT,
-        "config": dataclasses.asdict(net.config),
-        "image_size": list(image_size),
-        "state_dict": {key: value.detach().cpu() for key, value in net.state_dict().items()},
-        "meta": dict(meta or {}),
-    }
-    torch.save(payload, target)
-    return target
-
-
-def check_fits(net: torch.nn.Module, state: dict[str, torch.Tensor]) -> None:
-    """Refuse a state dict whose names or shapes differ from ``net``'s, naming the first misfit.
-
-    >>> check_fits(torch.nn.Linear(2, 1), {"weight": torch.zeros(1, 3), "bias": torch.zeros(1)})
-    Traceback (most recent call last):
-    ...
-    ValueError: the weights do not fit their config: weight is [1, 3], not [1, 2]
-    """
-    expected = net.state_dict()
-    for name in sorted(expected.keys() | state.keys()):
-        if name not in state or name not in expected:
-            where = "missing from the file" if name not in state else "not in the network"
-            problem = f"{name} is {where}"
-        elif state[name].shape != expected[name].shape:
-            problem = f"{name} is {list(state[name].shape)}, not {list(expected[name].shape)}"
-        else:
-            continue
-        raise ValueError(f"the weights do not fit their config: {problem}")
+    config = dataclasses.asdict(net.config)
+    return write_weights(path, WEIGHTS_FORMAT, net, config, meta, image_size=list(image_size))
 
 
 def load_small_depth(
@@ -170,9 +142,7 @@ def load_small_depth(
     """
     file = Path(path) if path is not None else shipped_weights()
     try:
-        payload = torch.load(file, map_location="cpu", weights_only=True)
-        if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
-            raise ValueError(f"not a weights file of {WEIGHTS_FORMAT!r}")
+        payload = read_weights(file, WEIGHTS_FORMAT)
         net = DepthNet(config_from_dict(payload["config"]))
         check_fits(net, payload["state_dict"])
         net.load_state_dict(payload["state_dict"])

@@ -15,11 +15,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from oasis_torchrl.models.motion import MotionNet, MotionNetConfig
-from oasis_torchrl.rewards.depth_net import check_fits
 from oasis_torchrl.rewards.depth_sources import error_cause
+from oasis_torchrl.rewards.weights_file import check_fits, read_weights, write_weights
 
 logger = logging.getLogger(__name__)
 
@@ -47,16 +45,7 @@ def save_motion_weights(
     >>> load_motion_net(str(path)).cfg.channels
     (4, 4)
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    payload = {
-        "format": MOTION_WEIGHTS_FORMAT,
-        "config": dataclasses.asdict(net.cfg),
-        "state_dict": {key: value.detach().cpu() for key, value in net.state_dict().items()},
-        "meta": dict(meta or {}),
-    }
-    torch.save(payload, target)
-    return target
+    return write_weights(path, MOTION_WEIGHTS_FORMAT, net, dataclasses.asdict(net.cfg), meta)
 
 
 def motion_weights_path(model: str) -> Path:
@@ -70,11 +59,6 @@ def motion_weights_path(model: str) -> Path:
     return Path(model)
 
 
-def read_motion_meta(model: str) -> dict[str, Any]:
-    """How the weights ``model`` names were trained (the ``meta`` saved with them)."""
-    return dict(_read_payload(motion_weights_path(model)).get("meta", {}))
-
-
 def load_motion_net(model: str = SMALL_MOTION_MODEL) -> MotionNet:
     """The motion network ``model`` names (``small`` or a weights file), in inference mode.
 
@@ -86,7 +70,7 @@ def load_motion_net(model: str = SMALL_MOTION_MODEL) -> MotionNet:
     """
     file = motion_weights_path(model)
     try:
-        payload = _read_payload(file)
+        payload = read_weights(file, MOTION_WEIGHTS_FORMAT)
         values = payload["config"]
         cfg = MotionNetConfig(
             image_size=tuple(values["image_size"]),
@@ -105,10 +89,3 @@ def load_motion_net(model: str = SMALL_MOTION_MODEL) -> MotionNet:
         ) from None
     logger.debug("loaded motion network %s", file)
     return net.eval()
-
-
-def _read_payload(file: Path) -> dict[str, Any]:
-    payload = torch.load(file, map_location="cpu", weights_only=True)
-    if not isinstance(payload, dict) or payload.get("format") != MOTION_WEIGHTS_FORMAT:
-        raise ValueError(f"not a weights file of {MOTION_WEIGHTS_FORMAT!r}")
-    return payload
