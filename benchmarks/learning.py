@@ -17,8 +17,11 @@ one episode per env row of up to ``eval.max_steps`` chunks:
    hosted-like server, the depth network's reward, a camera-only critic) both kept policies are
    judged on the embedded server with ground truth; target: at least 1.3x within the whole
    budget;
-4. PPO fine-tuning of the cloned policy; target: beats behaviour cloning by more than 2
-   standard errors of the paired per-episode difference (the same scenes, episode by episode);
+4. PPO fine-tuning of the cloned policy (or of ``--clone``, e.g. the shipped one); target:
+   beats behaviour cloning by more than 2 standard errors of the paired per-episode difference
+   (the same scenes, episode by episode). On frames alone (``--ppo-overrides
+   env.server.hosted=true``) the kept policy is judged on the embedded server with ground truth;
+   target: no worse than the clone beyond 2 standard errors;
 5. held-out scenes: the references and every policy the run's other stages trained, on prompts
    no stage trained on (night, highway, rural, rain) and a seed no config uses, reported beside
    (no target).
@@ -65,6 +68,7 @@ from oasis_torchrl.config import DemoConfig, load_config
 from oasis_torchrl.config.arguments import add_config_arguments, flag_values, split_overrides
 from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
+from oasis_torchrl.drivers.pretrained import resolve_pretrained
 from oasis_torchrl.train.evaluate import paired_difference, selection_figure
 from oasis_torchrl.train.pipeline import (
     bc_config,
@@ -268,6 +272,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--finetune-frames", type=int, default=20480, help="BC + PPO, env steps")
     parser.add_argument(
+        "--clone",
+        help="the policy the bc_ppo stage fine-tunes (a folder or pretrained:NAME, e.g. "
+        "pretrained:clone with --config pretrained_clone) instead of the run's own clone",
+    )
+    parser.add_argument(
         "--ppo-overrides",
         nargs="*",
         default=[],
@@ -286,6 +295,8 @@ def parse_arguments(argv: list[str] | None = None) -> tuple[argparse.Namespace, 
     overrides, unknown = split_overrides(extra)
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    if args.clone and {"bc", "bc_dagger"} & set(args.stages):
+        parser.error("--clone replaces the run's own clone: leave bc and bc_dagger out of --stages")
     return args, overrides
 
 
@@ -308,6 +319,7 @@ def main() -> None:
             "ppo_early_frames": args.ppo_early_frames,
             "stages": args.stages,
             "finetune_frames": args.finetune_frames,
+            "clone": args.clone,
             "ppo_overrides": args.ppo_overrides,
             "overrides": overrides,
             "scratch_recipe": OmegaConf.to_container(scratch_recipe()),
@@ -333,7 +345,10 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
     if "references" in stages:
         with cache.timed("references"):
             results["references"] = cache.evaluate(cfg, REFERENCES)
-    if stages & CLONE_STAGES:
+    if args.clone:  # a given clone (e.g. the shipped one) in place of the run's own
+        dagger_policy = Path(resolve_pretrained(args.clone))
+        trained["bc_dagger"] = str(dagger_policy)
+    elif stages & CLONE_STAGES:
         with cache.timed("record"):
             dataset = demonstrations(cfg, work / "demos")
         with cache.timed("bc"):
@@ -350,6 +365,8 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
         trained["bc_ppo"] = str(work / "bc_ppo" / "policy")
         results["bc_ppo"] = history
         results["bc_ppo_start"] = cache.evaluate(cfg, {"bc_dagger": trained["bc_dagger"]})
+        if not history[-1].get("ground_truth", True):  # judged with ground truth, as below
+            results["bc_ppo_final"] = cache.evaluate(cfg, {"bc_ppo": trained["bc_ppo"]})["bc_ppo"]
     if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
             scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args)
@@ -419,9 +436,14 @@ def summarise(results: dict[str, Any]) -> dict[str, Any]:
             target["env_steps_run"] = results["ppo_scratch"][-1]["frames"]
     if "bc_ppo" in results:
         start = results["bc_ppo_start"]["bc_dagger"]
-        difference = paired_difference(results["bc_ppo"][-1], start)
-        met = difference["mean"] > 2 * difference["stderr"]
-        targets["bc_ppo_minus_bc"] = {**difference, "target": "> 2 stderr", "met": met}
+        if "bc_ppo_final" in results:  # fine-tuned on frames alone: it must keep the clone's
+            difference = paired_difference(results["bc_ppo_final"], start)
+            met = difference["mean"] >= -2 * difference["stderr"]
+            targets["bc_ppo_minus_bc"] = {**difference, "target": ">= -2 stderr", "met": met}
+        else:
+            difference = paired_difference(results["bc_ppo"][-1], start)
+            met = difference["mean"] > 2 * difference["stderr"]
+            targets["bc_ppo_minus_bc"] = {**difference, "target": "> 2 stderr", "met": met}
     report["targets"] = targets
     return report
 
