@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from _ranking import kendall_tau
 from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.config import EnvConfig
@@ -185,13 +186,6 @@ def pearson(a: np.ndarray, b: np.ndarray) -> float:
     if a.size < 2 or a.std() == 0 or b.std() == 0:
         return math.nan
     return float(np.corrcoef(a, b)[0, 1])
-
-
-def kendall_tau(a: list[float], b: list[float]) -> float:
-    """Kendall's tau-a between two rankings of the same items."""
-    pairs = [(i, j) for i in range(len(a)) for j in range(i + 1, len(a))]
-    signs = [np.sign(a[i] - a[j]) * np.sign(b[i] - b[j]) for i, j in pairs]
-    return float(np.mean(signs)) if signs else math.nan
 
 
 def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float:

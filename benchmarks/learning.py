@@ -61,6 +61,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from _ranking import kendall_tau
 from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.allocator import keep_batches_in_heap
@@ -71,6 +72,7 @@ from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD
 from oasis_torchrl.drivers.pretrained import resolve_pretrained
 from oasis_torchrl.train.evaluate import paired_difference, selection_figure
 from oasis_torchrl.train.pipeline import (
+    PPOStage,
     bc_config,
     clone,
     demonstrations,
@@ -360,17 +362,19 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
             results[stage] = cache.evaluate(cfg, {stage: trained[stage]})[stage]
     if "bc_ppo" in stages:
         with cache.timed("bc_ppo"):
-            finetune = ppo_stage(cfg, dagger_policy, "bc_ppo", args.finetune_frames, args)
-            history = run_ppo(finetune).history
+            finetune = run_ppo(ppo_stage(cfg, dagger_policy, "bc_ppo", args.finetune_frames, args))
+            history = finetune.history
         trained["bc_ppo"] = str(work / "bc_ppo" / "policy")
         results["bc_ppo"] = history
         results["bc_ppo_start"] = cache.evaluate(cfg, {"bc_dagger": trained["bc_dagger"]})
         if not history[-1].get("ground_truth", True):  # judged with ground truth, as below
             results["bc_ppo_final"] = cache.evaluate(cfg, {"bc_ppo": trained["bc_ppo"]})["bc_ppo"]
+            agreement = selection_agreement(cfg, cache, args, finetune)
+            results["bc_ppo_selection"] = agreement
     if "ppo_scratch" in stages:
         with cache.timed("ppo_scratch"):
-            scratch = ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args)
-            history = run_ppo(scratch).history
+            scratch = run_ppo(ppo_stage(cfg, None, "ppo_scratch", args.ppo_frames, args))
+            history = scratch.history
         trained["ppo_scratch"] = str(work / "ppo_scratch" / "policy")
         early = chosen_within(history, args.ppo_early_frames)
         checkpoints = work / "ppo_scratch" / "checkpoints"
@@ -381,6 +385,8 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
             # judged here, on the embedded server with ground truth, as the early one is.
             final = cache.evaluate(cfg, {"ppo_scratch": trained["ppo_scratch"]})
             results["ppo_scratch_final"] = final["ppo_scratch"]
+            agreement = selection_agreement(cfg, cache, args, scratch)
+            results["ppo_scratch_selection"] = agreement
         results["ppo_scratch_early"] = {
             "policy_frames": early["policy_frames"],
             **cache.evaluate(cfg, {"ppo_scratch_early": trained["ppo_scratch_early"]})[
@@ -393,6 +399,48 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
             held_out = held_out_config(cfg, args.held_out_episodes)
             results["held_out"] = cache.evaluate(held_out, {**policies, **trained})
     return results
+
+
+def selection_agreement(
+    cfg: DictConfig,
+    cache: StageCache,
+    args: argparse.Namespace,
+    stage: PPOStage,
+) -> dict[str, Any]:
+    """Whether a frames-only PPO stage's selection (by return under the frames-only reward)
+    agrees with ground truth: every periodically evaluated policy driven again on the selection
+    seeds on the embedded server, ranked by mean distance against its frames-only return
+    (Kendall's tau), and the ground-truth distance of the policy the stage kept beside the best
+    one's."""
+    checkpoints = stage.checkpoint.parent
+    *periodic, _ = stage.history
+    specs = {
+        f"{checkpoints.parent.name} at {entry['frames']}": str(
+            checkpoints / evaluated_checkpoint_name(entry["frames"])
+        )
+        for entry in periodic
+    }
+    on_seeds = OmegaConf.merge(cfg, {"eval": {"seeds": list(args.selection_seeds)}})
+    judged = cache.evaluate(on_seeds, specs)
+    rows = [
+        {
+            "frames": entry["frames"],
+            "frames_only_return": entry["mean_return"],
+            "mean_distance": judged[name]["mean_distance"],
+        }
+        for name, entry in zip(specs, periodic, strict=True)
+    ]
+    kept = next(row for row in rows if row["frames"] == stage.policy_frames)
+    best = max(rows, key=lambda row: row["mean_distance"])
+    returns = [row["frames_only_return"] for row in rows]
+    return {
+        "kendall_tau": kendall_tau(returns, [row["mean_distance"] for row in rows]),
+        "kept_frames": kept["frames"],
+        "kept_distance": kept["mean_distance"],
+        "best_frames": best["frames"],
+        "best_distance": best["mean_distance"],
+        "checkpoints": rows,
+    }
 
 
 def best_constant(references: dict[str, dict[str, Any]]) -> str:
