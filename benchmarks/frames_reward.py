@@ -43,6 +43,7 @@ from oasis_torchrl.envs.factory import make_env, make_frames_reward
 from oasis_torchrl.protocol import FRONT, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards import NoReward
 from oasis_torchrl.train.driving import drive
+from oasis_torchrl.train.motion_checks import pearson, roc_auc
 
 POLICIES = (
     "autopilot",
@@ -179,23 +180,6 @@ def _concat(parts: list[dict[str, object]]) -> dict[str, object]:
 def first_index(mask: np.ndarray) -> np.ndarray:
     """Per row of ``[E, T]``, the first True step, or T where none."""
     return np.where(mask.any(1), mask.argmax(1), mask.shape[1])
-
-
-def pearson(a: np.ndarray, b: np.ndarray) -> float:
-    """Pearson correlation of two flat arrays (NaN when one is constant)."""
-    if a.size < 2 or a.std() == 0 or b.std() == 0:
-        return math.nan
-    return float(np.corrcoef(a, b)[0, 1])
-
-
-def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float:
-    """Area under the ROC curve (ties count half)."""
-    positive, negative = scores[labels], scores[~labels]
-    if positive.size == 0 or negative.size == 0:
-        return math.nan
-    greater = (positive[:, None] > negative[None, :]).mean()
-    ties = (positive[:, None] == negative[None, :]).mean()
-    return float(greater + 0.5 * ties)
 
 
 def judged(run: dict[str, object], reward: str) -> dict[str, np.ndarray]:

@@ -4,6 +4,7 @@ network.
 ``train ppo`` runs TorchRL PPO in the world model (:class:`~oasis_torchrl.config.PPOConfig`);
 ``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`);
 ``train motion`` fits the frames-only reward's motion network to the embedded world's ground truth
+(or, with ``dataset=DIR``, its crash heads to the crash marks of a LeRobot dataset)
 (:class:`~oasis_torchrl.config.training.MotionTrainConfig`); ``train depth`` the reference
 reward's small depth network to its depth
 (:class:`~oasis_torchrl.config.training.DepthTrainConfig`).

@@ -523,6 +523,13 @@ class MotionTrainConfig:
         help="fine-tune these weights (small: the shipped ones, or a weights file; their shape "
         "wins over channels) instead of starting afresh",
     )
+    dataset: str | None = option(
+        None,
+        help="train on this LeRobot dataset's episodes instead of driving: its crash marks "
+        "(next.crash: the drive page's C key, or the world's collisions) label the collided and "
+        "collision-ahead heads; it holds no progress, so the progress head keeps init_from's "
+        "(use init_from=small); the reward's checks are printed on the held-out episodes",
+    )
     output: str = option("outputs/motion/motion_small.pt", help="the weights file written")
     progress: bool = option(True, help="tqdm progress bars")
 

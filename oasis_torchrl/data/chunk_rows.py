@@ -24,7 +24,9 @@ dataset fps = world fps / 4 (5): one row per step, image = last frame of ``O_t``
 ``[throttle, steering]`` of an env with ``chunk_actions=False``), reward ``r_t``, done ``d_t``.
 
 A batch with an ``"intervention"`` key (bool ``[..., T, 1]``: a person drove the step over a
-policy) adds the ``intervention`` column, the step's flag on each of its rows.
+policy) adds the ``intervention`` column, the step's flag on each of its rows; one with a
+``("next", "crash")`` key (bool ``[..., T, 1]``: the car crashed during the step) adds the
+``next.crash`` column, the step's flag on its last row (as ``next.done``).
 
 So the chunk reward sits on the row whose action completes the chunk (sums over an episode are
 preserved), every row's action is the one applied next, and the reset observation is row 0 of
@@ -44,13 +46,21 @@ import torch
 from lerobot.utils.constants import ACTION, DONE, OBS_STATE, REWARD
 from tensordict import NonTensorData, TensorDictBase
 
-from oasis_torchrl.data.features import INTERVENTION_KEY, SEED_KEY, DatasetLayout, image_key
+from oasis_torchrl.data.features import (
+    CRASH_KEY,
+    INTERVENTION_KEY,
+    SEED_KEY,
+    DatasetLayout,
+    image_key,
+)
 from oasis_torchrl.data.images import resize_frames
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS, PRIVILEGED_KEY, privileged_state
 from oasis_torchrl.protocol import CAMERAS, CHUNK
 
 PIXELS = "pixels"
 NEXT = "next"
+CRASH_STEP_KEY = "crash"
+"""The step key (under ``"next"``) of a crash mark."""
 TRUTH = "truth"
 
 
@@ -139,6 +149,7 @@ def infer_layout(
         actions_per_row=actions_per_row,
         with_privileged=privileged,
         with_intervention=INTERVENTION_KEY in steps.keys(),
+        with_crash=(NEXT, CRASH_STEP_KEY) in steps.keys(include_nested=True),
     )
 
 
@@ -289,6 +300,9 @@ def batch_to_rows(
         reward = _get(steps, (NEXT, "reward"), "the chunk reward").detach().cpu().float()
         columns[REWARD] = _on_last_row(reward.reshape(*steps.batch_size, 1), rows).numpy()
     columns[DONE] = _on_last_row(done.bool(), rows).numpy()
+    if layout.with_crash:
+        crashed = _get(steps, (NEXT, CRASH_STEP_KEY), "the crash marks").cpu().bool()
+        columns[CRASH_KEY] = _on_last_row(crashed.reshape(*steps.batch_size, 1), rows).numpy()
     if layout.with_privileged:
         columns[PRIVILEGED_KEY] = _privileged(steps, rows).numpy()
     if layout.with_intervention:

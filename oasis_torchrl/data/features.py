@@ -27,6 +27,11 @@ key                                dtype       shape          meaning
 ``intervention``                   bool        ``(1,)``       on request, a person drove this row
                                                               over a policy (LeRobot's DAgger
                                                               convention, ``lerobot-rollout``)
+``next.crash``                     bool        ``(1,)``       on request, the car crashed by this
+                                                              row (last row of its chunk): a
+                                                              person's mark on the drive page, or
+                                                              the world's collision where the
+                                                              endpoint sends ground truth
 ``task``                           string                     the episode's prompt
 =================================  ==========  =============  =====================================
 
@@ -59,6 +64,10 @@ from oasis_torchrl.protocol import CHUNK
 
 SEED_KEY = "episode_seed"
 INTERVENTION_KEY = "intervention"
+CRASH_KEY = "next.crash"
+"""Rows by which the car crashed: named like ``next.done`` and ``next.success`` (an outcome of
+the row's action); the frames-only reward's heads fine-tune on it
+(:mod:`oasis_torchrl.train.motion_dataset`)."""
 """Rows a person drove while a policy was in charge: the name and type ``lerobot-rollout``'s
 DAgger strategy gives its corrections."""
 VELOCITY_SUFFIX = ".vel"
@@ -95,6 +104,7 @@ class DatasetLayout:
         with_privileged: include ``privileged_state`` (needs the embedded server's ground
             truth; :mod:`oasis_torchrl.models.privileged`).
         with_intervention: include ``intervention`` (a person took over from a policy).
+        with_crash: include ``next.crash`` (crash marks).
 
     Example:
         >>> layout = DatasetLayout(("front",), (48, 64), actions_per_row=1)
@@ -110,6 +120,7 @@ class DatasetLayout:
     with_seed: bool = True
     with_privileged: bool = False
     with_intervention: bool = False
+    with_crash: bool = False
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -167,6 +178,8 @@ def build_features(layout: DatasetLayout) -> dict[str, Feature]:
         }
     if layout.with_intervention:
         features[INTERVENTION_KEY] = {"dtype": "bool", "shape": (1,), "names": None}
+    if layout.with_crash:
+        features[CRASH_KEY] = {"dtype": "bool", "shape": (1,), "names": None}
     return features
 
 

@@ -19,7 +19,7 @@ import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -38,86 +38,11 @@ from oasis_torchrl.rewards.base import NoReward
 from oasis_torchrl.rewards.motion_net import load_motion_net, save_motion_weights
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.driven_rounds import kept_or_driven, split_rounds
+from oasis_torchrl.train.motion_checks import check_reward
+from oasis_torchrl.train.motion_chunks import UNLABELLED, MotionChunks, chunk_labels
+from oasis_torchrl.train.motion_dataset import dataset_motion_chunks, episodes_of
 
 logger = logging.getLogger(__name__)
-
-UNLABELLED = -(10**6)
-"""``time_to`` of a chunk the hazard head learns nothing from: at or after the episode's
-collision, or the episode's last chunk without one."""
-
-
-@dataclass
-class MotionChunks:
-    """Chunks of the front camera with their ground-truth labels, one row per chunk.
-
-    ``frames`` uint8 ``[M, 4, H, W, 3]``, ``actions`` ``[M, 4, 2]``, ``progress`` metres gained
-    ``[M]``, ``collided`` ``[M]``, ``time_to`` chunks to the next collision ``[M]`` (see
-    :func:`~oasis_torchrl.models.motion.hazard_loss`; :data:`UNLABELLED` once collided),
-    ``rounds`` ``[M]``.
-    """
-
-    frames: torch.Tensor
-    actions: torch.Tensor
-    progress: torch.Tensor
-    collided: torch.Tensor
-    time_to: torch.Tensor
-    rounds: torch.Tensor
-
-    def __len__(self) -> int:
-        return self.frames.shape[0]
-
-    def select(self, rows: torch.Tensor) -> MotionChunks:
-        """The rows ``rows`` names (indices, or a bool mask)."""
-        return MotionChunks(*(value[rows] for value in dataclasses.astuple(self)))
-
-    def save(self, path: str | Path) -> None:
-        """Write the rows to ``path`` (a torch file)."""
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        torch.save(dataclasses.asdict(self), path)
-
-    @classmethod
-    def load(cls, path: str | Path) -> MotionChunks:
-        """The rows :meth:`save` wrote to ``path``."""
-        return cls(**torch.load(path, weights_only=True))
-
-    @classmethod
-    def concat(cls, parts: list[MotionChunks]) -> MotionChunks:
-        """The rows of ``parts``, in order."""
-        columns = zip(*(dataclasses.astuple(part) for part in parts), strict=True)
-        return cls(*(torch.cat(column) for column in columns))
-
-
-def chunk_labels(
-    progress: torch.Tensor, collided: torch.Tensor, horizon: int
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Per chunk of episodes ``[E, T]``: progress gained, collided and chunks to the collision.
-
-    Args:
-        progress: ground truth ``progress`` ``[E, T, 4]`` (metres since the Prompt).
-        collided: ground truth ``collided`` ``[E, T, 4]``.
-        horizon: the hazard head's horizon in chunks.
-
-    Example:
-        >>> progress = torch.tensor([[[1.0] * 4, [2.0] * 4, [2.5] * 4, [2.5] * 4]])
-        >>> hit = torch.tensor([[[0.0] * 4, [0.0] * 4, [0.0, 1, 1, 1], [1.0] * 4]])
-        >>> gained, collided, time_to = chunk_labels(progress, hit, horizon=5)
-        >>> gained.tolist(), collided.tolist(), time_to.tolist()[0][:2]
-        ([[1.0, 1.0, 0.5, 0.0]], [[False, False, True, True]], [2, 1])
-    """
-    last = progress[..., -1]
-    gained = last - torch.cat([torch.zeros_like(last[:, :1]), last[:, :-1]], dim=1)
-    hit = collided.gt(0.5).any(-1)
-    chunks = hit.shape[1]
-    steps = torch.arange(chunks).unsqueeze(0)
-    first = torch.where(hit.any(1), hit.float().argmax(1), torch.tensor(chunks)).unsqueeze(1)
-    until = first - steps
-    remaining = chunks - 1 - steps
-    time_to = torch.where(until <= horizon, until, torch.zeros_like(until))
-    censored = (first == chunks) & (remaining < horizon)
-    time_to = torch.where(censored, -remaining, time_to)
-    time_to = torch.where(steps >= first, torch.full_like(until, UNLABELLED), time_to)
-    time_to = torch.where(censored & (remaining == 0), torch.full_like(until, UNLABELLED), time_to)
-    return gained, hit, time_to
 
 
 def motion_env(settings: MotionTrainConfig, render: tuple[int, int]) -> OasisEnv:
@@ -191,8 +116,11 @@ def motion_losses(
     """The three heads' losses on ``batch``: Huber on progress (m), cross-entropy on collided,
     the hazard likelihood on the chunks before a collision."""
     out = net(batch.frames, batch.actions)
+    known = batch.progress.isfinite()  # a person's recordings label crashes, not progress
     losses = {
-        "progress": F.smooth_l1_loss(out.progress, batch.progress, beta=0.25),
+        "progress": F.smooth_l1_loss(out.progress[known], batch.progress[known], beta=0.25)
+        if known.any()
+        else out.progress.sum() * 0.0,
         "collided": collided_weight
         * F.binary_cross_entropy_with_logits(out.collided, batch.collided.float()),
     }
@@ -206,11 +134,14 @@ def motion_losses(
 
 @dataclass
 class MotionTrainResult:
-    """The weights file written, the chunks trained on and the last validation losses."""
+    """The weights file written, the chunks trained on, the last validation losses and (trained
+    from a dataset) the reward's checks on its held-out episodes
+    (:func:`~oasis_torchrl.train.motion_checks.check_reward`)."""
 
     path: Path
     chunks: int
     validation: dict[str, float]
+    checks: dict[str, float] = field(default_factory=dict)
 
 
 def _mirrored(batch: MotionChunks, generator: torch.Generator) -> MotionChunks:
@@ -272,9 +203,7 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
     settings = cfg if isinstance(cfg, MotionTrainConfig) else OmegaConf.to_object(cfg)
     started = time.monotonic()
     torch.manual_seed(settings.seed)
-    data = kept_or_driven(
-        settings.chunks_file, MotionChunks.load, lambda: collect_motion_chunks(settings)
-    )
+    data = kept_or_driven(settings.chunks_file, MotionChunks.load, lambda: _chunks(settings))
     driven = time.monotonic() - started
     train, held = split_rounds(data, settings.validation)
     net = initial_net(settings)
@@ -301,6 +230,7 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
             bar.set_postfix(loss=f"{loss.item():.3f}")
     bar.close()
     validation = evaluate_losses(net, held) if held is not None else {}
+    checks = check_reward(net, episodes_of(held)) if settings.dataset and held else {}
     path = save_motion_weights(
         net,
         settings.output,
@@ -308,9 +238,22 @@ def train_motion(cfg: MotionTrainConfig | DictConfig) -> MotionTrainResult:
             "settings": dataclasses.asdict(settings),
             "chunks": len(train),
             "validation": validation,
+            "checks": checks,
             "seconds_driving": round(driven, 1),
             "seconds_total": round(time.monotonic() - started, 1),
         },
     )
     logger.info("validation losses %s; wrote %s", validation, path)
-    return MotionTrainResult(path, len(train), validation)
+    if checks:
+        logger.info("the reward on the dataset's held-out episodes: %s", checks)
+    return MotionTrainResult(path, len(train), validation, checks)
+
+
+def _chunks(settings: MotionTrainConfig) -> MotionChunks:
+    """The chunks of ``settings.dataset``, else the driven rounds'."""
+    if settings.dataset:
+        size = (int(settings.image_size[0]), int(settings.image_size[1]))
+        return dataset_motion_chunks(
+            settings.dataset, size, settings.horizon, progress=settings.progress
+        )
+    return collect_motion_chunks(settings)

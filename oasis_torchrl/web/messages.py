@@ -7,7 +7,10 @@ type            fields                                            what it does
 ==============  ================================================  ==================================
 ``control``     ``throttle``, ``steering`` in [-1, 1], ``seq``    the person's input (held until
                 (an increasing int the page stamps it with)       the next one)
-``record``      ``command``: ``start`` | ``stop`` | ``discard``   start, save or drop an episode
+``record``      ``command``: ``start`` | ``stop`` |               start, save or drop an episode;
+                ``discard`` | ``crash``                           ``crash`` marks a crash: the
+                                                                  episode ends at the next chunk,
+                                                                  saved with ``next.crash`` set
 ``takeover``    ``human``: bool                                   the person drives, or hands back
                                                                   to the policy
 ``reset``                                                         a new scene (a new episode)
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 MAX_MESSAGE_BYTES = 4096
-RECORD_COMMANDS = ("start", "stop", "discard")
+RECORD_COMMANDS = ("start", "stop", "discard", "crash")
 
 
 class Refused(Exception):
@@ -57,7 +60,7 @@ class Control:
 
 @dataclass(frozen=True)
 class Record:
-    """Start, stop (save) or discard an episode."""
+    """Start, stop (save) or discard an episode, or mark a crash in it."""
 
     command: str
 

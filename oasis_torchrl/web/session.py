@@ -8,6 +8,11 @@ by one status message. A chunk that ends after its slot is counted late, and the
 timed from then (the world never races to catch up). Page commands (record, reset, takeover)
 run on the session's thread between chunks, so the env and the dataset are only ever touched
 there. The session idles while no page is connected.
+
+A recorded step carries ``("next", "crash")`` (the dataset's ``next.crash``): the world's
+collision where the endpoint sends ground truth, or the person's crash mark (the page's C key).
+A mark lands on the chunk after the key press (about a person's reaction time later than what
+they saw), ends the episode there and saves it; the scene goes on until the next reset.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from oasis_torchrl.data.chunk_rows import CRASH_STEP_KEY
 from oasis_torchrl.data.features import INTERVENTION_KEY
 from oasis_torchrl.web.frames import pack_frames
 from oasis_torchrl.web.messages import Record, Refused, Reset, Takeover
@@ -98,6 +104,7 @@ class DriveSession:
         self._make_env = make_env
         self._publish = publish
         self._commands: queue.Queue[tuple[Command, Future]] = queue.Queue()
+        self._crash_marked = False
         self._pages = 0
         self._pages_lock = threading.Lock()
         self._stop = threading.Event()
@@ -190,7 +197,7 @@ class DriveSession:
         step, following = env.step_and_maybe_reset(td)
         self.last = step
         self.chunks += 1
-        saved = self.recording is not None and self.recording.write(step)
+        saved = self._write(step)
         frames = step["next", "pixels"]
         cameras = list(frames.keys())
         for k in range(frames[cameras[0]].shape[1]):
@@ -199,6 +206,18 @@ class DriveSession:
             self._publish(pack_frames(shown, cameras, header, self.jpeg_quality))
         self._publish(self.status(step, human=human, saved=saved))
         return following
+
+    def _write(self, step: TensorDictBase) -> bool:
+        """Record ``step`` with its crash flag if an episode runs; whether that saved it."""
+        if self.recording is None or not self.recording.recording:
+            return False
+        marked, self._crash_marked = self._crash_marked, False
+        collided = step.get(("next", "truth", "collided"), None)
+        crashed = marked or (collided is not None and bool((collided > 0.5).any()))
+        step.set(("next", CRASH_STEP_KEY), torch.tensor([[crashed]]))
+        if marked:  # the person saw a crash: the episode ends here (the world's done is its own)
+            step.set(("next", "done"), torch.tensor([[True]]))
+        return self.recording.write(step)
 
     def status(
         self, step: TensorDictBase | None = None, *, human: bool = True, saved: bool = False
@@ -256,9 +275,15 @@ class DriveSession:
             raise Refused("no_dataset", "recording is off (start the page with --root DIR)")
         if command.command == "start":
             self.recording.start()
+            self._crash_marked = False
             return env.reset(), None  # each episode starts from a fresh scene, as `record`'s
         if command.command == "stop":
             return td, self.recording.stop()
+        if command.command == "crash":
+            if not self.recording.recording:
+                raise Refused("not_recording", "no episode is running to mark a crash in")
+            self._crash_marked = True
+            return td, None
         self.recording.discard()
         return td, None
 

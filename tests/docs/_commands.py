@@ -116,7 +116,11 @@ def check_script(path: str, argv: list[str]) -> None:
     assert spec is not None and spec.loader is not None, path
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # a dataclass of the script looks its module up there
-    spec.loader.exec_module(module)
+    sys.path.insert(0, str(script.parent))  # as `python <script>` does: its helpers import
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(script.parent))
     assert hasattr(module, "parse_arguments"), f"{path} has no parse_arguments(argv) to check"
     try:
         parsed = module.parse_arguments(argv)

@@ -124,7 +124,7 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
 
     dataset = LeRobotDataset("local/drives", root=root, video_backend="pyav")
     assert dataset.num_episodes == 1 and dataset.fps == 20
-    layout = DatasetLayout(CAMERAS, (256, 384) if REGENERATE else (64, 96))
+    layout = DatasetLayout(CAMERAS, (256, 384) if REGENERATE else (64, 96), with_crash=True)
     expected = build_features(layout)
     assert {k: (v["dtype"], tuple(v["shape"])) for k, v in expected.items()} == {
         k: (v["dtype"], tuple(v["shape"])) for k, v in user_features(dataset.features).items()
@@ -140,6 +140,21 @@ def test_keys_drive_record_and_replay(browser, serve_page, tmp_path: Path) -> No
     # The end message can arrive while the last frames wait in the page's display queue.
     shown = lambda: page_state(browser)["replayed"] == dataset.num_frames  # noqa: E731
     wait_until(shown, f"all {dataset.num_frames} replayed frames shown")
+
+    # C marks a crash: the episode ends at the next chunk, saved with that chunk's last row
+    # marked; the rows of the episode before carry no mark (no collision on the way).
+    press(browser, "r")
+    wait_until(lambda: status(browser)["recording"], "recording again")
+    chunks_later(browser, 2)
+    press(browser, "c")
+    wait_until(lambda: status(browser)["saved"] == 2, "the crashed episode saved")
+    assert not status(browser)["recording"]
+    rows = LeRobotDataset("local/drives", root=root).hf_dataset.with_format("numpy")
+    episode = np.asarray(rows["episode_index"])
+    crash, done = (np.asarray(rows[key]).reshape(-1) for key in ("next.crash", "next.done"))
+    assert not crash[episode == 0].any()
+    assert crash[episode == 1].tolist() == done[episode == 1].tolist()
+    assert crash[episode == 1].tolist()[-5:] == [False] * 4 + [True]
 
     if REGENERATE:
         press(browser, "w")

@@ -222,6 +222,11 @@ function toggleRecord() {
   send({ type: "record", command: recording ? "stop" : "start" });
 }
 
+// The car crashed: the episode ends at the next chunk, saved with that chunk marked.
+function markCrash() {
+  send({ type: "record", command: "crash" });
+}
+
 function toggleTakeover() {
   send({ type: "takeover", human: !(page.status && page.status.human) });
 }
@@ -238,6 +243,7 @@ function replay() {
 const COMMAND_KEYS = {
   KeyR: toggleRecord,
   KeyX: () => send({ type: "record", command: "discard" }),
+  KeyC: markCrash,
   Backspace: () => send({ type: "record", command: "discard" }),
   KeyT: toggleTakeover,
   KeyN: () => send({ type: "reset" }),
@@ -278,6 +284,7 @@ function keyNow() {
 
 $("record").onclick = toggleRecord;
 $("discard").onclick = () => send({ type: "record", command: "discard" });
+$("crash").onclick = markCrash;
 $("takeover").onclick = toggleTakeover;
 $("reset").onclick = () => send({ type: "reset" });
 $("replay").onclick = replay;
