@@ -20,7 +20,6 @@ from oasis_torchrl.config.training import (
     PPOSettings,
 )
 from oasis_torchrl.options import option
-from oasis_torchrl.sim.config import require_int
 
 
 @dataclass
@@ -184,8 +183,8 @@ class DemoConfig:
     # on each other: a behaviour-cloning step took about 5x the CPU time of one thread's
     # (docs/experiments/2026-11-28-depth-network.md measured the same for the depth network).
     threads: int = option(
-        1, help="threads of this process's torch operations (intra-op; 0: torch's default)"
+        1,
+        help="threads of this process's torch operations (intra-op; 0: torch's default)",
+        ge=0,
+        le=1024,
     )
-
-    def __post_init__(self) -> None:
-        require_int("threads", self.threads, 0, 1024)

@@ -24,12 +24,8 @@ LOGGER_BACKENDS = ("csv", "tensorboard")
 class LoggerConfig:
     """Where training curves go (a TorchRL logger)."""
 
-    backend: str = option("csv", help="csv | tensorboard")
+    backend: str = option("csv", help="csv | tensorboard", choices=LOGGER_BACKENDS)
     exp_name: str = option("ppo", help="experiment name (the logger's folder)")
-
-    def __post_init__(self) -> None:
-        if self.backend not in LOGGER_BACKENDS:
-            raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
 # -- the driving network -----------------------------------------------------------------------
@@ -149,16 +145,12 @@ class AuxReplayConfig:
         0,
         help="rows of past observations (frames as uint8, ~110 KB a row at 64x96) and their "
         "privileged state kept for the auxiliary loss (0: off; needs loss.aux_coeff > 0)",
+        ge=0,
     )
-    steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
+    steps: int = option(16, help="auxiliary-only minibatches after each PPO update", ge=0)
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
 
     def __post_init__(self) -> None:
-        if self.capacity < 0 or self.steps < 0:
-            raise ValueError(
-                f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
-                f"and {self.steps}"
-            )
         check_holds_minibatch("aux_replay.capacity", self.capacity, self.mini_batch_size)
 
 
@@ -171,22 +163,18 @@ class PerceptionWarmupConfig:
         0,
         help="env steps driven for the warm-up (warmup.driver), counted in "
         "collector.total_frames (0: off; needs loss.aux_coeff > 0)",
+        ge=0,
     )
     driver: str | None = option(
         None,
         help="who drives them: null, the policy itself (its initial exploration), or a driver "
         "that needs no expert, e.g. 'constant:throttle=1.0,steering=0.0' (oasis_torchrl.drivers)",
     )
-    steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
+    steps: int = option(6000, help="auxiliary-only minibatches fitted on them", ge=0)
     mini_batch_size: int = option(64, help="rows per minibatch")
-    lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up")
+    lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up", gt=0.0)
 
     def __post_init__(self) -> None:
-        if self.frames < 0 or self.steps < 0 or not self.lr > 0:
-            raise ValueError(
-                f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
-                f"{self.frames}, {self.steps} and {self.lr}"
-            )
         check_holds_minibatch("warmup.frames", self.frames, self.mini_batch_size)
 
 
@@ -218,13 +206,8 @@ class OptimConfig:
         None,
         help="env steps the learning rates decay over (null: collector.total_frames; larger: "
         "the run stops part-way through the schedule)",
+        gt=0,
     )
-
-    def __post_init__(self) -> None:
-        if self.anneal_frames is not None and self.anneal_frames <= 0:
-            raise ValueError(
-                f"optim.anneal_frames must be positive or null, got {self.anneal_frames}"
-            )
 
 
 @dataclass
@@ -242,6 +225,7 @@ class PPOEvaluationConfig(EvaluationConfig):
         0.0,
         help="standard errors of the paired per-episode difference by which a policy must beat "
         "the kept one on the selection seeds to replace it (0: any higher mean distance)",
+        ge=0.0,
     )
     final: bool = option(
         True,
@@ -253,8 +237,6 @@ class PPOEvaluationConfig(EvaluationConfig):
         super().__post_init__()
         if self.selection_seeds is not None and not self.selection_seeds:
             raise ValueError("eval.selection_seeds must be null or a non-empty list of integers")
-        if not self.selection_margin >= 0:
-            raise ValueError(f"eval.selection_margin must be >= 0, got {self.selection_margin}")
 
 
 @dataclass
@@ -376,7 +358,7 @@ class BCTrainConfig:
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
     shift_pad: int = option(
-        4, help="random-shift augmentation of the samples' frames, in pixels (0: off)"
+        4, help="random-shift augmentation of the samples' frames, in pixels (0: off)", ge=0
     )
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
@@ -384,10 +366,6 @@ class BCTrainConfig:
         help="also save the policy so far to checkpoints/last every N steps (0: never); policy/ "
         "is written at the end only",
     )
-
-    def __post_init__(self) -> None:
-        if self.shift_pad < 0:
-            raise ValueError(f"train.shift_pad is a shift in pixels, >= 0, got {self.shift_pad}")
 
 
 @dataclass
@@ -477,6 +455,7 @@ class MotionTrainConfig:
         7,
         help="every this many rounds, one is rendered at the hosted model's 768x512 (decoded "
         "down to image_size); the others at image_size (0: none)",
+        ge=0,
     )
     frame_format: str = option(
         "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
@@ -484,7 +463,7 @@ class MotionTrainConfig:
     channels: list[int] = option(
         default_factory=lambda: [16, 32, 48, 64], help="widths of the network's levels"
     )
-    horizon: int = option(5, help="chunks ahead the collision-ahead head predicts")
+    horizon: int = option(5, help="chunks ahead the collision-ahead head predicts", ge=1)
     prompts: list[str] = option(
         default_factory=lambda: list(MOTION_TRAINING_PROMPTS), help="scenes, one drawn per episode"
     )
@@ -502,15 +481,18 @@ class MotionTrainConfig:
         help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
         "in turn",
     )
-    num_envs: int = option(8, help="episodes driven at once (one round)")
-    episodes: int = option(256, help="episodes driven (a multiple of num_envs)")
-    steps: int = option(60, help="chunks per episode (a collision does not end it)")
-    epochs: int = option(8, help="passes over the chunks")
-    batch_size: int = option(64, help="chunks per step")
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
+    num_envs: int = option(8, help="episodes driven at once (one round)", ge=1)
+    episodes: int = option(256, help="episodes driven (a multiple of num_envs)", ge=1)
+    steps: int = option(60, help="chunks per episode (a collision does not end it)", ge=1)
+    epochs: int = option(8, help="passes over the chunks", ge=1)
+    batch_size: int = option(64, help="chunks per step", ge=1)
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
     weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
     validation: float = option(
-        0.125, help="share of the episodes (whole rounds) kept out of training to report losses"
+        0.125,
+        help="share of the episodes (whole rounds) kept out of training to report losses",
+        ge=0.0,
+        lt=1.0,
     )
     seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     chunks_file: str | None = option(
@@ -527,20 +509,12 @@ class MotionTrainConfig:
     progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
+        if self.episodes % self.num_envs:
             raise ValueError(
-                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
-                f"({self.num_envs})"
+                f"episodes ({self.episodes}) must be a multiple of num_envs ({self.num_envs})"
             )
         if len(self.image_size) != 2 or min(self.image_size) <= 0:
             raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if self.hosted_every < 0:
-            raise ValueError(f"hosted_every must be >= 0, got {self.hosted_every}")
-        for name in ("horizon", "steps", "epochs", "batch_size", "lr"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if not 0.0 <= self.validation < 1.0:
-            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
         if not self.drivers or not self.prompts:
             raise ValueError("drivers and prompts must each name at least one")
         judged = sorted(set(self.prompts) & set(HELD_OUT_SCENES))
@@ -595,6 +569,7 @@ class DepthTrainConfig:
         2,
         help="the world is rendered at this multiple of image_size; frames are decoded down to "
         "it and the target's nearness averaged down to it",
+        ge=1,
     )
     frame_format: str = option(
         "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
@@ -615,20 +590,24 @@ class DepthTrainConfig:
         help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
         "in turn",
     )
-    num_envs: int = option(4, help="episodes driven at once (one round)")
-    episodes: int = option(32, help="episodes driven (a multiple of num_envs)")
-    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)")
-    epochs: int = option(15, help="passes over the frames")
-    batch_size: int = option(32, help="frames per step")
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
+    num_envs: int = option(4, help="episodes driven at once (one round)", ge=1)
+    episodes: int = option(32, help="episodes driven (a multiple of num_envs)", ge=1)
+    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)", ge=1)
+    epochs: int = option(15, help="passes over the frames", ge=1)
+    batch_size: int = option(32, help="frames per step", ge=1)
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
     weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
     near_weight: float = option(
         0.0,
         help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
         "normalised nearness (0: every pixel alike)",
+        ge=0.0,
     )
     validation: float = option(
-        0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
+        0.1,
+        help="share of the episodes (whole rounds) kept out of training to report a loss",
+        ge=0.0,
+        lt=1.0,
     )
     seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     frames_file: str | None = option(
@@ -642,24 +621,9 @@ class DepthTrainConfig:
     def __post_init__(self) -> None:
         if len(self.image_size) != 2 or min(self.image_size) <= 0:
             raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
+        if self.episodes % self.num_envs:
             raise ValueError(
-                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
-                f"({self.num_envs})"
+                f"episodes ({self.episodes}) must be a multiple of num_envs ({self.num_envs})"
             )
-        positive = {
-            "render_scale": self.render_scale,
-            "steps": self.steps,
-            "epochs": self.epochs,
-            "batch_size": self.batch_size,
-            "lr": self.lr,
-        }
-        for name, value in positive.items():
-            if not value > 0:
-                raise ValueError(f"{name} must be positive, got {value}")
-        if self.near_weight < 0:
-            raise ValueError(f"near_weight must be >= 0, got {self.near_weight}")
-        if not 0.0 <= self.validation < 1.0:
-            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
         if not self.drivers or not self.prompts:
             raise ValueError("drivers and prompts must each name at least one")
