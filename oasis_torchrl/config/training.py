@@ -9,6 +9,7 @@ env and one evaluation between its stages.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
@@ -418,6 +419,50 @@ class BCConfig(BCSettings):
     progress: bool = option(True, help="tqdm progress bars")
 
 
+# -- networks trained on the embedded world's frames -------------------------------------------
+
+
+@dataclass
+class WorldFramesTrainConfig:
+    """What ``train motion`` and ``train depth`` share: frames of the embedded world, as they
+    travel and at the size the network sees them, and AdamW from a seed. Each adds who drives
+    and how much (:func:`check_rounds`) and its network's settings."""
+
+    image_size: list[int] = option(
+        default_factory=lambda: [64, 96],
+        help="[height, width] the frames are decoded to and the network is trained at",
+    )
+    frame_format: str = option(
+        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+    )
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
+    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    progress: bool = option(True, help="tqdm progress bars")
+
+    def __post_init__(self) -> None:
+        if len(self.image_size) != 2 or min(self.image_size) <= 0:
+            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
+
+
+def check_rounds(
+    episodes: int, num_envs: int, drivers: Sequence[str], prompts: Sequence[str]
+) -> None:
+    """Refuse episodes that are not whole rounds of ``num_envs``, or no driver or prompt.
+
+    Example:
+        >>> check_rounds(32, 8, ["autopilot"], ["urban"])
+        >>> check_rounds(30, 8, ["autopilot"], ["urban"])
+        Traceback (most recent call last):
+        ...
+        ValueError: episodes (30) must be a multiple of num_envs (8)
+    """
+    if episodes % num_envs:
+        raise ValueError(f"episodes ({episodes}) must be a multiple of num_envs ({num_envs})")
+    if not drivers or not prompts:
+        raise ValueError("drivers and prompts must each name at least one")
+
+
 # -- the frames-only reward's motion network -----------------------------------------------
 
 MOTION_TRAINING_PROMPTS = (
@@ -443,22 +488,16 @@ MOTION_TRAINING_PROMPTS = (
 
 
 @dataclass
-class MotionTrainConfig:
+class MotionTrainConfig(WorldFramesTrainConfig):
     """``oasis-torchrl train motion``: the frames-only reward's network
     (oasis_torchrl.models.motion) on the embedded world's front frames, labelled by its ground
     truth (progress, collisions)."""
 
-    image_size: list[int] = option(
-        default_factory=lambda: [64, 96], help="[height, width] the frames are decoded to"
-    )
     hosted_every: int = option(
         7,
         help="every this many rounds, one is rendered at the hosted model's 768x512 (decoded "
         "down to image_size); the others at image_size (0: none)",
         ge=0,
-    )
-    frame_format: str = option(
-        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
     )
     channels: list[int] = option(
         default_factory=lambda: [16, 32, 48, 64], help="widths of the network's levels"
@@ -486,15 +525,12 @@ class MotionTrainConfig:
     steps: int = option(60, help="chunks per episode (a collision does not end it)", ge=1)
     epochs: int = option(8, help="passes over the chunks", ge=1)
     batch_size: int = option(64, help="chunks per step", ge=1)
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
-    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
     validation: float = option(
         0.125,
         help="share of the episodes (whole rounds) kept out of training to report losses",
         ge=0.0,
         lt=1.0,
     )
-    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     chunks_file: str | None = option(
         None,
         help="keep the driven chunks here: read when the file exists (no driving), else written "
@@ -506,17 +542,10 @@ class MotionTrainConfig:
         "wins over channels) instead of starting afresh",
     )
     output: str = option("outputs/motion/motion_small.pt", help="the weights file written")
-    progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if self.episodes % self.num_envs:
-            raise ValueError(
-                f"episodes ({self.episodes}) must be a multiple of num_envs ({self.num_envs})"
-            )
-        if len(self.image_size) != 2 or min(self.image_size) <= 0:
-            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if not self.drivers or not self.prompts:
-            raise ValueError("drivers and prompts must each name at least one")
+        super().__post_init__()
+        check_rounds(self.episodes, self.num_envs, self.drivers, self.prompts)
         judged = sorted(set(self.prompts) & set(HELD_OUT_SCENES))
         if judged:
             raise ValueError(f"prompts must not hold the held-out scenes {judged}")
@@ -558,21 +587,15 @@ agreement benchmark's."""
 
 
 @dataclass
-class DepthTrainConfig:
+class DepthTrainConfig(WorldFramesTrainConfig):
     """``oasis-torchrl train depth``: the small depth network (oasis_torchrl.models.depth) on
     the embedded world's front frames, with the simulator's metric depth as the target."""
 
-    image_size: list[int] = option(
-        default_factory=lambda: [64, 96], help="[height, width] of the frames it is trained at"
-    )
     render_scale: int = option(
         2,
         help="the world is rendered at this multiple of image_size; frames are decoded down to "
         "it and the target's nearness averaged down to it",
         ge=1,
-    )
-    frame_format: str = option(
-        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
     )
     channels: list[int] = option(
         default_factory=lambda: [12, 24, 48, 96], help="widths of the network's levels"
@@ -595,8 +618,6 @@ class DepthTrainConfig:
     steps: int = option(40, help="steps per episode (one frame each; a crash starts another)", ge=1)
     epochs: int = option(15, help="passes over the frames", ge=1)
     batch_size: int = option(32, help="frames per step", ge=1)
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
-    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
     near_weight: float = option(
         0.0,
         help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
@@ -609,21 +630,13 @@ class DepthTrainConfig:
         ge=0.0,
         lt=1.0,
     )
-    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     frames_file: str | None = option(
         None,
         help="keep the driven frames and their nearness here: read when the file exists (no "
         "driving), else written after driving (null: not kept)",
     )
     output: str = option("outputs/depth/depth_small.pt", help="the weights file written")
-    progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if len(self.image_size) != 2 or min(self.image_size) <= 0:
-            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if self.episodes % self.num_envs:
-            raise ValueError(
-                f"episodes ({self.episodes}) must be a multiple of num_envs ({self.num_envs})"
-            )
-        if not self.drivers or not self.prompts:
-            raise ValueError("drivers and prompts must each name at least one")
+        super().__post_init__()
+        check_rounds(self.episodes, self.num_envs, self.drivers, self.prompts)
