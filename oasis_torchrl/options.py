@@ -188,18 +188,17 @@ def option(
         >>> field.metadata["bounds"]
         Bounds(ge=1, gt=None, le=None, lt=None, choices=None)
     """
-    metadata = {
-        HELP: help,
-        CLI: CommandLine(parse, positional, metavar),
-    }
-    if choices is not None or any(bound is not None for bound in (ge, gt, le, lt)):
-        metadata[BOUNDS] = Bounds(ge, gt, le, lt, choices)
+    metadata: dict[str, Any] = {HELP: help, CLI: CommandLine(parse, positional, metavar)}
+    bounds = Bounds(ge, gt, le, lt, choices)
+    if bounds != Bounds():
+        metadata[BOUNDS] = bounds
     return dataclasses.field(default=default, default_factory=default_factory, metadata=metadata)
 
 
 @dataclass(frozen=True)
 class Leaf:
-    """One setting of a config tree: its dotted key, type, default, help and spelling."""
+    """One setting of a config tree: its dotted key, type, default, help, spelling and
+    bounds."""
 
     key: str
     type: Any
