@@ -181,6 +181,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.config.training",
             "oasis_torchrl.config.evaluation",
             "oasis_torchrl.config.pipeline",
+            "oasis_torchrl.config.demonstrations",
             "oasis_torchrl.config.scenes",
             "oasis_torchrl.config.pretrained",
             "oasis_torchrl.config.recording",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from oasis_torchrl.client.decoding import validate_front_crop
 from oasis_torchrl.options import option
 from oasis_torchrl.protocol import FPS
 
@@ -39,6 +38,7 @@ class RewardConfig:
         help="auto (ground_truth where the endpoint sends it, else motion) | ground_truth "
         "(embedded server) | motion (progress and crashes seen in the frames) | depth (the "
         "reference's depth-collision reward, for comparison)",
+        choices=REWARD_KINDS,
     )
     motion_model: str = option(
         "small",
@@ -62,10 +62,6 @@ class RewardConfig:
     )
     clearance_horizon: float = option(25.0, help="metres ahead from which an obstacle costs")
 
-    def __post_init__(self) -> None:
-        if self.kind not in REWARD_KINDS:
-            raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {self.kind!r}")
-
 
 @dataclass
 class EnvConfig:
@@ -76,8 +72,8 @@ class EnvConfig:
         default_factory=lambda: ["urban"],
         help="episode prompts: one for every episode, or several drawn from per episode",
     )
-    num_envs: int = option(8, help="concurrent world-model sessions (rows of the batch)")
-    max_steps: int = option(150, help="chunks per episode (150 = 30 s of world time)")
+    num_envs: int = option(8, help="concurrent world-model sessions (rows of the batch)", ge=1)
+    max_steps: int = option(150, help="chunks per episode (150 = 30 s of world time)", ge=1)
     image_size: tuple[int, int] | None = option(
         (64, 96),
         help="[height, width] the frames are decoded to, the policy's input size (null: the "
@@ -89,6 +85,8 @@ class EnvConfig:
         "fraction of its height and width, cut from the front frame at the server's full size "
         "and resized to image_size (an embedded server then renders large enough for it); "
         "null: off",
+        gt=0.0,
+        le=1.0,
     )
     server: EmbeddedServerConfig = option(
         default_factory=EmbeddedServerConfig, help="the embedded server of endpoint 'local'"
@@ -103,9 +101,3 @@ class EnvConfig:
             )
         if not self.prompts:
             raise ValueError("env.prompts must hold at least one prompt")
-        validate_front_crop(self.front_crop)
-        if self.num_envs < 1 or self.max_steps < 1:
-            raise ValueError(
-                f"env.num_envs and env.max_steps must be >= 1, got {self.num_envs}, "
-                f"{self.max_steps}"
-            )

@@ -13,9 +13,9 @@ class EvaluationConfig:
     """Fixed prompts and seeds a policy is evaluated on (one env row per episode)."""
 
     prompts: list[str] = option(default_factory=lambda: ["urban"], help="evaluation prompts")
-    episodes: int = option(8, help="episodes per prompt and seed, one env row each (0: none)")
+    episodes: int = option(8, help="episodes per prompt and seed, one env row each (0: none)", ge=0)
     seeds: list[int] = option(default_factory=lambda: [1000], help="evaluation seeds")
-    max_steps: int = option(150, help="chunks per episode")
+    max_steps: int = option(150, help="chunks per episode", ge=1)
     rerun: str | None = option(
         None, help="record the episodes: an .rrd path, 'spawn' or a viewer URL"
     )
@@ -32,11 +32,6 @@ class EvaluationConfig:
     )
 
     def __post_init__(self) -> None:
-        if self.episodes < 0 or self.max_steps < 1:
-            raise ValueError(
-                f"eval.episodes must be >= 0 and eval.max_steps >= 1, got {self.episodes}, "
-                f"{self.max_steps}"
-            )
         if self.episodes and (not self.prompts or not self.seeds):
             raise ValueError("eval needs at least one prompt and one seed")
 

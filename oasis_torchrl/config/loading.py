@@ -1,12 +1,14 @@
 """Loading a config: the schema's defaults, a YAML preset, then overrides (Hydra's structured
 configs, as TorchRL's recipes use them).
 
-A command's settings are a dataclass (the schema: types, defaults, help, checks in
-``__post_init__``). :func:`load_config` builds an OmegaConf ``DictConfig`` from it, merges a
-YAML preset (a named one, :mod:`oasis_torchrl.config.presets`, or any file), then values
-set by flags and ``key=value`` overrides (``optim.lr=1e-4``, ``env.prompts=[urban,rural]``). The
-result is in struct mode and typed: a key the schema lacks, or a value of the wrong type, is an
-error naming it; the dataclass's own checks run before the config is returned.
+A command's settings are a dataclass (the schema: types, defaults, help and bounds declared
+with :func:`~oasis_torchrl.options.option`, rules between settings in ``__post_init__``).
+:func:`load_config` builds an OmegaConf ``DictConfig`` from it, merges a YAML preset (a named
+one, :mod:`oasis_torchrl.config.presets`, or any file), then values set by flags and
+``key=value`` overrides (``optim.lr=1e-4``, ``env.prompts=[urban,rural]``). The result is in
+struct mode and typed: a key the schema lacks, or a value of the wrong type, is an error naming
+it; then every declared bound is checked once, naming the setting by its dotted key, and the
+dataclasses' own rules run before the config is returned.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
 from oasis_torchrl.config.presets import preset_file
+from oasis_torchrl.options import check_bounds
 
 
 def _named() -> dict[str, type]:
@@ -101,8 +104,13 @@ def load_config(
         Traceback (most recent call last):
         ...
         ValueError: optim.learning_rate=1: unknown key 'optim.learning_rate'
+        >>> load_config("ppo", ["env.num_envs=0"])
+        Traceback (most recent call last):
+        ...
+        ValueError: env.num_envs must be an integer >= 1, got 0
     """
-    cfg = OmegaConf.structured(schema_of(config))
+    schema = schema_of(config)
+    cfg = OmegaConf.structured(schema)
     _make_writable(cfg)
     OmegaConf.set_struct(cfg, True)
     if file is not None:
@@ -118,7 +126,8 @@ def load_config(
         cfg = _merged(cfg, OmegaConf.from_dotlist([override]), override)
     try:
         OmegaConf.resolve(cfg)
-        OmegaConf.to_object(cfg)  # runs the dataclasses' own checks
+        check_bounds(schema, lambda key: OmegaConf.select(cfg, key))
+        OmegaConf.to_object(cfg)  # runs the dataclasses' rules between settings
     except OmegaConfBaseException as error:
         raise ValueError(_describe(error)) from error
     return cfg
@@ -170,7 +179,7 @@ def _describe(error: OmegaConfBaseException) -> str:
 
 
 def to_object(cfg: DictConfig) -> Any:
-    """The config as its dataclass instance (its checks run again).
+    """The config as its dataclass instance (its rules between settings run again).
 
     Example:
         >>> type(to_object(load_config("eval"))).__name__

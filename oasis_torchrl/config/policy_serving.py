@@ -4,13 +4,12 @@ how it batches requests."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from oasis_torchrl.options import REQUIRED, Alias, option
 from oasis_torchrl.protocol import POLICY_SERVER_API_KEYS_ENV_VAR
-from oasis_torchrl.sim.config import GrpcServerConfig, require_float, require_int
+from oasis_torchrl.sim.config import GrpcServerConfig
 
 if TYPE_CHECKING:
     from oasis_torchrl.remote.features import Feature
@@ -34,32 +33,36 @@ class PolicyServerConfig(GrpcServerConfig):
     API_KEYS_ENV_VAR: ClassVar[str] = POLICY_SERVER_API_KEYS_ENV_VAR
     URL_SCHEMES: ClassVar[tuple[str, str]] = ("grpc", "grpcs")
 
-    max_message_bytes: int = option(8 << 20, help="largest request, bytes")
-    max_rows: int = option(64, help="rows (observations) one request may hold at most")
+    max_message_bytes: int = option(8 << 20, help="largest request, bytes", ge=1024, le=1 << 30)
+    max_rows: int = option(
+        64, help="rows (observations) one request may hold at most", ge=1, le=1 << 16
+    )
     batch_rows: int = option(
-        256, help="rows one forward pass merges from concurrent requests at most (1: no merging)"
+        256,
+        help="rows one forward pass merges from concurrent requests at most (1: no merging)",
+        ge=1,
+        le=1 << 16,
     )
     batch_wait_ms: float = option(
-        2.0, help="how long the first request of a batch waits for others at most, ms"
+        2.0,
+        help="how long the first request of a batch waits for others at most, ms",
+        ge=0.0,
+        le=10_000.0,
     )
-    max_sessions: int = option(1024, help="SelectAction sessions held at most")
-    max_sessions_per_key: int = option(256, help="SelectAction sessions of one API key at most")
-    session_idle_s: float = option(600.0, help="an unused session is forgotten after this, s")
-    rate_per_key: float = option(0.0, help="requests per second per API key (0: unlimited)")
-    burst_per_key: int = option(64, help="requests a key may make at once above its rate")
-    max_in_flight_per_key: int = option(64, help="calls of one API key running at once (0: any)")
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_int("max_rows", self.max_rows, 1, 1 << 16)
-        require_int("batch_rows", self.batch_rows, 1, 1 << 16)
-        require_float("batch_wait_ms", self.batch_wait_ms, 0.0, 10_000.0)
-        require_int("max_sessions", self.max_sessions, 1, 1 << 20)
-        require_int("max_sessions_per_key", self.max_sessions_per_key, 1, 1 << 20)
-        require_float("session_idle_s", self.session_idle_s, 0.001, math.inf)
-        require_float("rate_per_key", self.rate_per_key, 0.0, math.inf)
-        require_int("burst_per_key", self.burst_per_key, 1, 1 << 20)
-        require_int("max_in_flight_per_key", self.max_in_flight_per_key, 0, 1 << 20)
+    max_sessions: int = option(1024, help="SelectAction sessions held at most", ge=1, le=1 << 20)
+    max_sessions_per_key: int = option(
+        256, help="SelectAction sessions of one API key at most", ge=1, le=1 << 20
+    )
+    session_idle_s: float = option(
+        600.0, help="an unused session is forgotten after this, s", ge=0.001
+    )
+    rate_per_key: float = option(0.0, help="requests per second per API key (0: unlimited)", ge=0.0)
+    burst_per_key: int = option(
+        64, help="requests a key may make at once above its rate", ge=1, le=1 << 20
+    )
+    max_in_flight_per_key: int = option(
+        64, help="calls of one API key running at once (0: any)", ge=0, le=1 << 20
+    )
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,10 @@ class ServePolicyConfig(PolicyServerConfig):
         "(e.g. pixels.front:uint8:4x64x96x3); policies that declare their inputs need none",
     )
     threads: int = option(
-        0, help="threads of the policy's forward passes (torch intra-op; 0: torch's default)"
+        0,
+        help="threads of the policy's forward passes (torch intra-op; 0: torch's default)",
+        ge=0,
+        le=1024,
     )
     port_file: str | None = option(None, help="write the bound port to this file once serving")
     grace: float = option(2.0, help="seconds in-flight calls get at shutdown")
@@ -93,7 +99,6 @@ class ServePolicyConfig(PolicyServerConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "inputs", tuple(self.inputs))
-        require_int("threads", self.threads, 0, 1024)
         self.input_features()
 
     def input_features(self) -> list[Feature] | None:

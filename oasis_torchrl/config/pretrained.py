@@ -50,8 +50,8 @@ class ShipConfig:
     held_out_seeds: list[int] = option(
         default_factory=lambda: list(HELD_OUT_SEEDS), help="seeds no config uses"
     )
-    episodes: int = option(16, help="episodes per prompt and seed")
-    max_steps: int = option(150, help="chunks per episode")
+    episodes: int = option(16, help="episodes per prompt and seed", ge=1)
+    max_steps: int = option(150, help="chunks per episode", ge=1)
     baseline: str = option(BEST_CONSTANT, help="the driver every figure is compared with")
     commit: str | None = option(
         None, help="the commit that trained it (null: the source tree's commit when shipping)"
@@ -69,9 +69,5 @@ class ShipConfig:
     progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if self.episodes < 1 or self.max_steps < 1:
-            raise ValueError(
-                f"episodes and max_steps must be >= 1, got {self.episodes} and {self.max_steps}"
-            )
         if not self.name or "/" in self.name or self.name.startswith("."):
             raise ValueError(f"a shipped policy's name is a plain folder name, got {self.name!r}")

@@ -63,11 +63,11 @@ class RayCollectionConfig:
         LOCAL_ADDRESS,
         help="local (start a Ray runtime here) | auto | host:6379 | ray://host:10001",
     )
-    num_collectors: int = option(2, help="Ray actors, each a TorchRL collector")
+    num_collectors: int = option(2, help="Ray actors, each a TorchRL collector", ge=1)
     envs_per_collector: int = option(
-        1, help="OasisEnvs per actor (> 1: a MultiSyncCollector inside the actor)"
+        1, help="OasisEnvs per actor (> 1: a MultiSyncCollector inside the actor)", ge=1
     )
-    sessions_per_env: int = option(4, help="world-model sessions (rows) of each OasisEnv")
+    sessions_per_env: int = option(4, help="world-model sessions (rows) of each OasisEnv", ge=1)
     server_address: str | None = option(
         None,
         help="null: an embedded server per env; http://host:port of an 'oasis-torchrl serve' "
@@ -86,6 +86,7 @@ class RayCollectionConfig:
         120.0,
         help="seconds to reach the cluster and place every actor before the run stops, naming "
         "what was asked and what the cluster has",
+        gt=0.0,
     )
     num_cpus: int | None = option(None, help="local runtime only: CPUs Ray may use (null: all)")
     object_store_memory: int | None = option(
@@ -93,7 +94,9 @@ class RayCollectionConfig:
     )
     sync: bool = option(True, help="one batch from every actor per iteration; false: first-ready")
     on_failure: str = option(
-        "stop", help="a lost actor: stop (finalize shards, raise) | continue without it"
+        "stop",
+        help="a lost actor: stop (finalize shards, raise) | continue without it",
+        choices=FAILURE_POLICIES,
     )
     shard_root: str | None = option(
         None, help="record each actor's batches as a LeRobot shard under this folder"
@@ -102,21 +105,11 @@ class RayCollectionConfig:
         0,
         help="finalize a new shard part every N batches, so a lost worker loses at most one "
         "part (0: once, at the end)",
+        ge=0,
     )
 
     def __post_init__(self) -> None:
-        for name in ("num_collectors", "envs_per_collector", "sessions_per_env"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"ray.{name} must be >= 1, got {getattr(self, name)}")
-        if self.on_failure not in FAILURE_POLICIES:
-            raise ValueError(
-                f"ray.on_failure must be one of {FAILURE_POLICIES}, got {self.on_failure!r}"
-            )
-        if self.part_batches < 0:
-            raise ValueError(f"ray.part_batches must be >= 0, got {self.part_batches}")
         parse_resources(self.resources_per_collector)  # a malformed entry raises here
-        if self.startup_timeout_s <= 0:
-            raise ValueError(f"ray.startup_timeout_s must be > 0, got {self.startup_timeout_s}")
         if self.shard_root is not None and self.envs_per_collector != 1:
             # The hook would run in each env's subprocess, all writing the same shard.
             raise ValueError(

@@ -95,7 +95,7 @@ class RecordConfig(DatasetOutputConfig):
         "--keep-shards": Alias("ray.keep_shards"),
     }
 
-    episodes: int = option(10, help="episodes to record (with --ray, env.num_envs is unused)")
+    episodes: int = option(10, help="episodes to record (with --ray, env.num_envs is unused)", ge=1)
     driver: str = option(
         "auto",
         help="who drives: auto (the autopilot where the endpoint sends ground truth, else the "
@@ -113,7 +113,9 @@ class RecordConfig(DatasetOutputConfig):
         "(e.g. pixels.front,state)",
     )
     seed: int = option(0, help="seed of the episode sequence")
-    rows: str = option("frame", help="one dataset row per frame (fps) or per chunk (fps/4)")
+    rows: str = option(
+        "frame", help="one dataset row per frame (fps) or per chunk (fps/4)", choices=ROWS
+    )
     env: EnvConfig = option(
         default_factory=_record_env,
         help="the env (a remote endpoint reads its key from DECART_API_KEY, never a flag)",
@@ -137,12 +139,8 @@ class RecordConfig(DatasetOutputConfig):
         return self.driver
 
     def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.driver == "policy" and self.policy is None:
             raise ValueError("--driver policy needs --policy FILE")
-        if self.rows not in ROWS:
-            raise ValueError(f"rows must be one of {ROWS}, got {self.rows!r}")
         if self.ray.enabled and self.append:
             raise ValueError("--append does not work with --ray: record into a new --root")
         if self.ray.server_address and self.env.endpoint != "local":

@@ -9,6 +9,7 @@ env and one evaluation between its stages.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
@@ -24,12 +25,8 @@ LOGGER_BACKENDS = ("csv", "tensorboard")
 class LoggerConfig:
     """Where training curves go (a TorchRL logger)."""
 
-    backend: str = option("csv", help="csv | tensorboard")
+    backend: str = option("csv", help="csv | tensorboard", choices=LOGGER_BACKENDS)
     exp_name: str = option("ppo", help="experiment name (the logger's folder)")
-
-    def __post_init__(self) -> None:
-        if self.backend not in LOGGER_BACKENDS:
-            raise ValueError(f"logger.backend must be one of {LOGGER_BACKENDS}: {self.backend!r}")
 
 
 # -- the driving network -----------------------------------------------------------------------
@@ -149,16 +146,12 @@ class AuxReplayConfig:
         0,
         help="rows of past observations (frames as uint8, ~110 KB a row at 64x96) and their "
         "privileged state kept for the auxiliary loss (0: off; needs loss.aux_coeff > 0)",
+        ge=0,
     )
-    steps: int = option(16, help="auxiliary-only minibatches after each PPO update")
+    steps: int = option(16, help="auxiliary-only minibatches after each PPO update", ge=0)
     mini_batch_size: int = option(128, help="rows per replayed minibatch")
 
     def __post_init__(self) -> None:
-        if self.capacity < 0 or self.steps < 0:
-            raise ValueError(
-                f"aux_replay.capacity and aux_replay.steps must be >= 0, got {self.capacity} "
-                f"and {self.steps}"
-            )
         check_holds_minibatch("aux_replay.capacity", self.capacity, self.mini_batch_size)
 
 
@@ -171,22 +164,18 @@ class PerceptionWarmupConfig:
         0,
         help="env steps driven for the warm-up (warmup.driver), counted in "
         "collector.total_frames (0: off; needs loss.aux_coeff > 0)",
+        ge=0,
     )
     driver: str | None = option(
         None,
         help="who drives them: null, the policy itself (its initial exploration), or a driver "
         "that needs no expert, e.g. 'constant:throttle=1.0,steering=0.0' (oasis_torchrl.drivers)",
     )
-    steps: int = option(6000, help="auxiliary-only minibatches fitted on them")
+    steps: int = option(6000, help="auxiliary-only minibatches fitted on them", ge=0)
     mini_batch_size: int = option(64, help="rows per minibatch")
-    lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up")
+    lr: float = option(1.0e-3, help="Adam's learning rate for the warm-up", gt=0.0)
 
     def __post_init__(self) -> None:
-        if self.frames < 0 or self.steps < 0 or not self.lr > 0:
-            raise ValueError(
-                f"warmup.frames and warmup.steps must be >= 0 and warmup.lr > 0, got "
-                f"{self.frames}, {self.steps} and {self.lr}"
-            )
         check_holds_minibatch("warmup.frames", self.frames, self.mini_batch_size)
 
 
@@ -218,13 +207,8 @@ class OptimConfig:
         None,
         help="env steps the learning rates decay over (null: collector.total_frames; larger: "
         "the run stops part-way through the schedule)",
+        gt=0,
     )
-
-    def __post_init__(self) -> None:
-        if self.anneal_frames is not None and self.anneal_frames <= 0:
-            raise ValueError(
-                f"optim.anneal_frames must be positive or null, got {self.anneal_frames}"
-            )
 
 
 @dataclass
@@ -242,6 +226,7 @@ class PPOEvaluationConfig(EvaluationConfig):
         0.0,
         help="standard errors of the paired per-episode difference by which a policy must beat "
         "the kept one on the selection seeds to replace it (0: any higher mean distance)",
+        ge=0.0,
     )
     final: bool = option(
         True,
@@ -253,8 +238,6 @@ class PPOEvaluationConfig(EvaluationConfig):
         super().__post_init__()
         if self.selection_seeds is not None and not self.selection_seeds:
             raise ValueError("eval.selection_seeds must be null or a non-empty list of integers")
-        if not self.selection_margin >= 0:
-            raise ValueError(f"eval.selection_margin must be >= 0, got {self.selection_margin}")
 
 
 @dataclass
@@ -376,7 +359,7 @@ class BCTrainConfig:
     batch_size: int = option(64, help="samples per step")
     num_workers: int = option(0, help="data loader workers")
     shift_pad: int = option(
-        4, help="random-shift augmentation of the samples' frames, in pixels (0: off)"
+        4, help="random-shift augmentation of the samples' frames, in pixels (0: off)", ge=0
     )
     log_every: int = option(50, help="steps between logged losses")
     save_every: int = option(
@@ -384,10 +367,6 @@ class BCTrainConfig:
         help="also save the policy so far to checkpoints/last every N steps (0: never); policy/ "
         "is written at the end only",
     )
-
-    def __post_init__(self) -> None:
-        if self.shift_pad < 0:
-            raise ValueError(f"train.shift_pad is a shift in pixels, >= 0, got {self.shift_pad}")
 
 
 @dataclass
@@ -440,6 +419,50 @@ class BCConfig(BCSettings):
     progress: bool = option(True, help="tqdm progress bars")
 
 
+# -- networks trained on the embedded world's frames -------------------------------------------
+
+
+@dataclass
+class WorldFramesTrainConfig:
+    """What ``train motion`` and ``train depth`` share: frames of the embedded world, as they
+    travel and at the size the network sees them, and AdamW from a seed. Each adds who drives
+    and how much (:func:`check_rounds`) and its network's settings."""
+
+    image_size: list[int] = option(
+        default_factory=lambda: [64, 96],
+        help="[height, width] the frames are decoded to and the network is trained at",
+    )
+    frame_format: str = option(
+        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+    )
+    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)", gt=0.0)
+    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
+    progress: bool = option(True, help="tqdm progress bars")
+
+    def __post_init__(self) -> None:
+        if len(self.image_size) != 2 or min(self.image_size) <= 0:
+            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
+
+
+def check_rounds(
+    episodes: int, num_envs: int, drivers: Sequence[str], prompts: Sequence[str]
+) -> None:
+    """Refuse episodes that are not whole rounds of ``num_envs``, or no driver or prompt.
+
+    Example:
+        >>> check_rounds(32, 8, ["autopilot"], ["urban"])
+        >>> check_rounds(30, 8, ["autopilot"], ["urban"])
+        Traceback (most recent call last):
+        ...
+        ValueError: episodes (30) must be a multiple of num_envs (8)
+    """
+    if episodes % num_envs:
+        raise ValueError(f"episodes ({episodes}) must be a multiple of num_envs ({num_envs})")
+    if not drivers or not prompts:
+        raise ValueError("drivers and prompts must each name at least one")
+
+
 # -- the frames-only reward's motion network -----------------------------------------------
 
 MOTION_TRAINING_PROMPTS = (
@@ -465,26 +488,21 @@ MOTION_TRAINING_PROMPTS = (
 
 
 @dataclass
-class MotionTrainConfig:
+class MotionTrainConfig(WorldFramesTrainConfig):
     """``oasis-torchrl train motion``: the frames-only reward's network
     (oasis_torchrl.models.motion) on the embedded world's front frames, labelled by its ground
     truth (progress, collisions)."""
 
-    image_size: list[int] = option(
-        default_factory=lambda: [64, 96], help="[height, width] the frames are decoded to"
-    )
     hosted_every: int = option(
         7,
         help="every this many rounds, one is rendered at the hosted model's 768x512 (decoded "
         "down to image_size); the others at image_size (0: none)",
-    )
-    frame_format: str = option(
-        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+        ge=0,
     )
     channels: list[int] = option(
         default_factory=lambda: [16, 32, 48, 64], help="widths of the network's levels"
     )
-    horizon: int = option(5, help="chunks ahead the collision-ahead head predicts")
+    horizon: int = option(5, help="chunks ahead the collision-ahead head predicts", ge=1)
     prompts: list[str] = option(
         default_factory=lambda: list(MOTION_TRAINING_PROMPTS), help="scenes, one drawn per episode"
     )
@@ -502,17 +520,17 @@ class MotionTrainConfig:
         help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
         "in turn",
     )
-    num_envs: int = option(8, help="episodes driven at once (one round)")
-    episodes: int = option(256, help="episodes driven (a multiple of num_envs)")
-    steps: int = option(60, help="chunks per episode (a collision does not end it)")
-    epochs: int = option(8, help="passes over the chunks")
-    batch_size: int = option(64, help="chunks per step")
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
-    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    num_envs: int = option(8, help="episodes driven at once (one round)", ge=1)
+    episodes: int = option(256, help="episodes driven (a multiple of num_envs)", ge=1)
+    steps: int = option(60, help="chunks per episode (a collision does not end it)", ge=1)
+    epochs: int = option(8, help="passes over the chunks", ge=1)
+    batch_size: int = option(64, help="chunks per step", ge=1)
     validation: float = option(
-        0.125, help="share of the episodes (whole rounds) kept out of training to report losses"
+        0.125,
+        help="share of the episodes (whole rounds) kept out of training to report losses",
+        ge=0.0,
+        lt=1.0,
     )
-    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     chunks_file: str | None = option(
         None,
         help="keep the driven chunks here: read when the file exists (no driving), else written "
@@ -531,25 +549,10 @@ class MotionTrainConfig:
         "(use init_from=small); the reward's checks are printed on the held-out episodes",
     )
     output: str = option("outputs/motion/motion_small.pt", help="the weights file written")
-    progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
-            raise ValueError(
-                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
-                f"({self.num_envs})"
-            )
-        if len(self.image_size) != 2 or min(self.image_size) <= 0:
-            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if self.hosted_every < 0:
-            raise ValueError(f"hosted_every must be >= 0, got {self.hosted_every}")
-        for name in ("horizon", "steps", "epochs", "batch_size", "lr"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if not 0.0 <= self.validation < 1.0:
-            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
-        if not self.drivers or not self.prompts:
-            raise ValueError("drivers and prompts must each name at least one")
+        super().__post_init__()
+        check_rounds(self.episodes, self.num_envs, self.drivers, self.prompts)
         judged = sorted(set(self.prompts) & set(HELD_OUT_SCENES))
         if judged:
             raise ValueError(f"prompts must not hold the held-out scenes {judged}")
@@ -591,20 +594,15 @@ agreement benchmark's."""
 
 
 @dataclass
-class DepthTrainConfig:
+class DepthTrainConfig(WorldFramesTrainConfig):
     """``oasis-torchrl train depth``: the small depth network (oasis_torchrl.models.depth) on
     the embedded world's front frames, with the simulator's metric depth as the target."""
 
-    image_size: list[int] = option(
-        default_factory=lambda: [64, 96], help="[height, width] of the frames it is trained at"
-    )
     render_scale: int = option(
         2,
         help="the world is rendered at this multiple of image_size; frames are decoded down to "
         "it and the target's nearness averaged down to it",
-    )
-    frame_format: str = option(
-        "vp9", help="how frames travel: vp9 (the hosted model's compression) | raw | jpeg"
+        ge=1,
     )
     channels: list[int] = option(
         default_factory=lambda: [12, 24, 48, 96], help="widths of the network's levels"
@@ -622,51 +620,30 @@ class DepthTrainConfig:
         help="who drives (oasis_torchrl.drivers grammar), one per round of num_envs episodes, "
         "in turn",
     )
-    num_envs: int = option(4, help="episodes driven at once (one round)")
-    episodes: int = option(32, help="episodes driven (a multiple of num_envs)")
-    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)")
-    epochs: int = option(15, help="passes over the frames")
-    batch_size: int = option(32, help="frames per step")
-    lr: float = option(2.0e-3, help="AdamW's learning rate (cosine-annealed to 0)")
-    weight_decay: float = option(1.0e-4, help="AdamW's weight decay")
+    num_envs: int = option(4, help="episodes driven at once (one round)", ge=1)
+    episodes: int = option(32, help="episodes driven (a multiple of num_envs)", ge=1)
+    steps: int = option(40, help="steps per episode (one frame each; a crash starts another)", ge=1)
+    epochs: int = option(15, help="passes over the frames", ge=1)
+    batch_size: int = option(32, help="frames per step", ge=1)
     near_weight: float = option(
         0.0,
         help="extra weight of near pixels in the loss: 1 + near_weight x the target's min-max "
         "normalised nearness (0: every pixel alike)",
+        ge=0.0,
     )
     validation: float = option(
-        0.1, help="share of the episodes (whole rounds) kept out of training to report a loss"
+        0.1,
+        help="share of the episodes (whole rounds) kept out of training to report a loss",
+        ge=0.0,
+        lt=1.0,
     )
-    seed: int = option(0, help="seed of the episodes, the initialisation and the batches")
     frames_file: str | None = option(
         None,
         help="keep the driven frames and their nearness here: read when the file exists (no "
         "driving), else written after driving (null: not kept)",
     )
     output: str = option("outputs/depth/depth_small.pt", help="the weights file written")
-    progress: bool = option(True, help="tqdm progress bars")
 
     def __post_init__(self) -> None:
-        if len(self.image_size) != 2 or min(self.image_size) <= 0:
-            raise ValueError(f"image_size must be [height, width], got {list(self.image_size)}")
-        if self.episodes <= 0 or self.num_envs <= 0 or self.episodes % self.num_envs:
-            raise ValueError(
-                f"episodes ({self.episodes}) must be a positive multiple of num_envs "
-                f"({self.num_envs})"
-            )
-        positive = {
-            "render_scale": self.render_scale,
-            "steps": self.steps,
-            "epochs": self.epochs,
-            "batch_size": self.batch_size,
-            "lr": self.lr,
-        }
-        for name, value in positive.items():
-            if not value > 0:
-                raise ValueError(f"{name} must be positive, got {value}")
-        if self.near_weight < 0:
-            raise ValueError(f"near_weight must be >= 0, got {self.near_weight}")
-        if not 0.0 <= self.validation < 1.0:
-            raise ValueError(f"validation is a share in [0, 1), got {self.validation}")
-        if not self.drivers or not self.prompts:
-            raise ValueError("drivers and prompts must each name at least one")
+        super().__post_init__()
+        check_rounds(self.episodes, self.num_envs, self.drivers, self.prompts)

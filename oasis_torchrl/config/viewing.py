@@ -61,7 +61,9 @@ class ViewConfig:
     memory_limit: str | None = option(
         None, help="memory limit of a spawned viewer, e.g. 4GB or 50% (null: rerun's 25%)"
     )
-    jpeg_quality: int | None = option(None, help="JPEG quality 1-100 of frames (null: 85)")
+    jpeg_quality: int | None = option(
+        None, help="JPEG quality 1-100 of frames (null: 85)", ge=1, le=100
+    )
     scenes: str | None = option(
         None,
         help="an embedded server (oasis-torchrl serve) to ask a saved rollout's roads and "
@@ -77,8 +79,6 @@ class ViewConfig:
                 f"{self.beside!r} stands where a second .rrd goes: give view's settings as flags "
                 "(--rows 0,5), not KEY=VALUE"
             )
-        if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
-            raise ValueError(f"jpeg_quality must be in 1-100, got {self.jpeg_quality}")
 
     @property
     def target(self) -> str:

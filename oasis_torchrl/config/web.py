@@ -60,14 +60,16 @@ class PlayConfig(DatasetOutputConfig):
         help="address the page is served on; any but loopback needs the token of "
         "OASIS_PLAY_TOKEN (a random one is made and logged if it is unset)",
     )
-    port: int = option(8080, help="port of the page (0: a free one)")
+    port: int = option(8080, help="port of the page (0: a free one)", ge=0, le=65535)
     policy: str | None = option(
         None,
         help="a policy that drives until the person takes over: saved (a LeRobot policy "
         "folder, a PPO checkpoint, a TorchScript or torch.save file) or served (grpc://host:port)",
     )
     seed: int = option(0, help="seed of the episode sequence (the embedded server's scenes)")
-    jpeg_quality: int = option(80, help="JPEG quality 1-100 of the frames sent to the page")
+    jpeg_quality: int = option(
+        80, help="JPEG quality 1-100 of the frames sent to the page", ge=1, le=100
+    )
     env: EnvConfig = option(
         default_factory=_play_env,
         help="the world (a remote endpoint reads its key from DECART_API_KEY, never a flag)",
@@ -78,7 +80,3 @@ class PlayConfig(DatasetOutputConfig):
             raise ValueError(
                 f"the page drives one session: env.num_envs must be 1, got {self.env.num_envs}"
             )
-        if not 1 <= self.jpeg_quality <= 100:
-            raise ValueError(f"jpeg_quality must be in 1-100, got {self.jpeg_quality}")
-        if not 0 <= self.port <= 65535:
-            raise ValueError(f"port must be in 0-65535, got {self.port}")

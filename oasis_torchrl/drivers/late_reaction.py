@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import torch
 from tensordict import TensorDictBase
 
-from oasis_torchrl.config.pipeline import reaction_range
+from oasis_torchrl.config.demonstrations import reaction_range
 from oasis_torchrl.drivers.autopilot import Autopilot
 
 TRUTH = "truth"

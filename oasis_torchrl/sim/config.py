@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 from dataclasses import asdict, dataclass, fields
@@ -12,7 +11,7 @@ from typing import Any, ClassVar
 
 import grpc
 
-from oasis_torchrl.options import option
+from oasis_torchrl.options import check_bounds, is_integer, option
 from oasis_torchrl.protocol import FORMAT_NAMES, FPS, SERVER_API_KEYS_ENV_VAR, FrameFormat
 from oasis_torchrl.sim.encoding import SUPPORTED_FORMATS, format_name
 
@@ -72,19 +71,21 @@ class GrpcServerConfig:
     """The scheme of :meth:`endpoint` without and with TLS."""
 
     host: str = option("127.0.0.1", help="interface to bind")
-    port: int = option(0, help="port to bind; 0 picks a free one")
+    port: int = option(0, help="port to bind; 0 picks a free one", ge=0, le=65535)
     api_keys: tuple[str, ...] = option(
         (), help="accepted API keys (default: from the environment; flags are visible to all)"
     )
     allow_any_key: bool = option(False, help="accept any non-empty key")
-    max_message_bytes: int = option(64 * 1024, help="largest request, bytes")
+    max_message_bytes: int = option(64 * 1024, help="largest request, bytes", ge=1024, le=1 << 30)
     tls_cert: str | None = option(None, help="PEM certificate chain (with tls_key)")
     tls_key: str | None = option(None, help="PEM private key (with tls_cert)")
-    workers: int = option(32, help="gRPC handler threads")
+    workers: int = option(32, help="gRPC handler threads", ge=1, le=1024)
 
     def __post_init__(self) -> None:
         keys = tuple(self.api_keys) or keys_from_env(variable=self.API_KEYS_ENV_VAR)
         object.__setattr__(self, "api_keys", keys)
+        # Built outside the config loader too (from JSON in a worker process, in code).
+        check_bounds(type(self), lambda key: getattr(self, key))
         self._validate_network()
         self._validate_keys()
 
@@ -131,9 +132,6 @@ class GrpcServerConfig:
     def _validate_network(self) -> None:
         if not self.host:
             raise ValueError("host must be a non-empty host name or address")
-        require_int("port", self.port, 0, 65535)
-        require_int("workers", self.workers, 1, 1024)
-        require_int("max_message_bytes", self.max_message_bytes, 1024, 1 << 30)
         if (self.tls_cert is None) != (self.tls_key is None):
             raise ValueError(
                 "tls_cert and tls_key must be given together, got "
@@ -174,30 +172,42 @@ class ServerConfig(GrpcServerConfig):
 
     width: int = option(768, help="frame width")
     height: int = option(512, help="frame height")
-    fps: float = option(FPS, help="frame rate (the world's time step is 1/fps)")
-    latency_ms: float = option(0.0, help="delay added to every Infer, emulating a GPU model")
-    failure_rate: float = option(0.0, help="probability of an injected UNAVAILABLE per call")
-    failure_seed: int = option(0, help="seed of the injected failures")
-    idle_timeout_s: float = option(300.0, help="idle session expiry, seconds")
-    max_sessions: int = option(64, help="open sessions at most")
-    max_sessions_per_key: int = option(32, help="open sessions per API key at most")
-    max_prompt_chars: int = option(2000, help="longest prompt")
+    fps: float = option(FPS, help="frame rate (the world's time step is 1/fps)", ge=1.0, le=240.0)
+    latency_ms: float = option(
+        0.0, help="delay added to every Infer, emulating a GPU model", ge=0.0, le=600_000.0
+    )
+    failure_rate: float = option(
+        0.0, help="probability of an injected UNAVAILABLE per call", ge=0.0, le=1.0
+    )
+    failure_seed: int = option(0, help="seed of the injected failures", ge=0, le=(1 << 64) - 1)
+    idle_timeout_s: float = option(300.0, help="idle session expiry, seconds", ge=0.001)
+    max_sessions: int = option(64, help="open sessions at most", ge=1, le=1 << 20)
+    max_sessions_per_key: int = option(
+        32, help="open sessions per API key at most", ge=1, le=1 << 20
+    )
+    max_prompt_chars: int = option(2000, help="longest prompt", ge=1, le=1 << 20)
     processes: int | None = option(
         None,
         help="worker processes running the sessions (null: one per core; 0: all in the "
         "server's process)",
+        ge=0,
+        le=1024,
     )
-    encode_workers: int = option(0, help="threads encoding streams per process (0: automatic)")
+    encode_workers: int = option(
+        0, help="threads encoding streams per process (0: automatic)", ge=0, le=1024
+    )
     formats: tuple[int, ...] = option(
         tuple(int(value) for value in SUPPORTED_FORMATS),
         help="allowed frame formats in preference order, e.g. raw,vp9,jpeg",
         parse=parse_formats,
         metavar="FORMATS",
     )
-    vp9_cpu_used: int = option(8, help="libvpx speed 0-8")
-    vp9_bit_rate: int | None = option(None, help="VP9 bits/s (null: scales with the frame size)")
-    vp9_threads: int = option(1, help="libvpx threads per stream")
-    jpeg_quality: int = option(90, help="JPEG quality 1-100")
+    vp9_cpu_used: int = option(8, help="libvpx speed 0-8", ge=0, le=8)
+    vp9_bit_rate: int | None = option(
+        None, help="VP9 bits/s (null: scales with the frame size)", ge=1000, le=1 << 31
+    )
+    vp9_threads: int = option(1, help="libvpx threads per stream", ge=1, le=64)
+    jpeg_quality: int = option(90, help="JPEG quality 1-100", ge=1, le=100)
     hosted: bool = option(
         False,
         help="hosted-like: send only what the hosted Oasis service sends (VP9 frames; no "
@@ -209,10 +219,7 @@ class ServerConfig(GrpcServerConfig):
         super().__post_init__()
         formats = (int(FrameFormat.VP9),) if self.hosted else tuple(self.formats)
         object.__setattr__(self, "formats", formats)
-        if self.processes is not None:
-            require_int("processes", self.processes, 0, 1024)
         self._validate_video()
-        self._validate_limits()
 
     @property
     def resolved_processes(self) -> int:
@@ -290,14 +297,8 @@ class ServerConfig(GrpcServerConfig):
     def _validate_video(self) -> None:
         for name in ("width", "height"):
             value = getattr(self, name)
-            if not is_int(value) or value % 2 or not 16 <= value <= 4096:
+            if not is_integer(value) or value % 2 or not 16 <= value <= 4096:
                 raise ValueError(f"{name} must be an even integer in [16, 4096], got {value!r}")
-        require_float("fps", self.fps, 1.0, 240.0)
-        require_int("vp9_cpu_used", self.vp9_cpu_used, 0, 8)
-        require_int("vp9_threads", self.vp9_threads, 1, 64)
-        require_int("jpeg_quality", self.jpeg_quality, 1, 100)
-        if self.vp9_bit_rate is not None:
-            require_int("vp9_bit_rate", self.vp9_bit_rate, 1000, 1 << 31)
         if not self.formats:
             raise ValueError("formats must name at least one frame format")
         for frame_format in self.formats:
@@ -306,28 +307,3 @@ class ServerConfig(GrpcServerConfig):
                 raise ValueError(
                     f"formats contains {format_name(frame_format)}; supported: {supported}"
                 )
-
-    def _validate_limits(self) -> None:
-        require_float("latency_ms", self.latency_ms, 0.0, 600_000.0)
-        require_float("failure_rate", self.failure_rate, 0.0, 1.0)
-        require_int("failure_seed", self.failure_seed, 0, (1 << 64) - 1)
-        require_float("idle_timeout_s", self.idle_timeout_s, 0.001, math.inf)
-        require_int("max_sessions", self.max_sessions, 1, 1 << 20)
-        require_int("max_sessions_per_key", self.max_sessions_per_key, 1, 1 << 20)
-        require_int("max_prompt_chars", self.max_prompt_chars, 1, 1 << 20)
-        require_int("encode_workers", self.encode_workers, 0, 1024)
-
-
-def is_int(value: object) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def require_int(name: str, value: object, low: int, high: int) -> None:
-    if not is_int(value) or not low <= value <= high:  # type: ignore[operator]
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-
-
-def require_float(name: str, value: object, low: float, high: float) -> None:
-    number_ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if not number_ok or math.isnan(value) or not low <= value <= high:  # type: ignore[arg-type]
-        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
+import oasis_torchrl.drivers
 from oasis_torchrl.drivers import Autopilot, PolicyDriver, ScriptedDriver, load_driver
 from oasis_torchrl.drivers.folders import export_lerobot
 from oasis_torchrl.envs import OasisEnv
@@ -18,6 +20,27 @@ from oasis_torchrl.models.checkpoint import save_checkpoint
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.vehicle import VehicleParams, VehicleState, step_vehicle
+
+ABOVE_THE_DRIVERS = (
+    "oasis_torchrl.cli",
+    "oasis_torchrl.commands",
+    "oasis_torchrl.train",
+    "oasis_torchrl.distributed",
+    "oasis_torchrl.serving",
+    "oasis_torchrl.config.pipeline",
+)
+"""The entry points, the pipelines and the main job's settings: drivers run under them."""
+
+
+def test_the_drivers_import_nothing_above_them() -> None:
+    folder = Path(oasis_torchrl.drivers.__file__).parent
+    imported = {
+        (path.name, node.module)
+        for path in folder.glob("*.py")
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ImportFrom) and node.module
+    }
+    assert imported and not [item for item in imported if item[1].startswith(ABOVE_THE_DRIVERS)]
 
 
 def test_autopilot_drives_with_the_servers_expert() -> None:

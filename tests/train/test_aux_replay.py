@@ -81,7 +81,7 @@ def test_bad_settings_are_refused() -> None:
         load_config("ppo", ["aux_replay.capacity=1024", "loss.aux_coeff=0"])
     with pytest.raises(ValueError, match=r"aux_replay\.capacity \(64\) must hold at least one"):
         load_config("ppo", ["aux_replay.capacity=64"])
-    with pytest.raises(ValueError, match="must be >= 0"):
+    with pytest.raises(ValueError, match=r"aux_replay\.steps must be an integer >= 0, got -1"):
         load_config("ppo", ["aux_replay.steps=-1"])
 
 

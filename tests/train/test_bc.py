@@ -133,7 +133,7 @@ def test_in_memory_samples_and_batches_match_lerobot_samples(
 
 
 def test_a_negative_shift_is_refused() -> None:
-    with pytest.raises(ValueError, match=r"train\.shift_pad is a shift in pixels, >= 0, got -1"):
+    with pytest.raises(ValueError, match=r"train\.shift_pad must be an integer >= 0, got -1"):
         load_config("bc", ["train.shift_pad=-1"])
 
 

@@ -192,7 +192,9 @@ def test_a_margin_keeps_the_warm_start_against_gains_within_noise(tmp_path: Path
     latest = load_checkpoint(tmp_path / "run" / "checkpoints" / "latest.pt")
     assert latest["kept_selection"]["mean_distance"] == periodic[0]["mean_distance"]
 
-    with pytest.raises(ValueError, match=r"eval\.selection_margin must be >= 0, got -1"):
+    with pytest.raises(
+        ValueError, match=r"eval\.selection_margin must be a number >= 0\.0, got -1"
+    ):
         _ppo_config(tmp_path, 32, "eval.selection_margin=-1")
 
 

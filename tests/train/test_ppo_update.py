@@ -63,7 +63,9 @@ def test_the_learning_rates_anneal_over_the_run_to_five_percent() -> None:
 
 
 def test_a_schedule_must_be_positive() -> None:
-    with pytest.raises(ValueError, match=r"optim\.anneal_frames must be positive or null, got 0"):
+    with pytest.raises(
+        ValueError, match=r"optim\.anneal_frames must be an integer > 0 or null, got 0"
+    ):
         load_config("ppo", ["optim.anneal_frames=0"])
 
 
