@@ -40,11 +40,13 @@ from oasis_torchrl.viz.paths import ENV_ROOT
 from oasis_torchrl.viz.recording import (
     APPLICATION_ID,
     DEFAULT_MEMORY_LIMIT,
+    describe_target,
     is_live,
+    layout_first,
     open_recording,
 )
 from oasis_torchrl.viz.records import StepRecord, batch_rows, read_frames, read_step
-from oasis_torchrl.viz.summary import EpisodeSummary
+from oasis_torchrl.viz.summary import SUMMARY_ROOT, EpisodeSummary
 from oasis_torchrl.viz.worker import BoundedWorker
 from oasis_torchrl.viz.writer import RecordWriter
 
@@ -106,6 +108,8 @@ class RolloutLogger:
     ) -> None:
         self.options = options if options is not None else LogOptions()
         self._owns_recording = not isinstance(target, rr.RecordingStream)
+        owned_file = self._owns_recording and describe_target(target) == "file"
+        self._file = Path(target) if owned_file else None
         if live is None:
             live = is_live(target) if self._owns_recording else True
         recording = (
@@ -279,6 +283,8 @@ class RolloutLogger:
             writer.recording.flush()
             if self._owns_recording:
                 writer.recording.disconnect()
+            if self._file is not None:
+                layout_first(self._file, writer.latest_layout(), [SUMMARY_ROOT])
 
     def __enter__(self) -> RolloutLogger:
         return self

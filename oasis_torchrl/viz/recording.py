@@ -10,12 +10,15 @@ schema: rerun's default batching, 200 ms, leaves a slowly stepped evaluation's f
 of a row or two, mostly schemas); a viewer gets data as it comes. A layout goes to a viewer as
 soon as it changes, to a file once, when it is flushed (:class:`LayoutSender`): a file is read
 whole, and each layout of a recording with many tabs weighs as much as seconds of its video.
+A viewer shows a file as it reads it, while the final layout and the summary are only known at
+the end: :func:`layout_first` rewrites a finished file with them first.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Sequence
 from datetime import timedelta
 from pathlib import Path
 
@@ -125,6 +128,7 @@ class LayoutSender:
         self.recording = recording
         self.live = live
         self._pending: Callable[[], rrb.Blueprint] | None = None
+        self._latest: Callable[[], rrb.Blueprint] | None = None
 
     @property
     def pending(self) -> bool:
@@ -135,6 +139,7 @@ class LayoutSender:
         """Send the layout ``blueprint()`` builds (now if live, else at the next flush)."""
         if self.live:
             self.recording.send_blueprint(blueprint())
+            self._latest = blueprint
         else:
             self._pending = blueprint
 
@@ -143,3 +148,54 @@ class LayoutSender:
         blueprint, self._pending = self._pending, None
         if blueprint is not None:
             self.recording.send_blueprint(blueprint())
+            self._latest = blueprint
+
+    def latest(self) -> rrb.Blueprint | None:
+        """The last layout sent (built anew), or None."""
+        return None if self._latest is None else self._latest()
+
+
+def layout_first(
+    path: str | Path, blueprint: rrb.Blueprint | None, first: Sequence[str] = ()
+) -> bool:
+    """Rewrite the finished ``.rrd`` at ``path`` with ``blueprint`` as its default layout at the
+    start, then the chunks of the entities under ``first`` (e.g. the summary), then the rest in
+    their order: a viewer then lays the file out and shows those entities at once, however long
+    the rest takes to read. Returns False (the file as it was) where this rerun-sdk cannot read
+    a file back (before 0.32).
+
+    Example:
+        >>> import tempfile
+        >>> path = Path(tempfile.mkdtemp()) / "run.rrd"
+        >>> recording = open_recording(path)
+        >>> recording.log("env/0/speed", rr.Scalars(1.0))
+        >>> recording.log("summary/n", rr.Scalars(2.0))
+        >>> recording.disconnect()
+        >>> layout_first(path, rrb.Blueprint(rrb.TextLogView(origin="summary")), ["summary"])
+        True
+        >>> from rerun.experimental import RrdReader
+        >>> [chunk.entity_path for chunk in RrdReader(path).stream()]
+        ['/summary/n', '/__properties', '/env/0/speed']
+    """
+    try:
+        from rerun.experimental import RrdReader, send_chunks
+    except ImportError:
+        logger.debug("rerun-sdk %s reads no file back: %s keeps its order", rr.__version__, path)
+        return False
+    path = Path(path)
+    reader = RrdReader(path)
+    (store,) = reader.recordings()
+    chunks = list(reader.stream(store=store))
+    prefixes = tuple(f"/{root}/" for root in first)
+    early = [chunk for chunk in chunks if chunk.entity_path.startswith(prefixes)]
+    late = [chunk for chunk in chunks if not chunk.entity_path.startswith(prefixes)]
+    partial = path.with_name(f"{path.name}.partial")
+    out = rr.RecordingStream(
+        store.application_id, recording_id=store.recording_id, send_properties=False
+    )
+    out.save(partial, default_blueprint=blueprint)
+    send_chunks([*early, *late], recording=out)
+    out.flush()
+    out.disconnect()
+    os.replace(partial, path)
+    return True

@@ -40,7 +40,7 @@ from oasis_torchrl.viz.logger import RolloutLogger
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.palette import COMPARED, SHARED_PLOTS, Plot, Policy, series_style
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
-from oasis_torchrl.viz.recording import LayoutSender, is_live, open_recording
+from oasis_torchrl.viz.recording import LayoutSender, is_live, layout_first, open_recording
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
 from oasis_torchrl.viz.timelines import set_frame
 from oasis_torchrl.viz.titles import episodes_of, tab_title
@@ -204,6 +204,7 @@ class SideBySide:
         self.options = options if options is not None else LogOptions()
         self.recording = open_recording(target)
         self.live = is_live(target)
+        self._file = None if self.live else Path(target)
         self.summary = EpisodeSummary(self.recording, tuple(self.roots.values()))
         self._layouts: dict[str, RowsLayout] = {}
         self._sender = LayoutSender(self.recording, self.live)
@@ -230,6 +231,8 @@ class SideBySide:
         finally:
             self.recording.flush()
             self.recording.disconnect()
+        if self._file is not None:
+            layout_first(self._file, self._sender.latest(), [SUMMARY_ROOT])
 
     def _send_layout(self, layout: RowsLayout) -> None:
         self._layouts[layout.root] = layout

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from oasis_torchrl.client.scenes import SceneLookup
 from oasis_torchrl.protocol import CHUNK
@@ -214,6 +215,10 @@ class RecordWriter:
         if layout != self._layout:
             self._layout = layout
             self._send_layout(layout)
+
+    def latest_layout(self) -> rrb.Blueprint | None:
+        """The last default layout sent (None: none, or another sends the layout)."""
+        return self._layouts.latest()
 
     def _send_default_blueprint(self, layout: RowsLayout) -> None:
         self._layouts.send(lambda: layout.blueprint(self.options.fps))

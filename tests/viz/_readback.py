@@ -37,6 +37,12 @@ def blueprint_views(path: Path) -> set[tuple[str, str, str]]:
     return set(re.findall(pattern, printed(path)))
 
 
+def chunk_paths(path: Path) -> list[str]:
+    """The entity path of every chunk in the order the file holds them (blueprint stores'
+    included), via the rerun CLI."""
+    return re.findall(r"^Chunk\(\S+\) with .*? - (/\S*) - ", printed(path), re.MULTILINE)
+
+
 def blueprint_count(path: Path) -> int:
     """How many layouts (blueprint stores) the file holds, via the rerun CLI."""
     return len(set(re.findall(r'StoreId\(\s*Blueprint,\s*"[^"]*",\s*"([^"]*)"', printed(path))))

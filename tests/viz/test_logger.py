@@ -20,7 +20,14 @@ from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.sim.launcher import LocalServer
 from oasis_torchrl.viz import LogOptions, RerunFrameConsumer, RerunTransform, RolloutLogger
 
-from ._readback import Readback, RrdReader, blueprint_count, blueprint_views, printed
+from ._readback import (
+    Readback,
+    RrdReader,
+    blueprint_count,
+    blueprint_views,
+    chunk_paths,
+    printed,
+)
 from ._rollouts import CAMERAS, SIZE, TERMS, action, color, reward, rollout
 
 FPS = 20.0
@@ -122,6 +129,10 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     # Tabs are named after their episodes (row 0's still runs); a file gets one layout, at close
     assert "[episode 0: running]" in text and "[episode 1: collision at step 2]" in text
     assert blueprint_count(path) == 1
+    order = chunk_paths(path)  # the layout first, then the summary, then the episodes
+    assert order[0].startswith(("/view/", "/container/", "/viewport"))
+    summary = next(i for i, p in enumerate(order) if p.startswith("/summary/"))
+    assert summary < next(i for i, p in enumerate(order) if p.startswith("/env/"))
 
 
 def test_all_frames_raw_images_and_depth(tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ from oasis_torchrl.viz import RolloutLogger
 from oasis_torchrl.viz.palette import POLICY_COLORS
 from oasis_torchrl.viz.side_by_side import SideBySide
 
-from ._readback import Readback, blueprint_count, blueprint_views, printed
+from ._readback import Readback, blueprint_count, blueprint_views, chunk_paths, printed
 from ._rollouts import CAMERAS, rollout
 
 STEPS = 4
@@ -85,6 +85,13 @@ def test_two_policies_share_one_recording_and_their_divergence_is_marked(tmp_pat
     title = "episode 0: autopilot collision at step 4, bc_ppo collision at step 4"
     assert f"[{title}]" in printed(path)
     assert blueprint_count(path) == 1  # a file gets its layout once, complete
+    # ... at its start, then the summary: a viewer lays the file out and shows the summary at
+    # once, while it reads the episodes
+    order = chunk_paths(path)
+    first_summary = next(i for i, p in enumerate(order) if p.startswith("/summary/"))
+    first_episode = next(i for i, p in enumerate(order) if p.startswith("/autopilot/"))
+    assert order[0].startswith(("/view/", "/container/", "/viewport"))
+    assert first_summary < first_episode
 
 
 def test_view_aligns_two_saved_recordings(tmp_path: Path) -> None:
