@@ -47,11 +47,11 @@ from oasis_torchrl.envs.capabilities import (
     env_capabilities,
     resolve_reward_kind,
 )
+from oasis_torchrl.envs.driving import drive
 from oasis_torchrl.envs.factory import make_env, make_frames_reward
 from oasis_torchrl.models.actor_critic import FRAME_STACK, PIXELS
 from oasis_torchrl.models.config import POLICY_FRAMES
 from oasis_torchrl.rewards import DepthCollisionReward, MotionReward
-from oasis_torchrl.train.driving import drive
 
 if TYPE_CHECKING:
     from oasis_torchrl.viz import RolloutLogger
