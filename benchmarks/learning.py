@@ -69,7 +69,7 @@ from oasis_torchrl.config.arguments import add_config_arguments, flag_values, sp
 from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
 from oasis_torchrl.drivers.pretrained import resolve_pretrained
-from oasis_torchrl.train.evaluate import paired_difference, selection_figure
+from oasis_torchrl.evaluation import paired_difference, selection_figure
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,

@@ -152,7 +152,6 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.bc_data",
             "oasis_torchrl.train.batch_order",
             "oasis_torchrl.train.demonstrations",
-            "oasis_torchrl.train.evaluate",
             "oasis_torchrl.train.comparison",
             "oasis_torchrl.train.cards",
             "oasis_torchrl.train.stage_seconds",
@@ -164,6 +163,19 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.driven_rounds",
             "oasis_torchrl.allocator",
             "oasis_torchrl.atomic",
+        ),
+    ),
+    "evaluation": ApiPage(
+        "Evaluation",
+        "guides/training.md",
+        (
+            "oasis_torchrl.evaluation",
+            "oasis_torchrl.evaluation.evaluator",
+            "oasis_torchrl.evaluation.reports",
+            "oasis_torchrl.evaluation.selection",
+            "oasis_torchrl.evaluation.rollouts",
+            "oasis_torchrl.evaluation.recorders",
+            "oasis_torchrl.evaluation.side_by_side",
         ),
     ),
     "config": ApiPage(

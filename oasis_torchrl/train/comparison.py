@@ -5,7 +5,7 @@ sends frames only (``ground_truth: false``: no distance) are compared by their m
 under the frames-only reward (the motion reward) instead, and their collisions are the reward's
 likely-collision terminations.
 
-Evaluations are :func:`oasis_torchrl.train.evaluate.EvalReport.to_dict` dicts (aggregates and
+Evaluations are :func:`oasis_torchrl.evaluation.EvalReport.to_dict` dicts (aggregates and
 ``per_episode`` results), keyed by policy name.
 """
 

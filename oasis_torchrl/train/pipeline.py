@@ -61,6 +61,7 @@ from oasis_torchrl.drivers import (
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.drivers.pretrained import PREFIX as PRETRAINED
 from oasis_torchrl.envs.capabilities import env_capabilities
+from oasis_torchrl.evaluation import EvalReport, Evaluator, side_by_side_for
 from oasis_torchrl.train.cards import hours, load_card
 from oasis_torchrl.train.comparison import (
     PolicyRow,
@@ -70,7 +71,6 @@ from oasis_torchrl.train.comparison import (
     plot_comparison,
 )
 from oasis_torchrl.train.demonstrations import ActionNoise, record_demonstrations
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator, side_by_side_for
 from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
 
 logger = logging.getLogger(__name__)
@@ -454,7 +454,7 @@ def clone(cfg: DictConfig, dataset: Path) -> Path:
 
 def evaluate_all(cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, Any]]:
     """Evaluate each named policy spec on the config's fixed prompts and seeds: the aggregates
-    and every episode (:meth:`~oasis_torchrl.train.evaluate.EvalReport.to_dict`).
+    and every episode (:meth:`~oasis_torchrl.evaluation.EvalReport.to_dict`).
 
     The last policy's episodes are also recorded (``eval.rerun`` / ``eval.lerobot``), side by
     side with those of the policies in ``eval.compare`` if any. A spec

@@ -40,6 +40,7 @@ from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
+from oasis_torchrl.evaluation import EvalReport, Evaluator, beats
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.checkpoint import (
     BEST,
@@ -49,7 +50,6 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.protocol import FRONT_CROP
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
 
@@ -407,7 +407,7 @@ class PPOTrainer:
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
         ``checkpoints/best.pt`` if it beats the kept one (by ``eval.selection_margin`` standard
-        errors, :func:`~oasis_torchrl.train.evaluate.beats`); otherwise on ``eval.seeds``. With
+        errors, :func:`~oasis_torchrl.evaluation.beats`); otherwise on ``eval.seeds``. With
         ``checkpoint.keep_evaluated``, the evaluated policy is also saved as
         ``checkpoints/frames_<env steps>.pt`` (to choose among them later, e.g. the best within
         a smaller budget)."""
