@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from oasis_torchrl.evaluation.selection import selection_figure
+
 AUTOPILOT_COLOR = "0.25"
 CONSTANT_COLOR = "0.65"
 LEARNED_COLOR = "tab:blue"
@@ -119,7 +121,7 @@ def comparison(
     rows = []
     for name, evaluation in evaluations.items():
         key, unit = compared_value(evaluation)
-        distance = evaluation["mean_distance" if unit == "m" else "mean_return"]
+        distance = selection_figure(evaluation)
         kind = "autopilot" if name == autopilot else "constant" if name in present else "learned"
         kind = "shipped" if name in shipped else kind
         rows.append(
