@@ -81,6 +81,8 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.client",
             "oasis_torchrl.client.sync_client",
             "oasis_torchrl.client.pool",
+            "oasis_torchrl.client.pool_row",
+            "oasis_torchrl.client.transport",
             "oasis_torchrl.client.session",
             "oasis_torchrl.client.types",
             "oasis_torchrl.client.errors",
