@@ -40,13 +40,7 @@ from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
-from oasis_torchrl.evaluation import (
-    EvalReport,
-    Evaluator,
-    beats,
-    selection_figure,
-    selection_key,
-)
+from oasis_torchrl.evaluation import EvalReport, Evaluator, beats, selection_figure, selection_key
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.checkpoint import (
     BEST,
