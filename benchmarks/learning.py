@@ -70,11 +70,11 @@ from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
 from oasis_torchrl.drivers.pretrained import resolve_pretrained
 from oasis_torchrl.evaluation import paired_difference, selection_figure
+from oasis_torchrl.train.main_evaluation import evaluate_all
 from oasis_torchrl.train.pipeline import (
     bc_config,
     clone,
     demonstrations,
-    evaluate_all,
     ppo_config,
     run_ppo,
     timed_stage,

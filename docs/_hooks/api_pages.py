@@ -147,6 +147,7 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.train",
             "oasis_torchrl.train.pipeline",
+            "oasis_torchrl.train.main_evaluation",
             "oasis_torchrl.train.ppo",
             "oasis_torchrl.train.ppo_update",
             "oasis_torchrl.train.ppo_loss",
