@@ -1,8 +1,8 @@
 """Imports flow one way, from the commands down to the protocol (the development guide's
 "Layout" table). The evaluation package is a layer of its own: it stands on the envs and tools
 (envs, drivers, data, viz, config) and the parts (client, models, rewards), and the training
-pipelines and the commands stand on it. The embedded server's side is checked in
-``tests/server/test_launcher.py``."""
+pipelines and the commands stand on it. The embedded server is a peer of the client, on the
+protocol alone."""
 
 from __future__ import annotations
 
@@ -68,14 +68,31 @@ def test_only_the_commands_and_the_pipelines_import_evaluation() -> None:
     assert importers <= EVALUATION_IMPORTERS, importers - EVALUATION_IMPORTERS
 
 
-def test_importing_evaluation_loads_no_pipeline() -> None:
+def loaded_by(*modules: str) -> list[str]:
+    """The ``oasis_torchrl`` modules a fresh interpreter has loaded once it imported ``modules``."""
     code = (
         "import json, sys\n"
-        "import oasis_torchrl.evaluation\n"
+        f"import {', '.join(modules)}\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.startswith('oasis_torchrl.'))))"
     )
     result = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     )
-    loaded = {name.split(".")[1] for name in json.loads(result.stdout)}
+    return json.loads(result.stdout)
+
+
+def test_importing_evaluation_loads_no_pipeline() -> None:
+    loaded = {name.split(".")[1] for name in loaded_by("oasis_torchrl.evaluation")}
     assert "evaluation" in loaded and not loaded & ABOVE_EVALUATION
+
+
+def test_the_server_side_imports_nothing_above_the_protocol() -> None:
+    # The embedded server is a peer of the client: it stands on the protocol (and the ground
+    # floor every layer shares: the settings fields, whole-file writes and the one-line video
+    # fallback of the package's import) alone; not even the config package.
+    imported = loaded_by(
+        "oasis_torchrl.sim.__main__", "oasis_torchrl.sim.launcher", "oasis_torchrl.sim.server"
+    )
+    allowed = ("oasis_torchrl.sim", "oasis_torchrl.proto", "oasis_torchrl.protocol")
+    allowed += ("oasis_torchrl.options", "oasis_torchrl.atomic", "oasis_torchrl.video_fallback")
+    assert imported and not [name for name in imported if not name.startswith(allowed)]
