@@ -39,10 +39,10 @@ from oasis_torchrl.config import EnvConfig
 from oasis_torchrl.config.env import EmbeddedServerConfig, RewardConfig
 from oasis_torchrl.config.scenes import HELD_OUT_SCENES, REWARD_CHECK_SEEDS
 from oasis_torchrl.drivers import load_driver
+from oasis_torchrl.envs.driving import drive
 from oasis_torchrl.envs.factory import make_env, make_frames_reward
 from oasis_torchrl.protocol import FRONT, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards import NoReward
-from oasis_torchrl.train.driving import drive
 from oasis_torchrl.train.motion_checks import pearson, roc_auc
 
 POLICIES = (

@@ -29,9 +29,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from oasis_torchrl.allocator import keep_batches_in_heap
 from oasis_torchrl.config import load_config
+from oasis_torchrl.evaluation import paired_difference
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.train.bc import train_bc
-from oasis_torchrl.train.evaluate import paired_difference
 from oasis_torchrl.train.pipeline import bc_config, demonstrations
 
 CROP = 0.25

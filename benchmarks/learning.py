@@ -70,13 +70,13 @@ from oasis_torchrl.config.arguments import add_config_arguments, flag_values, sp
 from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
 from oasis_torchrl.drivers.pretrained import resolve_pretrained
-from oasis_torchrl.train.evaluate import paired_difference, selection_figure
+from oasis_torchrl.evaluation import paired_difference, selection_figure
+from oasis_torchrl.train.main_evaluation import evaluate_all
 from oasis_torchrl.train.pipeline import (
     PPOStage,
     bc_config,
     clone,
     demonstrations,
-    evaluate_all,
     ppo_config,
     run_ppo,
     timed_stage,

@@ -13,7 +13,7 @@ With ``--side-by-side`` it measures instead what recording policies side by side
 evaluation of two policies (the autopilot and a constant throttle) on the same seeds, unlogged
 (one ``Evaluator`` per policy, as ``oasis-torchrl eval`` runs without ``rerun``) against the same
 evaluation recorded side by side into one ``.rrd``
-(:func:`~oasis_torchrl.train.evaluate.evaluate_side_by_side`, ``eval compare=[...]``), in
+(:func:`~oasis_torchrl.evaluation.evaluate_side_by_side`, ``eval compare=[...]``), in
 alternating rounds; env start-up is inside both timings, as a user pays it.
 
 Usage: ``python benchmarks/logging_overhead.py [--envs 4 --steps 4 --rounds 8]`` or
@@ -88,7 +88,7 @@ def measure(args: argparse.Namespace, rrd: Path) -> dict[str, list[float]]:
 
 def measure_side_by_side(args: argparse.Namespace, folder: Path) -> dict[str, list[float]]:
     """Seconds of each unlogged and each side-by-side evaluation, over ``rounds`` pairs."""
-    from oasis_torchrl.train.evaluate import Evaluator, evaluate_side_by_side
+    from oasis_torchrl.evaluation import Evaluator, evaluate_side_by_side
 
     settings = [f"episodes={args.envs}", f"max_steps={args.steps}", "seeds=[1000]"]
     settings.append(f"env.image_size=[{args.height},{args.width}]")

@@ -32,7 +32,7 @@ from tensordict import TensorDictBase
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.envs.factory import make_env
-from oasis_torchrl.train.evaluate import rollout_episodes
+from oasis_torchrl.evaluation import rollout_episodes
 from oasis_torchrl.viz import LogOptions, RolloutLogger
 
 MAIN_JOB_EPISODE_STEPS = 16 * 2 * 150

@@ -15,17 +15,10 @@ to a thread would cost more than the copy.
 A row's next step only starts after its previous step returned, so each decoder sees its
 stream's packets in order.
 
-Faults, per row (other rows are unaffected):
-
-- transient gRPC failures are retried by the :class:`RetryPolicy` (Infer replays idempotently);
-- a sequence mismatch or an undecodable packet (desync): the row is re-prompted with its stored
-  prompt and seed and one all-zero chunk is sent; status RESTARTED;
-- the session is gone (INVALID_SESSION, ALREADY_FINISHED, server restart): re-Initialize,
-  re-prompt, zero chunk; status RESTARTED;
-- the recovery (or the call itself) still fails after retries: status LOST, frames zero; the row
-  is re-Initialized at its next step (RESTARTED) or by :meth:`SessionPool.recover`.
-
-If every selected row of a step is LOST the server is unreachable: the step raises that error
+The calls go through :class:`~oasis_torchrl.client.transport.Transport` (retries, timeout);
+each row is a :class:`~oasis_torchrl.client.pool_row.PoolRow`, which restarts or loses its
+session on a fault without touching the other rows (its module lists the faults). If every
+selected row of a step is LOST the server is unreachable: the step raises that error
 (within the configured timeout and retry deadline, never a hang). Errors no retry can fix
 (bad key, bad request, unsupported SDK or format) raise at once with the row in ``error.row``.
 """
@@ -38,230 +31,31 @@ import os
 import weakref
 from collections.abc import Awaitable, Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
 import grpc
 import numpy as np
-from grpc_health.v1 import health_pb2_grpc
 
-from oasis_torchrl.client import health, wire
+from oasis_torchrl.client import wire
 from oasis_torchrl.client.background import EventLoopThread
-from oasis_torchrl.client.channel import TlsSetting, create_aio_channel, parse_endpoint
-from oasis_torchrl.client.decoding import (
-    FrontCrop,
-    decode_chunk,
-    validate_front_crop,
-    validate_resize,
-)
-from oasis_torchrl.client.errors import (
-    DecartRoboticsError,
-    DecodeError,
-    SequenceError,
-    SessionLostError,
-    TransportError,
-)
-from oasis_torchrl.client.ground_truth import (
-    TRUTH_FIELDS,
-    depth_maps,
-    expert_chunk,
-    raise_sim_error,
-    truth_array,
-)
-from oasis_torchrl.client.retry import RetryPolicy, acall_with_retry
-from oasis_torchrl.client.session import Call, SessionState
+from oasis_torchrl.client.channel import TlsSetting, parse_endpoint
+from oasis_torchrl.client.decoding import validate_front_crop, validate_resize
+from oasis_torchrl.client.errors import DecartRoboticsError, TransportError
+from oasis_torchrl.client.pool_row import PoolRow, RowOutcome, RowSlots, assemble, gather
+from oasis_torchrl.client.retry import RetryPolicy
+from oasis_torchrl.client.session import SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
-from oasis_torchrl.client.types import (
-    PoolStep,
-    ServerHandle,
-    SessionStatus,
-    StreamInfo,
-)
-from oasis_torchrl.proto import a2v_pb2_grpc, sim_pb2_grpc
-from oasis_torchrl.protocol import (
-    ACTION_DIM,
-    API_KEY_ENV_VAR,
-    CAMERAS,
-    CHUNK,
-    FRONT,
-    FRONT_CROP,
-    with_front_crop,
-)
+from oasis_torchrl.client.transport import Transport, open_channel
+from oasis_torchrl.client.types import PoolStep, ServerHandle, SessionStatus, StreamInfo
+from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK, FRONT, with_front_crop
 
 logger = logging.getLogger(__name__)
 
-# Finish at close is best effort: a hung server must not hold close() for the full call timeout.
-FINISH_TIMEOUT_S = 5.0
-ZERO_CHUNK = np.zeros((CHUNK, 2), np.float32)
 FRAME_SELECTIONS = {"all": CHUNK, "last": 1}
 """``frames=`` of :class:`SessionPool`: frames kept per chunk (``"last"`` asks the server for
 the last frame alone, and otherwise skips the RGB conversion of the first three, which an env
 observing only the last frame never reads)."""
-RECOVERABLE_STEP_ERRORS = (TransportError, SessionLostError, SequenceError, DecodeError)
-
-RowSlots = dict[str, np.ndarray]
-
-
-@dataclass
-class _Outcome:
-    """What one row's step produced."""
-
-    status: SessionStatus
-    error: Exception | None = None
-    sequence_num: int = -1
-    truth: np.ndarray | None = None
-    expert: np.ndarray | None = None
-
-
-class _Rpc:
-    """The pool's stubs on one aio channel, with retries, timeout and masked API key."""
-
-    def __init__(
-        self,
-        channel: grpc.aio.Channel,
-        policy: RetryPolicy,
-        timeout: float | None,
-        target: str,
-        secret: str | None,
-    ) -> None:
-        self.a2v = a2v_pb2_grpc.A2VServiceStub(channel)
-        self.sim = sim_pb2_grpc.SimServiceStub(channel)
-        self.health = health_pb2_grpc.HealthStub(channel)
-        self.policy = policy
-        self.timeout = timeout
-        self.target = target
-        self.secret = secret
-
-    async def call(
-        self,
-        method: Callable[..., Any],
-        name: str,
-        request: object,
-        metadata: wire.Metadata,
-        *,
-        policy: RetryPolicy | None = None,
-        timeout: float | None = None,
-    ) -> tuple[Any, grpc.aio.Call]:
-        """One unary call with retries; returns the response and its finished call."""
-
-        async def attempt(attempt_timeout: float | None) -> tuple[Any, grpc.aio.Call]:
-            call = method(request, timeout=attempt_timeout, metadata=metadata)
-            return await call, call
-
-        return await acall_with_retry(
-            attempt,
-            policy=policy or self.policy,
-            method=name,
-            timeout=self.timeout if timeout is None else timeout,
-            secret=self.secret,
-            target=self.target,
-        )
-
-
-@dataclass
-class _PoolSession:
-    """One row: its session's state, its transport, and why it was lost (if it was)."""
-
-    row: int
-    rpc: _Rpc
-    state: SessionState
-    executor: ThreadPoolExecutor
-    lost_error: Exception | None = None
-
-    @property
-    def lost(self) -> bool:
-        """Whether the row must be re-Initialized before use."""
-        return self.lost_error is not None
-
-    async def open(self) -> wire.SessionInfo:
-        """Initialize a new session (finishing any previous one, best effort)."""
-        await self.finish_quietly()
-        response, call = await self._send(self.state.initialize())
-        try:
-            info = self.state.on_initialize(response, await call.initial_metadata())
-        except DecartRoboticsError:
-            await self.finish_quietly()
-            raise
-        self.lost_error = None
-        logger.debug("row %d: session %s opened", self.row, info.session_id[:6])
-        return info
-
-    async def prompt(self, prompt: str, seed: int | None) -> None:
-        """Set the scene; restarts the rollout (sequence 0, fresh decoders)."""
-        response, _ = await self._send(self.state.prompt(prompt, seed))
-        self.state.on_prompt(response)
-
-    async def reprompt(self) -> None:
-        """Prompt again with the stored prompt and seed (a new clip of the same world)."""
-        response, _ = await self._send(self.state.replay_prompt())
-        self.state.on_prompt(response)
-
-    async def infer_into(self, actions: np.ndarray, slots: RowSlots) -> _Outcome:
-        """One Infer; decodes every selected stream into ``slots`` concurrently, off the loop."""
-        response, call = await self._send(self.state.infer(actions))
-        reply = self.state.on_infer(response, await call.trailing_metadata())
-        await self._decode(reply.packets, slots)
-        return _Outcome(
-            SessionStatus.OK,
-            sequence_num=reply.sequence_num,
-            truth=None if reply.truth is None else truth_array(reply.truth),
-            expert=expert_chunk(reply.truth),
-        )
-
-    async def _decode(self, packets: dict[str, Sequence[bytes]], slots: RowSlots) -> None:
-        """Decode every selected stream into its slot: on the decode threads, concurrently,
-        or right here when decoding is a mere copy (raw frames)."""
-        decoders, chunk = self.state.decoders, self.state.info.frames_per_chunk
-        jobs = [
-            (decoders[name], packets.get(name, ()), out, chunk, self._crop_of(name, slots))
-            for name, out in slots.items()
-            if name != FRONT_CROP
-        ]
-        if not any(decoder.threaded for decoder, *_ in jobs):
-            for job in jobs:
-                decode_chunk(*job)
-            return
-        loop = asyncio.get_running_loop()
-        # Wait for every stream's decode even if one fails: a recovery must not reset a decoder
-        # or rewrite a slot that a still-running decode job is using.
-        _raise_any(
-            await _gather([loop.run_in_executor(self.executor, decode_chunk, *job) for job in jobs])
-        )
-
-    def _crop_of(self, stream: str, slots: RowSlots) -> tuple[FrontCrop, np.ndarray] | None:
-        """The crop the ``stream`` decode also writes: ``front``'s, where the pool has one."""
-        front_crop = self.state.front_crop
-        if stream != FRONT or front_crop is None:
-            return None
-        return front_crop, slots[FRONT_CROP]
-
-    async def depth(self) -> dict[str, np.ndarray]:
-        """Depth maps of the last frame of each stream (SimService)."""
-        try:
-            response, _ = await self._send(self.state.depth())
-        except TransportError as error:
-            raise_sim_error(error, "depth")
-        return depth_maps(response)
-
-    async def finish_quietly(self) -> None:
-        """Finish the current session if any, ignoring failures (short timeout per attempt)."""
-        call = self.state.finish()
-        if call is None:
-            return
-        try:
-            await self._send(
-                call, timeout=min(self.rpc.timeout or FINISH_TIMEOUT_S, FINISH_TIMEOUT_S)
-            )
-        except (DecartRoboticsError, grpc.RpcError) as error:
-            logger.debug("row %d: Finish failed (ignored): %s", self.row, error)
-
-    async def _send(self, call: Call, *, timeout: float | None = None) -> tuple[Any, grpc.aio.Call]:
-        stub = self.rpc.sim if call.on_sim_service else self.rpc.a2v
-        method = getattr(stub, call.method)
-        return await self.rpc.call(
-            method, call.method, call.request, call.metadata, timeout=timeout
-        )
 
 
 class _Runtime:
@@ -271,14 +65,14 @@ class _Runtime:
         self,
         loop: EventLoopThread,
         channel: grpc.aio.Channel,
-        rpc: _Rpc,
+        rpc: Transport,
         executor: ThreadPoolExecutor,
     ) -> None:
         self.loop = loop
         self.channel = channel
         self.rpc = rpc
         self.executor = executor
-        self.sessions: list[_PoolSession] = []
+        self.sessions: list[PoolRow] = []
 
     def shutdown(self) -> None:
         """Close the channel, stop the loop and the decode threads (no Finish)."""
@@ -479,7 +273,7 @@ class SessionPool:
     def ping(self) -> bool:
         """Whether the server's gRPC health service reports SERVING (False if unreachable)."""
         runtime = self._ensure_runtime()
-        return runtime.loop.run(self._ping(runtime.rpc))
+        return runtime.loop.run(runtime.rpc.ping())
 
     # ---------------------------------------------------------------- batch calls
 
@@ -498,11 +292,8 @@ class SessionPool:
         rows = self._select(indices)
         prompts, seeds = self._prompt_args(prompts, seeds, rows)
         sessions = [runtime.sessions[row] for row in rows]
-        coroutines = [
-            self._prompt_session(s, p, sd)
-            for s, p, sd in zip(sessions, prompts, seeds, strict=True)
-        ]
-        self._raise_first(rows, runtime.loop.run(_gather(coroutines)))
+        coroutines = [s.set_scene(p, sd) for s, p, sd in zip(sessions, prompts, seeds, strict=True)]
+        self._raise_first(rows, runtime.loop.run(gather(coroutines)))
 
     def infer(self, actions: np.ndarray, indices: Sequence[int] | None = None) -> PoolStep:
         """Send one action chunk per selected row (float32 ``[n, 4, 2]``), all concurrently."""
@@ -514,7 +305,7 @@ class SessionPool:
             raise ValueError(
                 f"rows {unprompted} have no prompt yet; call prompt() or reset() first"
             )
-        return self._run_step(runtime, rows, lambda s, j, slots: self._step(s, chunk[j], slots))
+        return self._run_step(runtime, rows, lambda s, j, slots: s.step(chunk[j], slots))
 
     def reset(
         self,
@@ -535,7 +326,7 @@ class SessionPool:
         return self._run_step(
             runtime,
             rows,
-            lambda s, j, slots: self._reset_session(s, prompts[j], seeds[j], chunk[j], slots),
+            lambda s, j, slots: s.reset(prompts[j], seeds[j], chunk[j], slots),
         )
 
     def recover(self, indices: Sequence[int]) -> None:
@@ -543,82 +334,20 @@ class SessionPool:
         runtime = self._require_started()
         rows = self._select(indices)
         sessions = [runtime.sessions[row] for row in rows]
-        self._raise_first(rows, runtime.loop.run(_gather([self._recover(s) for s in sessions])))
+        self._raise_first(rows, runtime.loop.run(gather([s.recover() for s in sessions])))
 
     def depth(self, indices: Sequence[int] | None = None) -> dict[str, np.ndarray]:
         """Metric depth of each selected row's last frame: stream -> float32 ``[n, H, W]``."""
         runtime = self._require_started()
         rows = self._select(indices)
         sessions = [runtime.sessions[row] for row in rows]
-        results = runtime.loop.run(_gather([s.depth() for s in sessions]))
+        results = runtime.loop.run(gather([s.depth() for s in sessions]))
         self._raise_first(rows, results)
         return {name: np.stack([maps[name] for maps in results]) for name in self.stream_names}
 
-    # ------------------------------------------------------------- row coroutines
-
-    async def _step(self, session: _PoolSession, actions: np.ndarray, slots: RowSlots) -> _Outcome:
-        if session.lost:
-            return await self._restart(session, slots, session.lost_error, reopen=True)
-        try:
-            return await session.infer_into(actions, slots)
-        except (SequenceError, DecodeError) as error:
-            return await self._restart(session, slots, error, reopen=False)
-        except SessionLostError as error:
-            return await self._restart(session, slots, error, reopen=True)
-        except TransportError as error:
-            return _lose(session, error)
-
-    async def _restart(
-        self, session: _PoolSession, slots: RowSlots, cause: Exception | None, *, reopen: bool
-    ) -> _Outcome:
-        logger.info("row %d: restarting its rollout after: %s", session.row, cause)
-        try:
-            if reopen:
-                await session.open()
-            await session.reprompt()
-            outcome = await session.infer_into(ZERO_CHUNK, slots)
-        except RECOVERABLE_STEP_ERRORS as error:
-            return _lose(session, error)
-        outcome.status, outcome.error = SessionStatus.RESTARTED, cause
-        return outcome
-
-    async def _reset_session(
-        self,
-        session: _PoolSession,
-        prompt: str,
-        seed: int | None,
-        actions: np.ndarray,
-        slots: RowSlots,
-    ) -> _Outcome:
-        try:
-            await self._prompt_session(session, prompt, seed)
-        except RECOVERABLE_STEP_ERRORS as error:
-            return _lose(session, error)
-        return await self._step(session, actions, slots)
-
-    async def _prompt_session(self, session: _PoolSession, prompt: str, seed: int | None) -> None:
-        """Prompt a row, re-Initializing it first if its session is lost or gone."""
-        try:
-            if session.lost or session.state.info is None:
-                await session.open()
-            try:
-                await session.prompt(prompt, seed)
-            except SessionLostError:
-                await session.open()
-                await session.prompt(prompt, seed)
-        except TransportError as error:
-            # The server may or may not have applied the call: start this row over next time.
-            session.lost_error = error
-            raise
-
-    async def _recover(self, session: _PoolSession) -> None:
-        await session.open()
-        if session.state.prompt_text is not None:
-            await session.reprompt()
-
     async def _start(self, runtime: _Runtime) -> list[wire.SessionInfo]:
         await self._wait_ready(runtime.channel)
-        results = await _gather([s.open() for s in runtime.sessions])
+        results = await gather([s.open() for s in runtime.sessions])
         self._raise_first(range(self._num_sessions), results)
         return results
 
@@ -634,18 +363,8 @@ class SessionPool:
             ) from None
 
     @staticmethod
-    async def _finish_all(sessions: list[_PoolSession]) -> None:
+    async def _finish_all(sessions: list[PoolRow]) -> None:
         await asyncio.gather(*(s.finish_quietly() for s in sessions))
-
-    @staticmethod
-    async def _ping(rpc: _Rpc) -> bool:
-        try:
-            response, _ = await rpc.call(
-                rpc.health.Check, "Check", health.health_request(), (), policy=RetryPolicy.never()
-            )
-        except TransportError as error:
-            return health.ping_outcome(error)
-        return health.is_serving(response)
 
     # -------------------------------------------------------------------- helpers
 
@@ -653,7 +372,7 @@ class SessionPool:
         self,
         runtime: _Runtime,
         rows: list[int],
-        row_step: Callable[[_PoolSession, int, RowSlots], Awaitable[_Outcome]],
+        row_step: Callable[[PoolRow, int, RowSlots], Awaitable[RowOutcome]],
     ) -> PoolStep:
         """Run ``row_step`` for every selected row concurrently into fresh output arrays."""
         height, width = self.frame_size
@@ -666,12 +385,12 @@ class SessionPool:
             row_step(runtime.sessions[row], j, {name: out[j] for name, out in frames.items()})
             for j, row in enumerate(rows)
         ]
-        outcomes = runtime.loop.run(_gather(coroutines))
+        outcomes = runtime.loop.run(gather(coroutines))
         self._raise_first(rows, outcomes)
         if all(o.status == SessionStatus.LOST for o in outcomes):
             # No row could be served: the server is unreachable, which a caller must not miss.
             self._raise_first(rows, [o.error for o in outcomes])
-        return _assemble(frames, outcomes)
+        return assemble(frames, outcomes)
 
     def _ensure_runtime(self) -> _Runtime:
         if self._runtime is None:
@@ -679,14 +398,14 @@ class SessionPool:
             if not self.api_key:
                 raise wire.missing_api_key_error()
             loop = EventLoopThread(f"oasis-pool-{self._target}")
-            channel = loop.run(_open_channel(self.endpoint, self.tls))
-            rpc = _Rpc(channel, self.retry, self.timeout, self._target, self.api_key)
+            channel = loop.run(open_channel(self.endpoint, self.tls))
+            rpc = Transport(channel, self.retry, self.timeout, self._target, self.api_key)
             executor = ThreadPoolExecutor(
                 self.decode_threads or os.cpu_count() or 1, thread_name_prefix="oasis-decode"
             )
             runtime = _Runtime(loop, channel, rpc, executor)
             runtime.sessions = [
-                _PoolSession(row, rpc, self._session_state(), executor)
+                PoolRow(row, rpc, self._session_state(), executor)
                 for row in range(self._num_sessions)
             ]
             self._runtime = runtime
@@ -763,51 +482,3 @@ class SessionPool:
                 if isinstance(result, DecartRoboticsError):
                     result.row = row
                 raise result
-
-
-async def _open_channel(endpoint: str, tls: TlsSetting) -> grpc.aio.Channel:
-    return create_aio_channel(endpoint, tls)
-
-
-async def _gather(coroutines: Sequence[Awaitable[Any]]) -> list[Any]:
-    """Run all coroutines to completion; exceptions are returned in place of results."""
-    return await asyncio.gather(*coroutines, return_exceptions=True)
-
-
-def _lose(session: _PoolSession, error: Exception) -> _Outcome:
-    logger.warning("row %d: session lost: %s", session.row, error)
-    session.lost_error = error
-    return _Outcome(SessionStatus.LOST, error)
-
-
-def _raise_any(results: Sequence[object]) -> None:
-    for result in results:
-        if isinstance(result, BaseException):
-            raise result
-
-
-def _assemble(frames: dict[str, np.ndarray], outcomes: list[_Outcome]) -> PoolStep:
-    """Build the PoolStep; LOST rows get zero frames."""
-    status = np.array([o.status for o in outcomes], np.int8)
-    lost = status == SessionStatus.LOST
-    for out in frames.values():
-        out[lost] = 0
-    truths = [o.truth for o in outcomes]
-    truth = None
-    if any(t is not None for t in truths):
-        truth = np.full((len(outcomes), CHUNK, len(TRUTH_FIELDS)), np.nan)
-        for j, row_truth in enumerate(truths):
-            if row_truth is not None:
-                truth[j, : len(row_truth)] = row_truth[:CHUNK]
-    expert = np.full((len(outcomes), CHUNK, ACTION_DIM), np.nan, np.float32)
-    for j, outcome in enumerate(outcomes):
-        if outcome.expert is not None:
-            expert[j] = outcome.expert
-    return PoolStep(
-        frames=frames,
-        truth=truth,
-        status=status,
-        errors=[o.error for o in outcomes],
-        sequence_nums=np.array([o.sequence_num for o in outcomes], np.int64),
-        expert=expert,
-    )

@@ -53,8 +53,8 @@ def run(cfg: DictConfig) -> int:
         2
     """
     from oasis_torchrl.drivers import load_driver
+    from oasis_torchrl.evaluation import Evaluator, evaluate_side_by_side, load_report
     from oasis_torchrl.remote import RemotePolicyError
-    from oasis_torchrl.train.evaluate import Evaluator, evaluate_side_by_side, load_report
 
     compared: dict[str, Any] = {}
     try:
@@ -96,7 +96,7 @@ def run(cfg: DictConfig) -> int:
 
 def _versus(result: dict[str, Any], baseline: dict[str, Any], name: str) -> dict[str, Any]:
     """The paired difference against ``baseline``, logged for a person."""
-    from oasis_torchrl.train.evaluate import difference as compare
+    from oasis_torchrl.evaluation import difference as compare
 
     difference = compare(result, baseline)
     logger.info(

@@ -98,7 +98,7 @@ def record(cfg: RecordConfig, stop: threading.Event) -> int:
     from tqdm import tqdm
 
     from oasis_torchrl.data import LeRobotRecorder
-    from oasis_torchrl.train.driving import drive
+    from oasis_torchrl.envs.driving import drive
 
     storage = _recorder_kwargs(cfg)
     driver = driver_spec(cfg)()

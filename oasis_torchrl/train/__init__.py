@@ -1,3 +1,3 @@
-"""Training and evaluation of driving policies: PPO (TorchRL), behaviour cloning (LeRobot),
-evaluation, checkpoints and the record -> BC -> PPO -> eval pipeline. Their settings are the
-dataclasses of :mod:`oasis_torchrl.config`."""
+"""Training of driving policies: PPO (TorchRL), behaviour cloning (LeRobot), checkpoints and the
+record -> BC -> PPO -> eval pipeline, evaluating with :mod:`oasis_torchrl.evaluation`. Their
+settings are the dataclasses of :mod:`oasis_torchrl.config`."""

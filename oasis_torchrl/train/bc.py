@@ -31,12 +31,12 @@ from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config import save_config
 from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
+from oasis_torchrl.evaluation import EvalReport, Evaluator
 from oasis_torchrl.models import make_actor_critic
 from oasis_torchrl.models.privileged import PRIVILEGED_KEY
 from oasis_torchrl.protocol import FRONT_CROP
 from oasis_torchrl.train.batch_order import StepBatches
 from oasis_torchrl.train.bc_data import InMemoryBCDataset
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator
 from oasis_torchrl.train.shift import random_shift
 
 logger = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.config.presets import preset_names
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.drivers.pretrained import POLICY_FILES, policies_folder
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator
+from oasis_torchrl.evaluation import EvalReport, Evaluator
 from oasis_torchrl.train.stage_seconds import STAGE_SECONDS
 
 logger = logging.getLogger(__name__)

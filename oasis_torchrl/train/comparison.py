@@ -5,7 +5,7 @@ sends frames only (``ground_truth: false``: no distance) are compared by their m
 under the frames-only reward (the motion reward) instead, and their collisions are the reward's
 likely-collision terminations.
 
-Evaluations are :func:`oasis_torchrl.train.evaluate.EvalReport.to_dict` dicts (aggregates and
+Evaluations are :func:`oasis_torchrl.evaluation.EvalReport.to_dict` dicts (aggregates and
 ``per_episode`` results), keyed by policy name.
 """
 
@@ -16,6 +16,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from oasis_torchrl.evaluation.selection import selection_figure
 
 AUTOPILOT_COLOR = "0.25"
 CONSTANT_COLOR = "0.65"
@@ -119,7 +121,7 @@ def comparison(
     rows = []
     for name, evaluation in evaluations.items():
         key, unit = compared_value(evaluation)
-        distance = evaluation["mean_distance" if unit == "m" else "mean_return"]
+        distance = selection_figure(evaluation)
         kind = "autopilot" if name == autopilot else "constant" if name in present else "learned"
         kind = "shipped" if name in shipped else kind
         rows.append(

@@ -34,8 +34,8 @@ from tensordict import TensorDictBase
 from tqdm import tqdm
 
 from oasis_torchrl.drivers import Autopilot, Driver
+from oasis_torchrl.envs.driving import drive
 from oasis_torchrl.envs.factory import make_env
-from oasis_torchrl.train.driving import drive
 
 logger = logging.getLogger(__name__)
 

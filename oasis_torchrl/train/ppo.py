@@ -40,6 +40,7 @@ from oasis_torchrl.drivers.folders import export_lerobot, load_net
 from oasis_torchrl.envs.capabilities import env_capabilities
 from oasis_torchrl.envs.factory import make_env
 from oasis_torchrl.envs.transforms import PRIVILEGED_FIELDS, ChunkFrameStack
+from oasis_torchrl.evaluation import EvalReport, Evaluator, beats, selection_figure, selection_key
 from oasis_torchrl.models import DrivingNet, DrivingNetConfig, make_actor_critic
 from oasis_torchrl.models.checkpoint import (
     BEST,
@@ -49,7 +50,6 @@ from oasis_torchrl.models.checkpoint import (
     save_checkpoint,
 )
 from oasis_torchrl.protocol import FRONT_CROP
-from oasis_torchrl.train.evaluate import EvalReport, Evaluator, beats
 from oasis_torchrl.train.perception_warmup import PerceptionWarmup
 from oasis_torchrl.train.ppo_update import PPOUpdate
 
@@ -402,12 +402,12 @@ class PPOTrainer:
         return (None: none chosen yet)."""
         if self.kept_selection is None:
             return None
-        return self.kept_selection[_selection_key(self.kept_selection)]
+        return selection_figure(self.kept_selection)
 
     def _periodic_evaluation(self) -> EvalReport:
         """Evaluate on ``eval.selection_seeds`` if set, keeping the policy as
         ``checkpoints/best.pt`` if it beats the kept one (by ``eval.selection_margin`` standard
-        errors, :func:`~oasis_torchrl.train.evaluate.beats`); otherwise on ``eval.seeds``. With
+        errors, :func:`~oasis_torchrl.evaluation.beats`); otherwise on ``eval.seeds``. With
         ``checkpoint.keep_evaluated``, the evaluated policy is also saved as
         ``checkpoints/frames_<env steps>.pt`` (to choose among them later, e.g. the best within
         a smaller budget)."""
@@ -449,7 +449,7 @@ class PPOTrainer:
         logger.info(
             "keeping the policy of %d env steps (%s %.2f on the selection seeds)",
             state["frames"],
-            _selection_key(self.kept_selection),
+            selection_key(self.kept_selection),
             self.best_selection,
         )
         return net_from_checkpoint(state), path, state["frames"]
@@ -560,11 +560,6 @@ def evaluated_checkpoint_name(frames: int) -> str:
         'frames_10240.pt'
     """
     return f"frames_{frames}.pt"
-
-
-def _selection_key(evaluation: dict[str, Any]) -> str:
-    """What selection compares: the mean distance, or on frames alone the mean return."""
-    return "mean_distance" if evaluation.get("ground_truth", True) else "mean_return"
 
 
 def _prefixed(prefix: str, values: dict[str, float]) -> dict[str, float]:

@@ -11,8 +11,8 @@ from lerobot_env_oasis import OasisEnvConfig, OasisVectorEnv
 
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import ScriptedDriver
+from oasis_torchrl.evaluation import Evaluator
 from oasis_torchrl.protocol import CAMERAS
-from oasis_torchrl.train.evaluate import Evaluator
 
 SCRIPT = "throttle=1.0"  # straight on: some of these worlds have an obstacle ahead
 SEED = 11

@@ -12,11 +12,11 @@ from tensordict import TensorDict
 
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.envs import OasisEnv
+from oasis_torchrl.envs.driving import drive
 from oasis_torchrl.models.motion import MotionNet, MotionNetConfig
 from oasis_torchrl.rewards import MotionModelError, MotionReward, MotionRewardConfig
 from oasis_torchrl.rewards.motion_net import load_motion_net, save_motion_weights
 from oasis_torchrl.sim.config import ServerConfig
-from oasis_torchrl.train.driving import drive
 
 TINY = MotionNetConfig(channels=(4, 4), hidden=8)
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import pickle
 import shlex
 import subprocess
@@ -136,24 +135,6 @@ def test_cli_rejects_bad_settings(caplog: pytest.LogCaptureFixture) -> None:
 def test_config_validation_names_the_field(overrides: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         ServerConfig(**{"api_keys": ("k",), **overrides})  # type: ignore[arg-type]
-
-
-def test_the_server_side_imports_nothing_above_the_protocol() -> None:
-    # The embedded server is a peer of the client: it stands on the protocol (and the ground
-    # floor every layer shares: the settings fields, whole-file writes and the one-line video
-    # fallback of the package's import) alone; not even the config package.
-    code = (
-        "import json, sys\n"
-        "import oasis_torchrl.sim.__main__, oasis_torchrl.sim.launcher, oasis_torchrl.sim.server\n"
-        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('oasis_torchrl.'))))"
-    )
-    result = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    )
-    allowed = ("oasis_torchrl.sim", "oasis_torchrl.proto", "oasis_torchrl.protocol")
-    allowed += ("oasis_torchrl.options", "oasis_torchrl.atomic", "oasis_torchrl.video_fallback")
-    imported = json.loads(result.stdout)
-    assert imported and not [name for name in imported if not name.startswith(allowed)]
 
 
 def test_a_server_process_stops_when_its_launcher_dies(tmp_path: Path) -> None:

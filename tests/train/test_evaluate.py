@@ -12,7 +12,7 @@ from tensordict import TensorDict
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.drivers import ScriptedDriver
-from oasis_torchrl.train.evaluate import Evaluator, episode_results
+from oasis_torchrl.evaluation import Evaluator, episode_results
 
 from .conftest import TINY_ENV
 

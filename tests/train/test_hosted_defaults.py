@@ -102,7 +102,7 @@ def test_demo_runs_the_whole_loop_on_frames_alone(
 def test_evaluation_scores_the_reference_reward_beside_ground_truth() -> None:
     from oasis_torchrl.config import load_config
     from oasis_torchrl.drivers import ScriptedDriver
-    from oasis_torchrl.train.evaluate import Evaluator
+    from oasis_torchrl.evaluation import Evaluator
 
     cfg = load_config("eval", [*TINY_ENV, "episodes=2", "max_steps=3"])
     with Evaluator(cfg.env, cfg, progress=False) as evaluator:

@@ -14,7 +14,7 @@ from viz._readback import Readback
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
-from oasis_torchrl.train import pipeline
+from oasis_torchrl.train import main_evaluation, pipeline
 from oasis_torchrl.train.cards import TrainingRun
 from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
 
@@ -203,17 +203,17 @@ def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     opened = []
-    for_driver = pipeline.Evaluator.for_driver
+    for_driver = main_evaluation.Evaluator.for_driver
 
     def counting_for_driver(env_cfg, eval_cfg, driver, **kwargs):
         opened.append(eval_cfg.rerun)
         return for_driver(env_cfg, eval_cfg, driver, **kwargs)
 
-    monkeypatch.setattr(pipeline.Evaluator, "for_driver", counting_for_driver)
+    monkeypatch.setattr(main_evaluation.Evaluator, "for_driver", counting_for_driver)
     rerun = tmp_path / "eval.rrd"
     cfg = load_config("demo", [*TINY_PIPELINE, f"output_dir={tmp_path}", f"eval.rerun={rerun}"])
     slow, fast = "constant:throttle=0.5", "constant:throttle=1.0"
-    results = pipeline.evaluate_all(cfg, {"slow": slow, "fast": fast, "again": fast})
+    results = main_evaluation.evaluate_all(cfg, {"slow": slow, "fast": fast, "again": fast})
     assert opened == [None, str(rerun)]  # the last name's policy, recorded the first time
     assert results["again"] == results["fast"] != results["slow"]
     assert results["again"] is not results["fast"]  # separate rows of the summary

@@ -154,7 +154,7 @@ def test_periodic_evaluations_number_their_episodes_on(tmp_path: Path) -> None:
     episodes get the next numbers, and a row's tab names both of its episodes."""
     from oasis_torchrl.config import load_config
     from oasis_torchrl.drivers import ScriptedDriver
-    from oasis_torchrl.train.evaluate import Evaluator
+    from oasis_torchrl.evaluation import Evaluator
 
     path = tmp_path / "evaluations.rrd"
     settings = ["episodes=2", "max_steps=2", "env.image_size=[64,96]", f"rerun={path}"]

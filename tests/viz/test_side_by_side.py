@@ -133,7 +133,7 @@ def test_eval_records_policies_side_by_side_on_the_same_seeds(
 
 def test_the_main_job_records_the_final_policy_beside_the_compared_ones(tmp_path: Path) -> None:
     from oasis_torchrl.config import load_config
-    from oasis_torchrl.train.evaluate import side_by_side_for
+    from oasis_torchrl.evaluation import side_by_side_for
 
     cfg = load_config("eval", [f"rerun={tmp_path / 'eval.rrd'}", "compare=[autopilot]"])
     policies = {"autopilot": "autopilot", "constant": "constant", "bc": "out", "bc+ppo": "out"}
