@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from pathlib import Path
 
 import pytest
@@ -52,7 +53,8 @@ def test_train_eval_record_defaults_run_on_frames_alone(
     assert main(["eval", *evaluated, *outputs, *TINY_ENV, *HOSTED]) == 0
     report = json.loads(report_path.read_text())
     assert report["ground_truth"] is False and "ignores seeds" in report["note"]
-    assert 1 <= report["mean_steps"] <= 3 and report["mean_progress"] >= 0
+    # Metres seen, signed: an untrained policy may back up (scenes are random, seeds ignored)
+    assert 1 <= report["mean_steps"] <= 3 and math.isfinite(report["mean_progress"])
 
     root = tmp_path / "recorded"
     sizes = ["env.server.width=96", "env.server.height=64", "env.num_envs=1", "env.max_steps=2"]
