@@ -146,7 +146,7 @@ class StageCache:
         self.seconds: dict[str, float] = saved.get("seconds", {})
 
     def evaluate(self, cfg: DictConfig, policies: dict[str, str]) -> dict[str, dict[str, Any]]:
-        """``evaluate_all`` of the policies not evaluated yet with these settings."""
+        """``evaluate_all`` of each policy not evaluated yet with these settings."""
         settings = (
             f"prompts={list(cfg.eval.prompts)} episodes={cfg.eval.episodes} "
             f"seeds={list(cfg.eval.seeds)} steps={cfg.eval.max_steps}"
@@ -155,9 +155,8 @@ class StageCache:
         missing = {
             name: spec for name, spec in policies.items() if keys[name] not in self.evaluations
         }
-        if missing:
-            for name, evaluation in evaluate_all(cfg, missing).items():
-                self.evaluations[keys[name]] = evaluation
+        for name, spec in missing.items():  # saved one by one: a stopped run keeps each
+            self.evaluations[keys[name]] = evaluate_all(cfg, {name: spec})[name]
             self._save()
         return {name: self.evaluations[keys[name]] for name in policies}
 
