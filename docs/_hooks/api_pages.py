@@ -144,6 +144,8 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.train",
             "oasis_torchrl.train.pipeline",
+            "oasis_torchrl.train.plan",
+            "oasis_torchrl.train.stages",
             "oasis_torchrl.train.ppo",
             "oasis_torchrl.train.ppo_update",
             "oasis_torchrl.train.ppo_loss",
