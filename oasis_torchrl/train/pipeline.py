@@ -223,7 +223,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
             bc_policy,
             ppo.policy_dir,
             ppo.checkpoint,
-            plan.recording,
+            plan.eval.recording,
             plan.output_dir / "summary.json",
             plan.output_dir / "comparison.png",
             evaluations,
@@ -231,7 +231,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
             kept,
             {name: load_card(pretrained_path(name)) for name in plan.shipped},
         )
-    write_summary(result, plan.config.eval)
+    write_summary(result, plan.eval.recorded)
     logger.info("pipeline done in %.0f s; summary: %s", sum(seconds.values()), result.summary_path)
     return result
 

@@ -280,20 +280,25 @@ class EvaluationPlan:
 
     Example:
         >>> plan = EvaluationPlan.of(load_config("demo", ["output_dir=/tmp/d"]))
-        >>> plan.settings(record=True).rerun, plan.settings(record=False).rerun
-        ('/tmp/d/eval.rrd', None)
+        >>> plan.settings(record=True).rerun, plan.settings(record=False).rerun, plan.recording
+        ('/tmp/d/eval.rrd', None, PosixPath('/tmp/d/eval.rrd'))
     """
 
     env: DictConfig
     recorded: DictConfig
     unrecorded: DictConfig
     progress: bool
+    recording: Path | None
+    """The rerun file a recorded evaluation writes, if it writes one."""
 
     @classmethod
     def of(cls, cfg: DictConfig) -> EvaluationPlan:
         """The evaluations of a pipeline config."""
         unrecorded = OmegaConf.merge(cfg.eval, {"rerun": None, "lerobot": None})
-        return cls(frozen(cfg.env), frozen(cfg.eval), frozen(unrecorded), cfg.progress)
+        rerun = cfg.eval.rerun
+        recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
+        settings = (frozen(cfg.eval), frozen(unrecorded))
+        return cls(frozen(cfg.env), *settings, cfg.progress, recording)
 
     def settings(self, *, record: bool) -> DictConfig:
         """The ``eval`` settings, recording as they say or not at all."""
@@ -342,8 +347,6 @@ class RunPlan:
     """The reference drivers' specs the comparison lists (those the endpoint can drive)."""
     shipped: tuple[str, ...]
     """The shipped policies' specs the comparison lists."""
-    recording: Path | None
-    """The rerun file the evaluation writes, if it writes one."""
 
 
 def plan_run(cfg: DictConfig) -> RunPlan:
@@ -354,8 +357,8 @@ def plan_run(cfg: DictConfig) -> RunPlan:
         >>> plan = plan_run(load_config("demo", ["output_dir=/tmp/d"]))
         >>> plan.demonstrators.source, len(plan.clone), plan.ppo.init_from, plan.ppo.eval.final
         ('autopilot', 3, '/tmp/d/bc/round_2/policy', False)
-        >>> plan.references, plan.recording
-        (('autopilot', 'constant:throttle=1.0,steering=0.0'), PosixPath('/tmp/d/eval.rrd'))
+        >>> plan.references
+        ('autopilot', 'constant:throttle=1.0,steering=0.0')
     """
     shipped = tuple(shipped_specs(cfg.eval.get("pretrained")))  # an unknown name fails first
     found = env_capabilities(cfg.env)
@@ -368,8 +371,6 @@ def plan_run(cfg: DictConfig) -> RunPlan:
     references = [str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])]
     if not found.ground_truth:  # the autopilot drives with ground truth
         references = [spec for spec in references if spec != AUTOPILOT]
-    rerun = cfg.eval.rerun
-    recording = Path(rerun) if rerun and describe_target(rerun) == "file" else None
     return RunPlan(
         frozen(cfg),
         Path(cfg.output_dir),
@@ -381,5 +382,4 @@ def plan_run(cfg: DictConfig) -> RunPlan:
         EvaluationPlan.of(cfg),
         tuple(dict.fromkeys(references)),
         shipped,
-        recording,
     )
