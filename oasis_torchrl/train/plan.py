@@ -235,8 +235,10 @@ def _bc_config(
 ) -> DictConfig:
     """A clone round's BC config: the ``bc`` stage settings, the env's policy images, the
     round's ``values``, no evaluation of its own."""
-    policy: dict[str, Any] = {"image_size": list(cfg.env.image_size)}
-    policy["front_crop"] = cfg.env.front_crop
+    policy: dict[str, Any] = {
+        "image_size": list(cfg.env.image_size),
+        "front_crop": cfg.env.front_crop,
+    }
     if not ground_truth:  # no privileged state in the demonstrations
         policy["aux_weight"] = 0.0
     shared = {"progress": cfg.progress, "dataset": {"root": str(data)}, "eval": {"episodes": 0}}
