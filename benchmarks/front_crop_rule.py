@@ -32,7 +32,8 @@ from oasis_torchrl.config import load_config
 from oasis_torchrl.evaluation import paired_difference
 from oasis_torchrl.protocol import CAMERAS
 from oasis_torchrl.train.bc import train_bc
-from oasis_torchrl.train.pipeline import bc_config, demonstrations
+from oasis_torchrl.train.plan import plan_run
+from oasis_torchrl.train.stages import gather_demonstrations
 
 CROP = 0.25
 """The crop's fraction of the front frame (the rule's)."""
@@ -55,8 +56,9 @@ def rule_config(output_dir: Path, overrides: list[str]) -> DictConfig:
     return load_config("demo", overrides, file=CLONE_PRESET, values=values)
 
 
-def train_arm(cfg: DictConfig, demos: Path, crop: bool) -> Path:
-    """Train one arm's clone (reused when its policy exists); the path of its policy."""
+def train_arm(cfg: DictConfig, clone: DictConfig, crop: bool) -> Path:
+    """Train one arm's clone from the run's first clone settings ``clone`` (reused when its
+    policy exists); the path of its policy."""
     folder = Path(cfg.output_dir) / ("bc_crop" if crop else "bc_no_crop")
     policy = folder / "policy"
     if policy.exists():
@@ -65,7 +67,7 @@ def train_arm(cfg: DictConfig, demos: Path, crop: bool) -> Path:
     if not crop:
         arm["dataset"] = {"cameras": list(CAMERAS)}
         arm["policy"] = {"front_crop": None}
-    train_bc(OmegaConf.merge(bc_config(cfg, demos, 0), arm))
+    train_bc(OmegaConf.merge(clone, arm))
     return policy
 
 
@@ -101,8 +103,10 @@ def main() -> None:
     keep_batches_in_heap()  # as the oasis-torchrl command does
 
     cfg = rule_config(args.output_dir, args.overrides)
-    demos = demonstrations(cfg, args.output_dir / "demos")
-    arms = {"crop": str(train_arm(cfg, demos, True)), "no_crop": str(train_arm(cfg, demos, False))}
+    plan = plan_run(cfg)
+    gather_demonstrations(plan.record)
+    clone = plan.clone[0].config
+    arms = {"crop": str(train_arm(cfg, clone, True)), "no_crop": str(train_arm(cfg, clone, False))}
     cache = StageCache(args.output_dir / "evaluations.json")
     report = compare(cache, cfg, arms)
     episodes = min(HELD_OUT_EPISODES, cfg.eval.episodes)

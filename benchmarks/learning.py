@@ -71,17 +71,16 @@ from oasis_torchrl.config.presets import preset_file
 from oasis_torchrl.config.scenes import LEARNING_HELD_OUT_PROMPTS, LEARNING_HELD_OUT_SEED
 from oasis_torchrl.drivers.pretrained import resolve_pretrained
 from oasis_torchrl.evaluation import paired_difference, selection_figure
-from oasis_torchrl.train.main_evaluation import evaluate_all
-from oasis_torchrl.train.pipeline import (
-    PPOStage,
-    bc_config,
-    clone,
-    demonstrations,
-    ppo_config,
-    run_ppo,
-    timed_stage,
-)
+from oasis_torchrl.train.pipeline import timed_stage
+from oasis_torchrl.train.plan import EvaluationPlan, plan_run, ppo_config
 from oasis_torchrl.train.ppo import evaluated_checkpoint_name
+from oasis_torchrl.train.stages import (
+    PPOStage,
+    evaluate_all,
+    gather_demonstrations,
+    run_ppo,
+    train_clone,
+)
 
 logger = logging.getLogger("benchmarks.learning")
 
@@ -155,8 +154,9 @@ class StageCache:
         missing = {
             name: spec for name, spec in policies.items() if keys[name] not in self.evaluations
         }
+        plan = EvaluationPlan.of(cfg)
         for name, spec in missing.items():  # saved one by one: a stopped run keeps each
-            self.evaluations[keys[name]] = evaluate_all(cfg, {name: spec})[name]
+            self.evaluations[keys[name]] = evaluate_all(plan, {name: spec}, record=True)[name]
             self._save()
         return {name: self.evaluations[keys[name]] for name in policies}
 
@@ -350,11 +350,12 @@ def run_stages(args: argparse.Namespace, cfg: DictConfig, cache: StageCache) -> 
         dagger_policy = Path(resolve_pretrained(args.clone))
         trained["bc_dagger"] = str(dagger_policy)
     elif stages & CLONE_STAGES:
+        plan = plan_run(cfg)
         with cache.timed("record"):
-            dataset = demonstrations(cfg, work / "demos")
+            gather_demonstrations(plan.record)
         with cache.timed("bc"):
-            dagger_policy = clone(cfg, dataset)
-        trained["bc"] = str(Path(bc_config(cfg, dataset, 0).output_dir) / "policy")
+            dagger_policy = train_clone(plan.clone)
+        trained["bc"] = str(plan.clone[0].policy)
         trained["bc_dagger"] = str(dagger_policy)
     for stage in ("bc", "bc_dagger"):
         if stage in stages:

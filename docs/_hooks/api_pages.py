@@ -147,7 +147,8 @@ API_PAGES: dict[str, ApiPage] = {
         (
             "oasis_torchrl.train",
             "oasis_torchrl.train.pipeline",
-            "oasis_torchrl.train.main_evaluation",
+            "oasis_torchrl.train.plan",
+            "oasis_torchrl.train.stages",
             "oasis_torchrl.train.ppo",
             "oasis_torchrl.train.ppo_update",
             "oasis_torchrl.train.ppo_loss",

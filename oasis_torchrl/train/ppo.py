@@ -15,7 +15,6 @@ and the kept policy exported as a LeRobot policy folder. Config:
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 import time
@@ -109,10 +108,10 @@ def build_net(cfg: DictConfig, cameras: tuple[str, ...]) -> DrivingNet:
 
 
 def with_capabilities(cfg: DictConfig) -> DictConfig:
-    """A copy of ``cfg`` whose null ``privileged_critic`` and ``loss.aux_coeff`` are set from
-    what its endpoint sends (:mod:`~oasis_torchrl.envs.capabilities`): on with ground truth, off
-    on frames alone (explicit values are kept; on a frames-only endpoint
-    :func:`~oasis_torchrl.envs.make_env` refuses them).
+    """A copy of ``cfg`` (read-only if it is) whose null ``privileged_critic`` and
+    ``loss.aux_coeff`` follow what its endpoint sends (:mod:`~oasis_torchrl.envs.capabilities`):
+    on with ground truth, off on frames alone (explicit values are kept; on a frames-only
+    endpoint :func:`~oasis_torchrl.envs.make_env` refuses them).
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -121,12 +120,10 @@ def with_capabilities(cfg: DictConfig) -> DictConfig:
         (False, 0.0)
     """
     found = env_capabilities(cfg.env)
-    cfg = copy.deepcopy(cfg)
-    if cfg.privileged_critic is None:
-        cfg.privileged_critic = found.ground_truth
-    if cfg.loss.aux_coeff is None:
-        cfg.loss.aux_coeff = AUX_COEFF if found.ground_truth else 0.0
-    return cfg
+    privileged = found.ground_truth if cfg.privileged_critic is None else cfg.privileged_critic
+    aux = cfg.loss.aux_coeff
+    aux = (AUX_COEFF if found.ground_truth else 0.0) if aux is None else aux
+    return OmegaConf.merge(cfg, {"privileged_critic": privileged, "loss": {"aux_coeff": aux}})
 
 
 def uses_ground_truth(cfg: DictConfig) -> bool:

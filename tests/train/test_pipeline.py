@@ -14,8 +14,9 @@ from viz._readback import Readback
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
-from oasis_torchrl.train import main_evaluation, pipeline
+from oasis_torchrl.train import pipeline, stages
 from oasis_torchrl.train.cards import TrainingRun
+from oasis_torchrl.train.plan import EvaluationPlan, plan_run
 from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
 
 from .conftest import TINY_ENV
@@ -133,7 +134,7 @@ def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_aga
     dataset = tmp_path / "demos"
     shutil.copytree(tiny_dataset, dataset)
     overrides = [*TINY_PIPELINE, "dagger.steps=4", "bc.train.save_every=2"]
-    cfg = load_config("demo", [f"output_dir={tmp_path}", *overrides])
+    rounds = plan_run(load_config("demo", [f"output_dir={tmp_path}", *overrides])).clone
     runs: list[tuple[str, str | None]] = []
     steps: list[int] = []
     train_bc, forward = bc.train_bc, OasisPolicy.forward
@@ -155,10 +156,10 @@ def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_aga
     monkeypatch.setattr(bc, "train_bc", tracked)
     monkeypatch.setattr(OasisPolicy, "forward", counted)
     with pytest.raises(KeyboardInterrupt):
-        pipeline.clone(cfg, dataset)
+        stages.train_clone(rounds)
     assert episodes(tmp_path / "bc" / "round_1" / "dataset") == 4  # 2 demonstrations, 2 DAgger
-    monkeypatch.setattr(pipeline, "record_demonstrations", recorded_again)
-    assert pipeline.clone(cfg, dataset) == tmp_path / "bc" / "round_1" / "policy"
+    monkeypatch.setattr(stages, "record_demonstrations", recorded_again)
+    assert stages.train_clone(rounds) == tmp_path / "bc" / "round_1" / "policy"
     assert runs[2:] == [("round_1", "latest")]  # round 0 reused, round 1 resumed
     assert steps == [1, 2]  # round 1's steps 3 and 4
     assert (tmp_path / "bc" / "round_1" / "policy" / "model.safetensors").exists()
@@ -175,7 +176,8 @@ def test_a_stop_while_a_round_records_loses_only_its_unfinished_episodes(
     dataset = tmp_path / "demos"
     shutil.copytree(tiny_dataset, dataset)
     before = fingerprint(dataset)
-    cfg = load_config("demo", [f"output_dir={tmp_path}", *TINY_PIPELINE, "dagger.episodes=4"])
+    settings = [f"output_dir={tmp_path}", *TINY_PIPELINE, "dagger.episodes=4"]
+    rounds = plan_run(load_config("demo", settings)).clone
     round_1 = tmp_path / "bc" / "round_1"
     write = LeRobotRecorder.write
 
@@ -186,14 +188,14 @@ def test_a_stop_while_a_round_records_loses_only_its_unfinished_episodes(
 
     monkeypatch.setattr(LeRobotRecorder, "write", stopped)
     with pytest.raises(KeyboardInterrupt):
-        pipeline.clone(cfg, dataset)
+        stages.train_clone(rounds)
     assert (tmp_path / "bc" / "round_0" / "policy").exists() and not (round_1 / "dagger").exists()
     assert not any(round_1.glob(".*partial"))  # a stop that ran Python's cleanup leaves none
     killed = round_1 / ".dagger.partial"  # what a kill mid-recording leaves instead
     shutil.copytree(tiny_dataset, killed)
     (killed / "meta" / "info.json").write_text("{")
     monkeypatch.setattr(LeRobotRecorder, "write", write)
-    assert pipeline.clone(cfg, dataset) == round_1 / "policy"
+    assert stages.train_clone(rounds) == round_1 / "policy"
     assert fingerprint(dataset) == before
     assert episodes(round_1 / "dagger") == 4 and episodes(round_1 / "dataset") == 6
     assert not killed.exists()
@@ -203,17 +205,18 @@ def test_a_policy_named_twice_is_evaluated_once_and_the_last_recorded(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     opened = []
-    for_driver = main_evaluation.Evaluator.for_driver
+    for_driver = stages.Evaluator.for_driver
 
     def counting_for_driver(env_cfg, eval_cfg, driver, **kwargs):
         opened.append(eval_cfg.rerun)
         return for_driver(env_cfg, eval_cfg, driver, **kwargs)
 
-    monkeypatch.setattr(main_evaluation.Evaluator, "for_driver", counting_for_driver)
+    monkeypatch.setattr(stages.Evaluator, "for_driver", counting_for_driver)
     rerun = tmp_path / "eval.rrd"
     cfg = load_config("demo", [*TINY_PIPELINE, f"output_dir={tmp_path}", f"eval.rerun={rerun}"])
     slow, fast = "constant:throttle=0.5", "constant:throttle=1.0"
-    results = main_evaluation.evaluate_all(cfg, {"slow": slow, "fast": fast, "again": fast})
+    policies = {"slow": slow, "fast": fast, "again": fast}
+    results = stages.evaluate_all(EvaluationPlan.of(cfg), policies, record=True)
     assert opened == [None, str(rerun)]  # the last name's policy, recorded the first time
     assert results["again"] == results["fast"] != results["slow"]
     assert results["again"] is not results["fast"]  # separate rows of the summary

@@ -23,7 +23,7 @@ from oasis_torchrl.drivers import PolicyDriver, load_driver
 from oasis_torchrl.drivers.pretrained import POLICIES_ENV_VAR
 from oasis_torchrl.envs import capabilities
 from oasis_torchrl.models.checkpoint import BEST, LATEST, load_checkpoint
-from oasis_torchrl.train import main_evaluation, pipeline
+from oasis_torchrl.train import pipeline, plan, stages
 from oasis_torchrl.train.cards import TrainingRun, card_text, matching_preset
 
 from .conftest import TINY_ENV, tiny_ppo
@@ -174,13 +174,14 @@ def test_unknown_names_are_one_line_errors_listing_the_shipped(
 def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
     registry: Path, ppo_run: Path
 ) -> None:
-    assert main_evaluation.shipped_specs(None) == {"pretrained:tiny": "pretrained:tiny"}
+    assert plan.shipped_specs(None) == {"pretrained:tiny": "pretrained:tiny"}
     cfg = load_config("demo", [*TINY_ENV, "eval.episodes=1", "eval.max_steps=2", "progress=false"])
     policies = {
         "constant:throttle=1.0": "constant:throttle=1.0",
         "pretrained:tiny": "pretrained:tiny",
     }
-    evaluations = main_evaluation.evaluate_all(cfg, {**policies, "bc": str(ppo_run / "policy")})
+    policies["bc"] = str(ppo_run / "policy")
+    evaluations = stages.evaluate_all(plan.EvaluationPlan.of(cfg), policies, record=True)
     cards = {"pretrained:tiny": json.loads((registry / "tiny" / "card.json").read_text())}
     paths = [Path()] * 7
     result = pipeline.PipelineResult(*paths, evaluations, {"bc": 60.0}, False, cards)
@@ -204,13 +205,13 @@ def test_only_the_best_learned_policy_is_recorded_beside_the_compared_one(
     """The best ("fast", not last) is recorded beside the autopilot; no other episode is
     recorded, and the compared autopilot drives once, in the recorded pass."""
     recorded: list[bool] = []
-    for_driver = main_evaluation.Evaluator.for_driver
+    for_driver = stages.Evaluator.for_driver
 
     def counting_for_driver(env_cfg, eval_cfg, driver, **kwargs):
         recorded.append(bool(eval_cfg.rerun or kwargs.get("rerun_logger")))
         return for_driver(env_cfg, eval_cfg, driver, **kwargs)
 
-    monkeypatch.setattr(main_evaluation.Evaluator, "for_driver", counting_for_driver)
+    monkeypatch.setattr(stages.Evaluator, "for_driver", counting_for_driver)
     rerun = tmp_path / "eval.rrd"
     overrides = [*TINY_ENV, "eval.episodes=1", "eval.max_steps=2", "progress=false"]
     cfg = load_config("demo", [*overrides, f"eval.rerun={rerun}", "eval.compare=[autopilot]"])
@@ -219,7 +220,7 @@ def test_only_the_best_learned_policy_is_recorded_beside_the_compared_one(
         "fast": "constant:throttle=1.0",
         "slow": "constant:throttle=0.2",
     }
-    results = main_evaluation.evaluate_and_record_best(cfg, policies, [])
+    results = stages.evaluate_and_record_best(plan.EvaluationPlan.of(cfg), policies, [])
     assert list(results) == list(policies)  # the table keeps the policies' order
     assert results["fast"]["mean_distance"] > results["slow"]["mean_distance"]
     assert recorded == [False, False, True, True]  # fast, slow; then autopilot, fast
