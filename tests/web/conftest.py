@@ -28,6 +28,10 @@ BROWSER_FLAGS = (
     "--disable-component-update",
     "--disable-sync",
     "--window-size=1280,760",
+    # WebGL on the CPU (SwiftShader): rerun's web viewer draws with it, as on a machine without
+    # a GPU driver
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
 )
 SMALL = ("env.server.width=96", "env.server.height=64")
 
