@@ -83,8 +83,10 @@ def _table_shown(browser) -> Image.Image | None:
     width, height = shot.size
     left, top, right, bottom = TABLE
     region = np.asarray(shot.crop((left * width, top * height, right * width, bottom * height)))
-    # The loading screen leaves it white, plots leave about 1% of it drawn, the table over 6%.
-    return shot if (region < 200).mean() > 0.03 else None
+    # A table is text on a light page: the viewer's start is dark all over, its loading screen
+    # white all over, plots leave about 1% of it drawn; the table draws 6-10%, on 55-70% white.
+    drawn, light = (region < 200).mean(), (region > 240).mean()
+    return shot if 0.03 < drawn < 0.3 and light > 0.4 else None
 
 
 @pytest.mark.timeout(900)
