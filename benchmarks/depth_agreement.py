@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from oasis_torchrl.config.training import DEPTH_HELD_OUT_PROMPTS, DepthTrainConfig
+from oasis_torchrl.config.reward_networks import DEPTH_HELD_OUT_PROMPTS, DepthTrainConfig
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.models.depth import nearness_target
 from oasis_torchrl.rewards import (

@@ -195,6 +195,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.config.arguments",
             "oasis_torchrl.config.env",
             "oasis_torchrl.config.training",
+            "oasis_torchrl.config.reward_networks",
             "oasis_torchrl.config.evaluation",
             "oasis_torchrl.config.pipeline",
             "oasis_torchrl.config.demonstrations",

@@ -5,9 +5,9 @@ network.
 ``train bc`` runs behaviour cloning on a LeRobot dataset (:class:`~oasis_torchrl.config.BCConfig`);
 ``train motion`` fits the frames-only reward's motion network to the embedded world's ground truth
 (or, with ``dataset=DIR``, its crash heads to the crash marks of a LeRobot dataset)
-(:class:`~oasis_torchrl.config.training.MotionTrainConfig`); ``train depth`` the reference
+(:class:`~oasis_torchrl.config.reward_networks.MotionTrainConfig`); ``train depth`` the reference
 reward's small depth network to its depth
-(:class:`~oasis_torchrl.config.training.DepthTrainConfig`).
+(:class:`~oasis_torchrl.config.reward_networks.DepthTrainConfig`).
 Any setting can be given as ``key=value``, e.g.
 ``oasis-torchrl train ppo env.num_envs=4 collector.total_frames=20000 logger.backend=tensorboard``.
 """
@@ -19,7 +19,8 @@ import sys
 
 from omegaconf import DictConfig
 
-from oasis_torchrl.config.training import BCConfig, DepthTrainConfig, MotionTrainConfig, PPOConfig
+from oasis_torchrl.config.reward_networks import DepthTrainConfig, MotionTrainConfig
+from oasis_torchrl.config.training import BCConfig, PPOConfig
 
 logger = logging.getLogger(__name__)
 

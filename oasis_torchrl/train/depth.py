@@ -10,7 +10,7 @@ averaged down to the same size. The last rounds (``validation``) are kept out of
 Training: AdamW with a cosine schedule on :func:`~oasis_torchrl.models.depth.
 scale_shift_invariant_loss` (the MiDaS loss on inverse depth), frames mirrored left to right at
 random. The weights file (:func:`~oasis_torchrl.rewards.depth_net.save_weights`) carries the
-settings and losses. Config: :class:`~oasis_torchrl.config.training.DepthTrainConfig`.
+settings and losses. Config: :class:`~oasis_torchrl.config.reward_networks.DepthTrainConfig`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from oasis_torchrl.config.training import DepthTrainConfig
+from oasis_torchrl.config.reward_networks import DepthTrainConfig
 from oasis_torchrl.drivers import Driver, load_driver
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.envs.episodes import episode_prompts

@@ -10,7 +10,7 @@ episode here: the car stands still after it, which is what the collided head mus
 Labels per chunk, from ground truth: the progress along the road gained during the chunk, whether
 a frame of the chunk collided, and the chunks to the next collision (the hazard head's target,
 :func:`~oasis_torchrl.models.motion.hazard_loss`). The last rounds (``validation``) are kept out
-of training. Config: :class:`~oasis_torchrl.config.training.MotionTrainConfig`.
+of training. Config: :class:`~oasis_torchrl.config.reward_networks.MotionTrainConfig`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from torch.nn import functional as F
 from tqdm import tqdm
 
-from oasis_torchrl.config.training import MotionTrainConfig
+from oasis_torchrl.config.reward_networks import MotionTrainConfig
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.envs.episodes import episode_prompts

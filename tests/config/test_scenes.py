@@ -11,6 +11,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from oasis_torchrl.config.presets import presets
+from oasis_torchrl.config.reward_networks import MOTION_TRAINING_PROMPTS
 from oasis_torchrl.config.scenes import (
     BROAD_TRAINING_PROMPTS,
     HELD_OUT_SCENES,
@@ -19,7 +20,6 @@ from oasis_torchrl.config.scenes import (
     REPORT_SEED,
     REWARD_CHECK_SEEDS,
 )
-from oasis_torchrl.config.training import MOTION_TRAINING_PROMPTS
 from oasis_torchrl.sim.scene import LAYOUTS, LIGHTINGS, WEATHERS, parse_style
 
 ROOT = Path(__file__).resolve().parents[2]

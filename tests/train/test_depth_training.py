@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from oasis_torchrl.cli import main
-from oasis_torchrl.config.training import DepthTrainConfig
+from oasis_torchrl.config.reward_networks import DepthTrainConfig
 from oasis_torchrl.models.depth import DepthNet, DepthNetConfig, scale_shift_invariant_loss
 from oasis_torchrl.rewards.depth_net import load_small_depth
 from oasis_torchrl.train.depth import (

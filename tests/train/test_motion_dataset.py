@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from oasis_torchrl.config.training import MotionTrainConfig
+from oasis_torchrl.config.reward_networks import MotionTrainConfig
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.motion import train_motion
