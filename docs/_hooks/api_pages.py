@@ -46,6 +46,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl",
             "oasis_torchrl.envs",
             "oasis_torchrl.envs.oasis_env",
+            "oasis_torchrl.envs.embedded",
             "oasis_torchrl.envs.specs",
             "oasis_torchrl.envs.transforms",
             "oasis_torchrl.envs.factory",

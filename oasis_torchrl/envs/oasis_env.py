@@ -25,9 +25,8 @@ collectors each get their own sessions.
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -43,9 +42,11 @@ from oasis_torchrl.client import (
     SessionPool,
     SessionStatus,
 )
+from oasis_torchrl.envs.embedded import embedded_server, render_size
 from oasis_torchrl.envs.episodes import EpisodePlanner, Prompts
 from oasis_torchrl.envs.specs import (
     EnvLayout,
+    StreamLayout,
     build_action_spec,
     build_done_spec,
     build_observation_spec,
@@ -72,34 +73,6 @@ logger = logging.getLogger(__name__)
 
 LOCAL = "local"
 Reward = RewardModule | Callable[[TensorDictBase], torch.Tensor]
-
-
-@dataclass(frozen=True)
-class StreamLayout:
-    """The cameras an env returns and the ``(height, width)`` of their frames.
-
-    Example:
-        >>> StreamLayout.hosted().frame_size
-        (512, 768)
-    """
-
-    cameras: tuple[str, ...]
-    frame_size: tuple[int, int]
-
-    @classmethod
-    def hosted(cls) -> StreamLayout:
-        """What the hosted Oasis model advertises."""
-        return cls(CAMERAS, HOSTED_FRAME_SIZE)
-
-    def check(self, pool: SessionPool) -> None:
-        """Raise if a started pool streams something else (naming both and the fix)."""
-        served = StreamLayout(tuple(pool.stream_names), tuple(pool.frame_size))
-        if served != self:
-            raise ValueError(
-                f"the server streams {served.cameras} at {served.frame_size}, the env was built "
-                f"for {self.cameras} at {self.frame_size}: pass frame_size=(height, width) to "
-                "decode to a size of your choice, or streams=StreamLayout(...) with the server's"
-            )
 
 
 class OasisWrapper(_EnvWrapper):
@@ -483,7 +456,8 @@ class OasisEnv(OasisWrapper):
             camera, this fraction of its height and width, cut from the front frame decoded at
             the server's full size and resized to ``frame_size`` (a narrow forward camera; the
             detail it shows is what the server's size holds: the embedded server renders at
-            least :func:`render_size` for it, so a crop of ``frame_size`` pixels has detail).
+            least :func:`~oasis_torchrl.envs.embedded.render_size` for it, so a crop of
+            ``frame_size`` pixels has detail).
         retry: transient-failure policy of the session pool.
         timeout: per-call deadline in seconds.
         **kwargs: the other :class:`OasisWrapper` arguments (``chunk_actions``, ``max_steps``,
@@ -579,62 +553,6 @@ class OasisEnv(OasisWrapper):
     def server(self) -> LocalServer | ServerProcess | None:
         """The embedded server of ``endpoint="local"`` (started with the env's sessions)."""
         return self._env.server
-
-
-def render_size(
-    server: tuple[int, int], frame_size: tuple[int, int] | None, front_crop: float | None
-) -> tuple[int, int]:
-    """``(height, width)`` an embedded server renders at: its own size, or, with a front crop,
-    at least the size whose centre crop holds ``frame_size`` pixels (rounded up to even), so
-    the crop shows detail the cameras' frames lack (:class:`OasisEnv` renders so). Rendering
-    larger is the cheapest correct way: the crop is then cut exactly as from the hosted
-    service's 768x512 frames, and the client decodes every camera to ``frame_size`` anyway.
-
-    Example:
-        >>> render_size((64, 96), (64, 96), 0.25)
-        (256, 384)
-        >>> render_size((64, 96), (64, 96), None), render_size((512, 768), (64, 96), 0.25)
-        ((64, 96), (512, 768))
-    """
-    if front_crop is None or frame_size is None:
-        return server
-    needed = (_even(math.ceil(side / front_crop)) for side in frame_size)
-    height, width = (max(own, need) for own, need in zip(server, needed, strict=True))
-    return height, width
-
-
-def _even(value: int) -> int:
-    return value + value % 2
-
-
-SPARE_SESSIONS = 4
-"""Sessions an env's own server admits beyond its rows: the scene lookups of the top-down view
-(one session at a time) and rows re-opened before the server expired their lost sessions."""
-
-
-def embedded_server(config: ServerConfig, num_envs: int) -> LocalServer | ServerProcess:
-    """The embedded server of a local env: a process of its own (its workers at most one per
-    row), or, with ``processes=0``, inside the stepping process. Unstarted: the env's pool
-    starts it. It serves this env alone, so its session limits admit every row plus
-    :data:`SPARE_SESSIONS` whatever ``config`` says.
-
-    Example:
-        >>> type(embedded_server(ServerConfig(processes=0), 2)).__name__
-        'LocalServer'
-        >>> embedded_server(ServerConfig(), 1).config.processes
-        1
-        >>> embedded_server(ServerConfig(), 32).config.max_sessions_per_key
-        36
-    """
-    sessions = num_envs + SPARE_SESSIONS
-    config = replace(
-        config,
-        max_sessions=max(config.max_sessions, sessions),
-        max_sessions_per_key=max(config.max_sessions_per_key, sessions),
-    )
-    if config.resolved_processes == 0:
-        return LocalServer(config)
-    return ServerProcess(replace(config, processes=min(config.resolved_processes, num_envs)))
 
 
 def _truth_or_nan(step: PoolStep, n: int) -> np.ndarray:

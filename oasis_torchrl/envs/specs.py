@@ -31,13 +31,45 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from torchrl.data import Bounded, Categorical, Composite, NonTensor, Unbounded
 
-from oasis_torchrl.protocol import ACTION_DIM, CHUNK
+from oasis_torchrl.protocol import ACTION_DIM, CAMERAS, CHUNK, HOSTED_FRAME_SIZE
+
+if TYPE_CHECKING:
+    from oasis_torchrl.client import SessionPool
 
 """Actions per Infer call and frames per stream in every response."""
+
+
+@dataclass(frozen=True)
+class StreamLayout:
+    """The cameras an env returns and the ``(height, width)`` of their frames.
+
+    Example:
+        >>> StreamLayout.hosted().frame_size
+        (512, 768)
+    """
+
+    cameras: tuple[str, ...]
+    frame_size: tuple[int, int]
+
+    @classmethod
+    def hosted(cls) -> StreamLayout:
+        """What the hosted Oasis model advertises."""
+        return cls(CAMERAS, HOSTED_FRAME_SIZE)
+
+    def check(self, pool: SessionPool) -> None:
+        """Raise if a started pool streams something else (naming both and the fix)."""
+        served = StreamLayout(tuple(pool.stream_names), tuple(pool.frame_size))
+        if served != self:
+            raise ValueError(
+                f"the server streams {served.cameras} at {served.frame_size}, the env was built "
+                f"for {self.cameras} at {self.frame_size}: pass frame_size=(height, width) to "
+                "decode to a size of your choice, or streams=StreamLayout(...) with the server's"
+            )
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from oasis_torchrl.config import EmbeddedServerConfig, EnvConfig, load_config
 from oasis_torchrl.data import LeRobotRecorder
 from oasis_torchrl.drivers import Autopilot, ScriptedDriver, load_driver
 from oasis_torchrl.envs import OasisGymEnv, make_env
-from oasis_torchrl.envs.oasis_env import embedded_server
+from oasis_torchrl.envs.embedded import embedded_server
 from oasis_torchrl.sim.config import ServerConfig
 from oasis_torchrl.train.bc import BCTrainer
 
