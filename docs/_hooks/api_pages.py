@@ -338,6 +338,7 @@ EXCLUDED: dict[str, str] = {
     "oasis_torchrl.sim.encoding": _SIM_INSIDE,
     "oasis_torchrl.sim.render": _SIM_INSIDE,
     "oasis_torchrl.sim.scene": _SIM_INSIDE,
+    "oasis_torchrl.sim.style": _SIM_INSIDE,
     "oasis_torchrl.sim.server": _SIM_INSIDE,
     "oasis_torchrl.sim.serving": _SIM_INSIDE,
     "oasis_torchrl.sim.session_world": _SIM_INSIDE,

@@ -20,7 +20,7 @@ from oasis_torchrl.config.scenes import (
     REPORT_SEED,
     REWARD_CHECK_SEEDS,
 )
-from oasis_torchrl.sim.scene import LAYOUTS, LIGHTINGS, WEATHERS, parse_style
+from oasis_torchrl.sim.style import LAYOUTS, LIGHTINGS, WEATHERS, parse_style
 
 ROOT = Path(__file__).resolve().parents[2]
 BROAD_PRESETS = ("pretrained_clone", "pretrained_ppo_scratch")

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from oasis_torchrl.sim.scene import CLEAR_START, LAYOUTS, build_scene, parse_style
+from oasis_torchrl.sim.scene import CLEAR_START, build_scene
+from oasis_torchrl.sim.style import LAYOUTS, parse_style
 
 
 @pytest.mark.parametrize(

@@ -26,7 +26,8 @@ from oasis_torchrl.sim.render.textures import (
     ground_profiles,
 )
 from oasis_torchrl.sim.render.threads import Part, thread_array
-from oasis_torchrl.sim.scene import Road, Scene, Style
+from oasis_torchrl.sim.scene import Road, Scene
+from oasis_torchrl.sim.style import Style
 
 #: Depths (log-spaced, nearest ground row to FAR) at which road coordinates are exact.
 DEPTH_SAMPLES = 64

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oasis_torchrl.sim.render.materials import PALETTE, band_depths
-from oasis_torchrl.sim.scene import Style
+from oasis_torchrl.sim.style import Style
 
 _DAY_COLOURS = {
     "grass": (0.33, 0.47, 0.22),

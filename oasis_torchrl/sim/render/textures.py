@@ -28,8 +28,8 @@ from oasis_torchrl.sim.scene import (
     OBSTACLE_VARIANTS,
     ROADSIDE_VARIANTS,
     Scene,
-    Style,
 )
+from oasis_torchrl.sim.style import Style
 
 TEXTURE_COLUMN = 0.125
 TEXTURE_COLUMNS = 1024
