@@ -32,7 +32,9 @@ PROBE_PROMPT = "urban"
 PROBE_FRAME_SIZE = (32, 48)
 """Frames of the probe's single Infer are decoded this small: only its metadata matters."""
 
-_found: dict[tuple[str, bool], Capabilities] = {}
+_probed: dict[tuple[str, bool], Capabilities] = {}
+"""The capabilities of each endpoint (its address, and whether it is the hosted-like embedded
+server), probed once per process."""
 _lock = threading.Lock()
 
 
@@ -102,14 +104,14 @@ def env_capabilities(cfg: Settings) -> Capabilities:
     local = cfg.endpoint == LOCAL
     key = (str(cfg.endpoint), bool(cfg.server.hosted) if local else False)
     with _lock:
-        if key not in _found:
+        if key not in _probed:
             name = endpoint_name(cfg)
-            found = (
+            capabilities = (
                 Capabilities(name, ground_truth=not key[1]) if local else probe(str(cfg.endpoint))
             )
-            logger.info(found.summary())
-            _found[key] = found
-        return _found[key]
+            logger.info(capabilities.summary())
+            _probed[key] = capabilities
+        return _probed[key]
 
 
 def probe(endpoint: str, *, api_key: str | None = None, timeout: float = 60.0) -> Capabilities:
@@ -133,7 +135,7 @@ FRAMES_ONLY_REWARD = "motion"
 """The reward ``env.reward.kind=auto`` picks where the endpoint sends frames alone."""
 
 
-def resolve_reward_kind(kind: str, found: Capabilities) -> str:
+def resolve_reward_kind(kind: str, capabilities: Capabilities) -> str:
     """``env.reward.kind`` resolved: ``auto`` becomes ground_truth where the endpoint sends it,
     else motion (the frames-only reward); ground_truth on a frames-only endpoint is an error.
 
@@ -142,9 +144,9 @@ def resolve_reward_kind(kind: str, found: Capabilities) -> str:
         'motion'
     """
     if kind == "auto":
-        return "ground_truth" if found.ground_truth else FRAMES_ONLY_REWARD
+        return "ground_truth" if capabilities.ground_truth else FRAMES_ONLY_REWARD
     if kind == "ground_truth":
-        found.require(
+        capabilities.require(
             "env.reward.kind=ground_truth",
             "use env.reward.kind=motion (the frames-only reward) or auto",
         )

@@ -47,8 +47,8 @@ from oasis_torchrl.sim.config import ServerConfig
 Settings = EnvConfig | DictConfig
 
 
-def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardModule:
-    """The reward module of ``env.reward`` on an endpoint that sends what ``found`` says
+def make_reward(cfg: RewardConfig | DictConfig, capabilities: Capabilities) -> RewardModule:
+    """The reward module of ``env.reward`` on an endpoint that sends what ``capabilities`` says
     (``kind: auto`` is the ground-truth reward where it sends ground truth, else the motion
     reward on the frames).
 
@@ -63,7 +63,7 @@ def make_reward(cfg: RewardConfig | DictConfig, found: Capabilities) -> RewardMo
     """
     if cfg.kind not in REWARD_KINDS:
         raise ValueError(f"env.reward.kind must be one of {REWARD_KINDS}, got {cfg.kind!r}")
-    kind = resolve_reward_kind(cfg.kind, found)
+    kind = resolve_reward_kind(cfg.kind, capabilities)
     if kind != "ground_truth":
         return make_frames_reward(cfg, kind)
     reward = GroundTruthReward(
@@ -156,15 +156,15 @@ def make_env(
         >>> td["next", "frame_stack", "front"].shape
         torch.Size([2, 3, 2, 64, 96, 3])
     """
-    found = env_capabilities(cfg)
+    capabilities = env_capabilities(cfg)
     if privileged:
-        found.require(
+        capabilities.require(
             "privileged state (privileged_critic, loss.aux_coeff)",
             "leave privileged_critic and loss.aux_coeff unset (found from the endpoint) or set "
             "privileged_critic=false loss.aux_coeff=0",
         )
     if env_kwargs.get("expert"):
-        found.require(
+        capabilities.require(
             "the expert (the autopilot and its labels)",
             "take demonstrations from a person, a recordings folder or a policy",
         )
@@ -172,7 +172,7 @@ def make_env(
     frame_size = None if size is None else (int(size[0]), int(size[1]))
     crop = env_front_crop(cfg, front_crop)
     server = cfg.server
-    env_kwargs.setdefault("ground_truth", found.ground_truth)
+    env_kwargs.setdefault("ground_truth", capabilities.ground_truth)
     env = OasisEnv(
         cfg.endpoint,
         num_envs or cfg.num_envs,
@@ -184,7 +184,7 @@ def make_env(
         front_crop=crop,
         all_frames=all_frames,
         max_steps=max_steps or cfg.max_steps,
-        reward=make_reward(cfg.reward, found) if reward is None else reward,
+        reward=make_reward(cfg.reward, capabilities) if reward is None else reward,
         **env_kwargs,
     )
     transforms = [RewardSum(), StepCounter()]

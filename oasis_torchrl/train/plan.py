@@ -74,14 +74,14 @@ class Demonstrators:
     ground_truth: bool
 
     @classmethod
-    def of(cls, cfg: DictConfig, found: Capabilities) -> Demonstrators:
+    def of(cls, cfg: DictConfig, capabilities: Capabilities) -> Demonstrators:
         """Resolve ``record.source`` and ``dagger.labeller`` (``auto``: the autopilot where the
         endpoint sends ground truth; elsewhere the source must be given)."""
         source, labeller = str(cfg.record.source), str(cfg.dagger.labeller)
-        if source == AUTO and found.frames_only:
+        if source == AUTO and capabilities.frames_only:
             raise ValueError(
-                f"the demonstrations need a source: {found.endpoint} sends frames only (no "
-                "autopilot); pass record.source=<a policy folder, checkpoint or "
+                f"the demonstrations need a source: {capabilities.endpoint} sends frames only "
+                "(no autopilot); pass record.source=<a policy folder, checkpoint or "
                 "grpc://host:port>, or a LeRobot dataset of a person's drives (lerobot-record "
                 "with the keyboard teleoperators), or a folder of recordings in the reference "
                 "format (episode_*/manifest.jsonl)"
@@ -89,11 +89,13 @@ class Demonstrators:
         source = AUTOPILOT if source == AUTO else source
         recorded = is_dataset(source) or is_recordings(source)
         if labeller == AUTO:
-            labeller = AUTOPILOT if found.ground_truth else None if recorded else source
+            labeller = AUTOPILOT if capabilities.ground_truth else None if recorded else source
         for name, spec in (("record.source", source), ("dagger.labeller", labeller)):
             if spec == AUTOPILOT:
-                found.require(f"{name}=autopilot", f"pass a policy or a person's drives as {name}")
-        return cls(source, labeller, found.ground_truth)
+                capabilities.require(
+                    f"{name}=autopilot", f"pass a policy or a person's drives as {name}"
+                )
+        return cls(source, labeller, capabilities.ground_truth)
 
 
 def is_dataset(source: str | Path) -> bool:
@@ -145,22 +147,23 @@ class RecordPlan:
     image_size: tuple[int, int]
 
     @classmethod
-    def of(cls, cfg: DictConfig, who: Demonstrators) -> RecordPlan:
-        """The demonstrations of ``cfg.record`` by ``who``, under ``<output_dir>/demos``."""
+    def of(cls, cfg: DictConfig, demonstrators: Demonstrators) -> RecordPlan:
+        """The demonstrations of ``cfg.record`` by ``demonstrators.source``, under
+        ``<output_dir>/demos``."""
         reaction = cfg.record.late_reaction
-        late = reaction is not None and who.source == AUTOPILOT
+        late = reaction is not None and demonstrators.source == AUTOPILOT
         recording = Recording(
             frozen(cfg.env),
             cfg.record.episodes,
             cfg.record.seed,
             ActionNoise(**cfg.record.noise),
-            labeller=who.source,
+            labeller=demonstrators.source,
             late_reaction=tuple(reaction) if late else None,
             progress=cfg.progress,
         )
-        given = is_dataset(who.source)
-        dataset = Path(who.source) if given else Path(cfg.output_dir) / "demos"
-        recordings = Path(who.source) if is_recordings(who.source) else None
+        given = is_dataset(demonstrators.source)
+        dataset = Path(demonstrators.source) if given else Path(cfg.output_dir) / "demos"
+        recordings = Path(demonstrators.source) if is_recordings(demonstrators.source) else None
         return cls(dataset, given, recordings, recording, tuple(cfg.env.image_size))
 
 
@@ -199,10 +202,12 @@ class CloneRound:
         return self.folder / "policy"
 
 
-def clone_rounds(cfg: DictConfig, record: RecordPlan, who: Demonstrators) -> tuple[CloneRound, ...]:
+def clone_rounds(
+    cfg: DictConfig, record: RecordPlan, demonstrators: Demonstrators
+) -> tuple[CloneRound, ...]:
     """The first clone and the DAgger rounds (none without a labeller), each writing in
     ``<output_dir>/bc/round_<k>``."""
-    rounds = cfg.dagger.rounds if who.labeller is not None else 0
+    rounds = cfg.dagger.rounds if demonstrators.labeller is not None else 0
     if rounds < cfg.dagger.rounds:
         logger.info("no DAgger rounds: demonstrations from a dataset have no labeller")
     planned: list[CloneRound] = []
@@ -218,14 +223,14 @@ def clone_rounds(cfg: DictConfig, record: RecordPlan, who: Demonstrators) -> tup
                 cfg.dagger.episodes,
                 cfg.record.seed + 1000 * round_,
                 ActionNoise(**cfg.dagger.noise),
-                labeller=str(who.labeller),
+                labeller=str(demonstrators.labeller),
                 learner=str(previous),
                 progress=cfg.progress,
             )
             dagger = DaggerRound(recording, folder / "dagger", data, folder / "dataset")
             data = dagger.data
             values |= {"init_from": str(previous), "train": {"steps": cfg.dagger.steps}}
-        config = _bc_config(cfg, data, values, who.ground_truth)
+        config = _bc_config(cfg, data, values, demonstrators.ground_truth)
         planned.append(CloneRound(folder, config, dagger))
     return tuple(planned)
 
@@ -363,21 +368,21 @@ def plan_run(cfg: DictConfig) -> RunPlan:
         ('autopilot', 'constant:throttle=1.0,steering=0.0')
     """
     shipped = tuple(shipped_specs(cfg.eval.get("pretrained")))  # an unknown name fails first
-    found = env_capabilities(cfg.env)
-    who = Demonstrators.of(cfg, found)
-    record = RecordPlan.of(cfg, who)
-    rounds = clone_rounds(cfg, record, who)
+    capabilities = env_capabilities(cfg.env)
+    demonstrators = Demonstrators.of(cfg, capabilities)
+    record = RecordPlan.of(cfg, demonstrators)
+    rounds = clone_rounds(cfg, record, demonstrators)
     # The eval stage evaluates the kept policy on the same prompts and seeds right after:
     # PPO's own final evaluation would repeat it.
     ppo = OmegaConf.merge(ppo_config(cfg, rounds[-1].policy), {"eval": {"final": False}})
     references = [str(spec) for spec in cfg.eval.get(REFERENCE_KEY, [])]
-    if not found.ground_truth:  # the autopilot drives with ground truth
+    if not capabilities.ground_truth:  # the autopilot drives with ground truth
         references = [spec for spec in references if spec != AUTOPILOT]
     return RunPlan(
         frozen(cfg),
         Path(cfg.output_dir),
-        found,
-        who,
+        capabilities,
+        demonstrators,
         record,
         rounds,
         frozen(ppo),

@@ -119,10 +119,10 @@ def with_capabilities(cfg: DictConfig) -> DictConfig:
         >>> resolved.privileged_critic, resolved.loss.aux_coeff
         (False, 0.0)
     """
-    found = env_capabilities(cfg.env)
-    privileged = found.ground_truth if cfg.privileged_critic is None else cfg.privileged_critic
+    ground_truth = env_capabilities(cfg.env).ground_truth
+    privileged = ground_truth if cfg.privileged_critic is None else cfg.privileged_critic
     aux = cfg.loss.aux_coeff
-    aux = (AUX_COEFF if found.ground_truth else 0.0) if aux is None else aux
+    aux = (AUX_COEFF if ground_truth else 0.0) if aux is None else aux
     return OmegaConf.merge(cfg, {"privileged_critic": privileged, "loss": {"aux_coeff": aux}})
 
 

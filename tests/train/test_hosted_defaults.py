@@ -41,7 +41,7 @@ def test_hosted_like_env_sends_frames_and_scores_them_with_the_motion_reward() -
 def test_train_eval_record_defaults_run_on_frames_alone(
     tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(capabilities, "_found", {})  # found once per process: forget earlier tests
+    monkeypatch.setattr(capabilities, "_probed", {})  # probed once a process: forget earlier tests
     caplog.set_level(logging.INFO)
     assert main(["train", "ppo", *tiny_ppo(tmp_path / "ppo", 16, *HOSTED)]) == 0
     assert caplog.text.count("sends frames only") == 1

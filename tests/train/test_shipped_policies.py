@@ -236,7 +236,7 @@ def test_a_shipped_policy_drives_the_hosted_like_server_and_its_card_needs_groun
     caplog: pytest.LogCaptureFixture,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(capabilities, "_found", {})  # found once per process: forget earlier tests
+    monkeypatch.setattr(capabilities, "_probed", {})  # probed once a process: forget earlier tests
     hosted = [*TINY_ENV, "env.server.hosted=true"]
     evaluate = ["eval", "policy=pretrained:tiny", "episodes=1", "max_steps=2", *hosted]
     assert main(evaluate) == 0  # a camera policy: frames are all it reads
