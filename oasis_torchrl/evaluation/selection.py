@@ -111,31 +111,31 @@ def selection_figure(report: Mapping[str, Any]) -> float:
     return report[selection_key(report)]
 
 
-def beats(candidate: dict[str, Any], kept: dict[str, Any] | None, margin: float) -> bool:
-    """Whether an evaluation (:meth:`EvalReport.to_dict`) should replace the kept one: with
-    ``margin`` 0, any higher mean distance; otherwise a paired gain of more than ``margin``
-    standard errors over the episodes both ran (a gain within an evaluation's noise keeps the
-    kept policy).
+def beats(candidate: dict[str, Any], incumbent: dict[str, Any] | None, margin: float) -> bool:
+    """Whether an evaluation (:meth:`EvalReport.to_dict`) should replace ``incumbent``, the
+    evaluation of the policy kept so far (None: none yet): with ``margin`` 0, any higher mean
+    distance; otherwise a paired gain of more than ``margin`` standard errors over the episodes
+    both ran (a gain within an evaluation's noise keeps the incumbent).
 
     Example:
         >>> from oasis_torchrl.evaluation.reports import EpisodeResult, EvalReport
-        >>> kept = EvalReport([EpisodeResult("urban", i, 100.0 * i, False, 0.0, 9)
-        ...                    for i in range(4)]).to_dict()
-        >>> lucky = {**kept, "mean_distance": 160.0, "per_episode": [
+        >>> incumbent = EvalReport([EpisodeResult("urban", i, 100.0 * i, False, 0.0, 9)
+        ...                         for i in range(4)]).to_dict()
+        >>> lucky = {**incumbent, "mean_distance": 160.0, "per_episode": [
         ...     {**e, "distance": e["distance"] + g}
-        ...     for e, g in zip(kept["per_episode"], (-30.0, 40.0, -20.0, 50.0))]}
-        >>> beats(lucky, kept, margin=0.0), beats(lucky, kept, margin=2.0)
+        ...     for e, g in zip(incumbent["per_episode"], (-30.0, 40.0, -20.0, 50.0))]}
+        >>> beats(lucky, incumbent, margin=0.0), beats(lucky, incumbent, margin=2.0)
         (True, False)
     """
-    if kept is None:
+    if incumbent is None:
         return True
     if not margin:
-        return selection_figure(candidate) > selection_figure(kept)
-    if len(kept["per_episode"]) < 2:
+        return selection_figure(candidate) > selection_figure(incumbent)
+    if len(incumbent["per_episode"]) < 2:
         raise ValueError(
             f"a selection margin ({margin} standard errors) needs at least 2 evaluation "
-            f"episodes on the selection seeds, got {len(kept['per_episode'])}: raise "
+            f"episodes on the selection seeds, got {len(incumbent['per_episode'])}: raise "
             "eval.episodes or set eval.selection_margin=0"
         )
-    gain = difference(candidate, kept)
+    gain = difference(candidate, incumbent)
     return gain["mean"] > margin * gain["stderr"]
