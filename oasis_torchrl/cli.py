@@ -31,7 +31,7 @@ def discover_commands() -> list[ModuleType]:
         >>> "serve" in [command.NAME for command in discover_commands()]
         True
     """
-    found = []
+    modules = []
     for module_info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         if module_info.name.startswith("_"):
             continue
@@ -39,8 +39,8 @@ def discover_commands() -> list[ModuleType]:
         missing = [name for name in _COMMAND_ATTRIBUTES if not hasattr(module, name)]
         if missing:
             raise TypeError(f"command module {module.__name__} lacks {', '.join(missing)}")
-        found.append(module)
-    return found
+        modules.append(module)
+    return modules
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,7 +22,7 @@ def shipped_files(inside: str, top_level: str, pattern: str) -> list[Path]:
         ['ppo_scratch.yaml']
     """
     for folder in (PACKAGE / inside, PACKAGE.parent / top_level):
-        found = sorted(folder.glob(pattern))
-        if found:
-            return found
+        matches = sorted(folder.glob(pattern))
+        if matches:
+            return matches
     return []

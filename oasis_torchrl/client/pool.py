@@ -376,9 +376,9 @@ class SessionPool:
     ) -> PoolStep:
         """Run ``row_step`` for every selected row concurrently into fresh output arrays."""
         height, width = self.frame_size
-        kept = FRAME_SELECTIONS[self.frames]
+        per_chunk = FRAME_SELECTIONS[self.frames]
         frames = {
-            name: np.empty((len(rows), kept, height, width, 3), np.uint8)
+            name: np.empty((len(rows), per_chunk, height, width, 3), np.uint8)
             for name in self.camera_names
         }
         coroutines = [

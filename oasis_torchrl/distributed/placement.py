@@ -100,12 +100,14 @@ def _address_order(address: str) -> tuple[int, int, str]:
 
 def _resources(resources: dict[str, float]) -> str:
     """Resources without Ray's per-node bookkeeping entries (``node:...``, ``object_store...``)."""
-    kept = {
+    schedulable = {
         name: amount
         for name, amount in resources.items()
         if not name.startswith("node:") and name != "object_store_memory"
     }
-    return "{" + ", ".join(f"{name}: {amount:g}" for name, amount in sorted(kept.items())) + "}"
+    return (
+        "{" + ", ".join(f"{name}: {amount:g}" for name, amount in sorted(schedulable.items())) + "}"
+    )
 
 
 def reserve_collectors(config: RayCollectionConfig) -> PlacementGroup:

@@ -43,8 +43,8 @@ def shipped_policies() -> dict[str, Path]:
     folder = policies_folder()
     if not folder.is_dir():
         return {}
-    found = (path for path in sorted(folder.iterdir()) if path.is_dir())
-    return {path.name: path for path in found if all((path / f).is_file() for f in POLICY_FILES)}
+    folders = (path for path in sorted(folder.iterdir()) if path.is_dir())
+    return {path.name: path for path in folders if all((path / f).is_file() for f in POLICY_FILES)}
 
 
 def pretrained_path(name: str) -> Path:

@@ -64,14 +64,14 @@ def evaluate_side_by_side(
     from oasis_torchrl.viz.side_by_side import SideBySide
 
     # The others are compared, not evaluated for their own records (no LeRobot episodes).
-    plain = OmegaConf.merge(eval_cfg, {"rerun": None, "lerobot": None})
+    unrecorded = OmegaConf.merge(eval_cfg, {"rerun": None, "lerobot": None})
     recording = SideBySide(eval_cfg.rerun, list(drivers), threshold=eval_cfg.divergence)
     reports = {}
     try:
         for index, (name, driver) in enumerate(drivers.items()):
             with Evaluator.for_driver(
                 env_cfg,
-                plain if index else eval_cfg,
+                unrecorded if index else eval_cfg,
                 driver,
                 progress=progress,
                 rerun_logger=recording.logger(name),

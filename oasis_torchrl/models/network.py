@@ -318,9 +318,9 @@ class DrivingNet(nn.Module):
             ("aux.", self.config.aux_outputs, other.config.aux_outputs),
         )
         resized = tuple(head for head, size, other_size in sizes if size != other_size)
-        kept = {k: v for k, v in other.state_dict().items() if not k.startswith(resized)}
+        same_sized = {k: v for k, v in other.state_dict().items() if not k.startswith(resized)}
         try:
-            missing, _ = self.load_state_dict(kept, strict=False)
+            missing, _ = self.load_state_dict(same_sized, strict=False)
         except RuntimeError as error:
             raise ValueError(f"the networks' acting parts differ: {error}") from error
         unexpected = [key for key in missing if not key.startswith(resized)]

@@ -117,7 +117,7 @@ class TrainingRun:
             point = (entry["policy_frames"], entry["mean_distance"])
             curve.setdefault(f"evaluations on {label}", []).append(point)
         best = root / "checkpoints" / BEST  # the policy exported when the selection chose one
-        kept = load_checkpoint(best)["frames"] if best.exists() else state["frames"]
+        kept_steps = load_checkpoint(best)["frames"] if best.exists() else state["frames"]
         return cls(
             "ppo",
             root,
@@ -127,7 +127,7 @@ class TrainingRun:
             f"{state['frames']:,} env steps",
             {name: sorted(points) for name, points in curve.items()},
             ("env steps", "mean distance before collision (m)"),
-            None if kept == state["frames"] else kept,
+            None if kept_steps == state["frames"] else kept_steps,
         )
 
     @classmethod
@@ -186,10 +186,10 @@ def read_scalars(logs: Path, name: str) -> list[tuple[float, float]]:
         >>> read_scalars(logs, "bc/loss")
         [(50.0, 1.5), (100.0, 0.5)]
     """
-    found = sorted(logs.glob(f"*/scalars/{name}.csv"))
-    if not found:
+    files = sorted(logs.glob(f"*/scalars/{name}.csv"))
+    if not files:
         missing(logs / "<experiment>" / "scalars" / f"{name}.csv")
-    with found[0].open() as file:
+    with files[0].open() as file:
         return [(float(step), float(value)) for step, value in csv.reader(file)]
 
 
@@ -207,8 +207,8 @@ def matching_preset(kind: str, settings: DictConfig) -> str | None:
             if OmegaConf.select(preset, key, default=0) is None:
                 OmegaConf.update(cfg, key, None)
         # As saved: a run's YAML holds lists where a loaded preset holds tuples.
-        plain = OmegaConf.to_container(OmegaConf.create(OmegaConf.to_yaml(cfg)))
-        return {key: value for key, value in plain.items() if key not in RUN_ONLY_KEYS}
+        saved = OmegaConf.to_container(OmegaConf.create(OmegaConf.to_yaml(cfg)))
+        return {key: value for key, value in saved.items() if key not in RUN_ONLY_KEYS}
 
     # Paths made from the output folder (the main job's eval.rerun) follow the run's.
     where = [("output_dir", settings.output_dir)]
@@ -419,12 +419,12 @@ def hours(seconds: float | None) -> str:
 
 def _kept(facts: Mapping[str, Any]) -> str:
     """The card's sentence on which policy of the run it ships ("" for the last one)."""
-    kept = facts.get("kept_steps")
-    if kept is None:
+    kept_steps = facts.get("kept_steps")
+    if kept_steps is None:
         return ""
     return (
-        f" It is the policy of {kept:,} env steps, the best of the run's periodic evaluations "
-        "on its selection seeds (the training curve)."
+        f" It is the policy of {kept_steps:,} env steps, the best of the run's periodic "
+        "evaluations on its selection seeds (the training curve)."
     )
 
 

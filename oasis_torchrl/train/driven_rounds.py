@@ -32,21 +32,21 @@ class DrivenRows(Protocol):
 
 
 def kept_or_driven[Rows: DrivenRows](
-    kept: str | None, load: Callable[[str], Rows], drive: Callable[[], Rows]
+    path: str | None, load: Callable[[str], Rows], drive: Callable[[], Rows]
 ) -> Rows:
-    """The rows of the file ``kept`` if it exists, else ``drive()``'s (then written to ``kept``
+    """The rows of the file ``path`` if it exists, else ``drive()``'s (then written to ``path``
     when it is set).
 
     Example:
         >>> kept_or_driven(None, lambda path: None, lambda: "driven")
         'driven'
     """
-    if kept is not None and Path(kept).exists():
-        logger.info("reading the rows of %s (no driving)", kept)
-        return load(kept)
+    if path is not None and Path(path).exists():
+        logger.info("reading the rows of %s (no driving)", path)
+        return load(path)
     data = drive()
-    if kept is not None:
-        data.save(kept)
+    if path is not None:
+        data.save(path)
     return data
 
 

@@ -213,8 +213,8 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     with timed_stage(seconds, "ppo", totals):
         ppo = run_ppo(plan.ppo)
     # A fine-tuning that kept its warm start left the clone: its row reads "not kept".
-    kept = ppo.policy_frames > 0
-    learned = {"bc": str(bc_policy)} | ({FINE_TUNE: str(ppo.policy_dir)} if kept else {})
+    fine_tune_kept = ppo.policy_frames > 0
+    learned = {"bc": str(bc_policy)} | ({FINE_TUNE: str(ppo.policy_dir)} if fine_tune_kept else {})
     policies = {spec: spec for spec in (*plan.references, *plan.shipped)} | learned
     with timed_stage(seconds, "eval"):
         evaluations = evaluate_and_record_best(plan.eval, policies, list(plan.shipped))
@@ -228,7 +228,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
             plan.output_dir / "comparison.png",
             evaluations,
             seconds,
-            kept,
+            fine_tune_kept,
             {name: load_card(pretrained_path(name)) for name in plan.shipped},
         )
     write_summary(result, plan.eval.recorded)

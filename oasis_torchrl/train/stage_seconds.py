@@ -21,7 +21,7 @@ def add_stage_seconds(totals: Path, stage: str, elapsed: float) -> dict[str, flo
         >>> add_stage_seconds(path, "bc", 60.0) and add_stage_seconds(path, "bc", 30.5)
         {'bc': 90.5}
     """
-    found = json.loads(totals.read_text()) if totals.exists() else {}
-    found[stage] = round(found.get(stage, 0.0) + elapsed, 1)
-    totals.write_text(json.dumps(found, indent=2))
-    return found
+    seconds = json.loads(totals.read_text()) if totals.exists() else {}
+    seconds[stage] = round(seconds.get(stage, 0.0) + elapsed, 1)
+    totals.write_text(json.dumps(seconds, indent=2))
+    return seconds

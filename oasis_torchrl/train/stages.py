@@ -188,8 +188,8 @@ def run_ppo(config: DictConfig) -> PPOStage:
         result = train_ppo(resumed(config, (checkpoints / LATEST).exists()))
         policy, history = result.policy_dir or policy, result.history
     # The policy a stage leaves: the selection's choice (best.pt) if it made one, else the last.
-    kept = checkpoints / BEST if (checkpoints / BEST).exists() else checkpoints / LATEST
-    return PPOStage(policy, kept, load_checkpoint(kept)["frames"], history)
+    checkpoint = checkpoints / BEST if (checkpoints / BEST).exists() else checkpoints / LATEST
+    return PPOStage(policy, checkpoint, load_checkpoint(checkpoint)["frames"], history)
 
 
 def evaluate_all(
@@ -209,7 +209,7 @@ def evaluate_all(
         >>> evaluate_all(plan, {"autopilot": "autopilot"}, record=False)  # doctest: +SKIP
         {'autopilot': {'mean_distance': ..., 'collision_rate': 0.0, ..., 'per_episode': [...]}}
     """
-    settings, plain = plan.settings(record=record), plan.settings(record=False)
+    settings, unrecorded = plan.settings(record=record), plan.settings(record=False)
     recorded = list(policies.values())[-1] if policies else None
     side_by_side = side_by_side_for(settings, policies)
     reports: dict[str, EvalReport] = {}
@@ -222,7 +222,7 @@ def evaluate_all(
                 rerun_logger = side_by_side.logger(name)
             with Evaluator.for_driver(
                 plan.env,
-                settings if spec == recorded else plain,
+                settings if spec == recorded else unrecorded,
                 driver,
                 progress=plan.progress,
                 rerun_logger=rerun_logger,

@@ -248,9 +248,11 @@ class SideBySide:
                 other = outcomes.get((root, scene))
                 if first is None or other is None:
                     continue
-                found = first_divergence(first.actions, other.actions, self.threshold)
-                if found is not None:
-                    index, gap = found  # a frame of the episode's steps (the reset is one tick)
+                divergence = first_divergence(first.actions, other.actions, self.threshold)
+                if divergence is not None:
+                    index, gap = (
+                        divergence  # a frame of the episode's steps (the reset is one tick)
+                    )
                     step = index // CHUNK + 1
                     text = f"step {step}: {root} diverges from {reference} (by {gap:.2f})"
                     frame = other.start_frame + CHUNK + index
@@ -293,8 +295,8 @@ def align_recordings(
         tables = []
         for index, (name, root) in enumerate(roots.items()):
             chunks = list(RrdReader(name).stream())
-            kept = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
-            send_chunks(kept, recording=recording)
+            rerooted = [_rerooted(chunk, root) for chunk in chunks if _kept(chunk)]
+            send_chunks(rerooted, recording=recording)
             layouts.append(_layout_of(root, chunks))
             _restyle(recording, layouts[-1], Policy.at(root, index))
             actions[root] = _actions_by_frame(chunks)
@@ -362,19 +364,19 @@ def _layout_of(root: str, chunks: Sequence[object]) -> RowsLayout:
 
 def _events_of(chunks: Sequence[object], row: int) -> list[str]:
     """A row's event texts, in frame order."""
-    found = []
+    events = []
     for chunk in chunks:
         if chunk.entity_path != f"/{RowPaths(ENV_ROOT, row).events}":
             continue
         batch = chunk.to_record_batch()
         texts = batch.column("TextLog:text").to_pylist()
-        found += zip(batch.column(FRAME_TIMELINE).to_pylist(), texts, strict=True)
-    return [text[0] for _, text in sorted(found, key=lambda pair: pair[0]) if text]
+        events += zip(batch.column(FRAME_TIMELINE).to_pylist(), texts, strict=True)
+    return [text[0] for _, text in sorted(events, key=lambda pair: pair[0]) if text]
 
 
 def _actions_by_frame(chunks: Sequence[object]) -> dict[int, dict[int, np.ndarray]]:
     """Row -> frame -> ``[throttle, steering]`` (NaN where missing) of a recording's chunks."""
-    found: dict[int, dict[int, np.ndarray]] = {}
+    by_row: dict[int, dict[int, np.ndarray]] = {}
     for chunk in chunks:
         parts = chunk.entity_path.strip("/").split("/")
         if len(parts) != 4 or parts[0] != ENV_ROOT or parts[2] != "action":
@@ -385,11 +387,11 @@ def _actions_by_frame(chunks: Sequence[object]) -> dict[int, dict[int, np.ndarra
         column = ACTION_NAMES.index(parts[3])
         frames = batch.column(FRAME_TIMELINE).to_pylist()
         values = batch.column("Scalars:scalars").to_pylist()
-        row = found.setdefault(int(parts[1]), {})
+        row = by_row.setdefault(int(parts[1]), {})
         for frame, value in zip(frames, values, strict=True):
             action = row.setdefault(frame, np.full(2, np.nan))
             action[column] = value[0] if value else np.nan
-    return found
+    return by_row
 
 
 def _log_frame_divergences(
@@ -404,12 +406,12 @@ def _log_frame_divergences(
         for row, frames in actions[root].items():
             base = actions[reference].get(row, {})
             shared = sorted(set(frames) & set(base))
-            found = first_divergence(
+            divergence = first_divergence(
                 np.array([base[f] for f in shared]),
                 np.array([frames[f] for f in shared]),
                 threshold,
             )
-            if found is not None:
-                index, gap = found
+            if divergence is not None:
+                index, gap = divergence
                 text = f"frame {shared[index]}: {root} diverges from {reference} (by {gap:.2f})"
                 _log_event(recording, row, shared[index], text, fps)

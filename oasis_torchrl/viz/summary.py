@@ -120,10 +120,10 @@ class EpisodeSummary:
             "|" + "---|" * (5 + len(self.roots)),
         ]
         for scene in self.scenes():
-            found = [cells.get((root, scene)) for root in self.roots]
-            crashed = [o.root for o in found if o is not None and o.crashed]
+            outcomes = [cells.get((root, scene)) for root in self.roots]
+            crashed = [o.root for o in outcomes if o is not None and o.crashed]
             row, episode, prompt, seed = scene
-            results = " | ".join(_cell(outcome) for outcome in found)
+            results = " | ".join(_cell(outcome) for outcome in outcomes)
             lines.append(
                 f"| {episode} | {row} | {prompt} | {seed} | {', '.join(crashed) or '-'} "
                 f"| {results} |"
@@ -138,8 +138,8 @@ class EpisodeSummary:
         scenes = self.scenes()
         episodes = np.array([scene[1] for scene in scenes], dtype=np.int64)
         for index, root in enumerate(self.roots):
-            found = [cells.get((root, scene)) for scene in scenes]
-            values = np.array([_bar(outcome) for outcome in found], dtype=np.float64)
+            outcomes = [cells.get((root, scene)) for scene in scenes]
+            values = np.array([_bar(outcome) for outcome in outcomes], dtype=np.float64)
             color = Policy.at(root, index).color
             chart = rr.BarChart(values, color=color, abscissa=episodes)
             self.recording.log(chart_path(root), chart, static=True)
