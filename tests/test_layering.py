@@ -21,7 +21,7 @@ ABOVE_EVALUATION = {
     "distributed",
     "serving",
     "web",
-    "drive",
+    "film",
 }
 """The entry points and the pipelines: evaluation never imports them."""
 EVALUATION_IMPORTERS = {"commands", "train"}

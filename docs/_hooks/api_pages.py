@@ -106,7 +106,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.sim.launcher",
             "oasis_torchrl.sim.errors",
             "oasis_torchrl.sim.faults",
-            "oasis_torchrl.drive",
+            "oasis_torchrl.film",
             "oasis_torchrl.video",
         ),
     ),

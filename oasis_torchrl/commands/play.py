@@ -1,7 +1,7 @@
 """``oasis-torchrl play``: a person drives the world model in a browser page and records what
 they drive as a LeRobot dataset (settings: :class:`~oasis_torchrl.config.web.PlayConfig`).
 
-A command of its own rather than a flag of ``drive`` (the autopilot filming a route): the page
+A command of its own rather than a flag of ``film`` (the autopilot filmed on a route): the page
 is a server that runs until stopped, with its own settings (address, token, dataset, policy).
 Open the logged URL; over SSH forward the port (``ssh -L 8080:127.0.0.1:8080 host``). Stop with
 Ctrl-C or SIGTERM: every saved episode is kept, a running one is dropped.

@@ -33,14 +33,14 @@ def _named() -> dict[str, type]:
     from oasis_torchrl.config.recording import ImportConfig, RecordConfig
     from oasis_torchrl.config.serving import ServeConfig
     from oasis_torchrl.config.training import BCConfig, PPOConfig
-    from oasis_torchrl.config.viewing import DriveConfig, ViewConfig
+    from oasis_torchrl.config.viewing import FilmConfig, ViewConfig
     from oasis_torchrl.config.web import PlayConfig
 
     return {
         "bc": BCConfig,
         "demo": DemoConfig,
-        "drive": DriveConfig,
         "eval": EvalConfig,
+        "film": FilmConfig,
         "import-recordings": ImportConfig,
         "play": PlayConfig,
         "ppo": PPOConfig,
@@ -56,7 +56,7 @@ def config_names() -> list[str]:
 
     Example:
         >>> config_names()[:4]
-        ['bc', 'demo', 'drive', 'eval']
+        ['bc', 'demo', 'eval', 'film']
     """
     return sorted(_named())
 

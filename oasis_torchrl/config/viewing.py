@@ -88,8 +88,8 @@ class ViewConfig:
 
 
 @dataclass
-class DriveConfig:
-    """``oasis-torchrl drive``: the autopilot drives one route on the embedded server; the
+class FilmConfig:
+    """``oasis-torchrl film``: the autopilot drives one route on the embedded server, filmed; the
     three cameras go side by side to an MP4."""
 
     output: str = option("outputs/drive", help="output folder")

@@ -19,7 +19,7 @@ from oasis_torchrl.config.training import BCConfig
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.mark.parametrize("name", ["bc", "demo", "drive", "eval", "ppo", "serve"])
+@pytest.mark.parametrize("name", ["bc", "demo", "eval", "film", "ppo", "serve"])
 def test_named_configs_load_and_check(name: str) -> None:
     assert name in config_names()
     type(to_object(load_config(name)))  # the dataclasses' own checks pass on the defaults

@@ -143,8 +143,8 @@ def test_every_named_config_and_the_protos_load_from_the_wheel(
     assert {
         "bc",
         "demo",
-        "drive",
         "eval",
+        "film",
         "import-recordings",
         "ppo",
         "record",

@@ -1,8 +1,12 @@
-"""A filmed drive: the autopilot on the embedded server, filmed by the three cameras.
+"""A film: the autopilot driving one route on the embedded server, filmed by the three cameras.
 
-:func:`drive_route` starts the embedded A2V server, drives one scripted route (a fixed prompt
-and seed) with the privileged autopilot through the real protocol, writes the cameras side by
+:func:`film_route` starts the embedded A2V server, lets the privileged autopilot drive one
+scripted route (a fixed prompt and seed) through the real protocol, writes the cameras side by
 side to an MP4 and returns a summary.
+
+"Drive" in this project means a policy or a person controlling the car through an env (the
+drive loop of :mod:`oasis_torchrl.envs.driving`, :mod:`oasis_torchrl.drivers`, the drive page);
+filming such a drive into a video is "film" (``oasis-torchrl film``).
 """
 
 from __future__ import annotations
@@ -25,8 +29,8 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class DriveSummary:
-    """What the demo drive did."""
+class FilmSummary:
+    """What the filmed drive did."""
 
     prompt: str
     seed: int
@@ -39,7 +43,7 @@ class DriveSummary:
     video: str
 
 
-def drive_route(
+def film_route(
     output: str | Path,
     *,
     prompt: str = "urban street, sunset",
@@ -47,12 +51,12 @@ def drive_route(
     steps: int = 60,
     width: int = 768,
     height: int = 512,
-) -> DriveSummary:
-    """Drive ``steps`` chunks with the autopilot and write ``drive.mp4`` + ``summary.json``.
+) -> FilmSummary:
+    """Film the autopilot driving ``steps`` chunks: write ``drive.mp4`` + ``summary.json``.
 
     Example:
         >>> import tempfile
-        >>> summary = drive_route(tempfile.mkdtemp(), steps=3, width=96, height=64)
+        >>> summary = film_route(tempfile.mkdtemp(), steps=3, width=96, height=64)
         >>> summary.frames
         16
     """
@@ -67,17 +71,17 @@ def drive_route(
         env.set_seed(seed)
         td = env.reset()
         with StripVideoWriter(output / "drive.mp4", env.layout.cameras) as video:
-            _film(video, td, env.layout.cameras)
-            for _ in tqdm(range(steps), desc="demo drive", unit="step"):
+            _write_frame(video, td, env.layout.cameras)
+            for _ in tqdm(range(steps), desc="filmed drive", unit="step"):
                 td = env.step(pilot(td))["next"]
                 taken += 1
-                _film(video, td, env.layout.cameras)
+                _write_frame(video, td, env.layout.cameras)
                 if td["done"].any():
                     break
             frames = video.frames_written
     finally:
         env.close()
-    summary = DriveSummary(
+    summary = FilmSummary(
         prompt=prompt,
         seed=seed,
         steps=taken,
@@ -92,5 +96,5 @@ def drive_route(
     return summary
 
 
-def _film(video: StripVideoWriter, td: TensorDictBase, cameras: tuple[str, ...]) -> None:
+def _write_frame(video: StripVideoWriter, td: TensorDictBase, cameras: tuple[str, ...]) -> None:
     video.write({camera: td["pixels", camera][0].numpy() for camera in cameras})
