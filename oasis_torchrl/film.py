@@ -52,7 +52,7 @@ def film_route(
     width: int = 768,
     height: int = 512,
 ) -> FilmSummary:
-    """Film the autopilot driving ``steps`` chunks: write ``drive.mp4`` + ``summary.json``.
+    """Film the autopilot driving ``steps`` chunks: write ``film.mp4`` + ``summary.json``.
 
     Example:
         >>> import tempfile
@@ -70,7 +70,7 @@ def film_route(
     try:
         env.set_seed(seed)
         td = env.reset()
-        with StripVideoWriter(output / "drive.mp4", env.layout.cameras) as video:
+        with StripVideoWriter(output / "film.mp4", env.layout.cameras) as video:
             _write_frame(video, td, env.layout.cameras)
             for _ in tqdm(range(steps), desc="filmed drive", unit="step"):
                 td = env.step(pilot(td))["next"]
@@ -90,7 +90,7 @@ def film_route(
         progress_m=round(float(td["truth", "progress"][0, -1]), 2),
         collided=bool(td["truth", "collided"][0, -1] > 0.5),
         seconds=round(time.perf_counter() - started, 2),
-        video=str(output / "drive.mp4"),
+        video=str(output / "film.mp4"),
     )
     (output / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
     return summary

@@ -19,7 +19,7 @@ CONFIG = FilmConfig
 
 
 def run(cfg: DictConfig) -> int:
-    """Film the drive, write ``drive.mp4`` and ``summary.json``, print the summary as JSON.
+    """Film the drive, write ``film.mp4`` and ``summary.json``, print the summary as JSON.
 
     Example:
         >>> import tempfile

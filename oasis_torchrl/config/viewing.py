@@ -92,7 +92,7 @@ class FilmConfig:
     """``oasis-torchrl film``: the autopilot drives one route on the embedded server, filmed; the
     three cameras go side by side to an MP4."""
 
-    output: str = option("outputs/drive", help="output folder")
+    output: str = option("outputs/film", help="output folder")
     prompt: str = option("urban street, sunset", help="scene prompt")
     seed: int = option(0, help="world seed")
     steps: int = option(60, help="action chunks to drive")
