@@ -69,6 +69,9 @@ from oasis_torchrl.train.stages import (
 
 logger = logging.getLogger(__name__)
 
+EVALUATION = "eval"
+"""The final comparison's stage: timed, but not part of what the run took to learn."""
+
 FINE_TUNE = "bc+ppo"
 
 
@@ -106,16 +109,19 @@ class PipelineResult:
         """The comparison as a text table, what learning took (with shipped policies), and where
         the files are."""
         total = sum(self.seconds.values())
+        stages = ", ".join(f"{stage} {seconds:.0f} s" for stage, seconds in self.seconds.items())
         learned = self.learning_line()
         return (
             f"{format_table(self.rows())}\n"
             + (f"{learned}\n" if learned else "")
-            + f"\n{total / 60:.1f} min; summary {self.summary_path}, plot {self.plot_path}"
+            + f"\n{total / 60:.1f} min ({stages}); summary {self.summary_path}, "
+            + f"plot {self.plot_path}"
         )
 
     def learning_line(self) -> str | None:
-        """One plain line: what this run learned in its minutes, and what the shipped policies
-        took to train (from their cards); None without shipped policies.
+        """One plain line: what this run learned in the minutes of its stages before the
+        evaluation, and what the shipped policies took to train (from their cards); None without
+        shipped policies.
 
         Example:
             >>> result = PipelineResult(*[Path()] * 7, seconds={"bc": 600.0},
@@ -132,7 +138,7 @@ took: pretrained:ppo-scratch 204,800 env steps, 5.0 h on 2 cores.
             return None
         own = [row for row in self.rows() if row.kind == "learned"]
         best = best_learned(own)
-        minutes = sum(self.seconds.values()) / 60
+        minutes = sum(s for stage, s in self.seconds.items() if stage != EVALUATION) / 60
         learned = (
             f"{best.name} drives {best.vs_constant:.2f}x the best constant"
             if best is not None and best.vs_constant is not None
@@ -216,7 +222,7 @@ def run_pipeline(cfg: DictConfig) -> PipelineResult:
     fine_tune_kept = ppo.policy_frames > 0
     learned = {"bc": str(bc_policy)} | ({FINE_TUNE: str(ppo.policy_dir)} if fine_tune_kept else {})
     policies = {spec: spec for spec in (*plan.references, *plan.shipped)} | learned
-    with timed_stage(seconds, "eval"):
+    with timed_stage(seconds, EVALUATION):
         evaluations = evaluate_and_record_best(plan.eval, policies, list(plan.shipped))
         result = PipelineResult(
             dataset,

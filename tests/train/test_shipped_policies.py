@@ -184,7 +184,8 @@ def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
     evaluations = stages.evaluate_all(plan.EvaluationPlan.of(cfg), policies, record=True)
     cards = {"pretrained:tiny": json.loads((registry / "tiny" / "card.json").read_text())}
     paths = [Path()] * 7
-    result = pipeline.PipelineResult(*paths, evaluations, {"bc": 60.0}, False, cards)
+    seconds = {"bc": 60.0, pipeline.EVALUATION: 300.0}
+    result = pipeline.PipelineResult(*paths, evaluations, seconds, False, cards)
     rows = result.rows()
     assert [(row.name, row.kind) for row in rows] == [
         ("constant:throttle=1.0", "constant"),
@@ -194,8 +195,9 @@ def test_the_main_job_lists_shipped_policies_and_a_fine_tune_not_kept(
     ]
     table = result.table().splitlines()
     assert table[4].split() == ["bc+ppo", "not", "kept"]  # not the clone's row again
-    assert table[5].startswith("This run learned in 1 min: bc drives ")
+    assert table[5].startswith("This run learned in 1 min: bc drives ")  # not the evaluation
     assert "pretrained:tiny 16 env steps, 0.0 h on " in table[5]
+    assert table[7].startswith("6.0 min (bc 60 s, eval 300 s); summary ")
     assert result.to_dict()["fine_tune_kept"] is False
 
 
