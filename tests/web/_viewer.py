@@ -8,9 +8,12 @@ A benchmark imports it as ``web._viewer`` with ``tests/`` on ``sys.path``, as py
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import io
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -130,8 +133,13 @@ def web_viewer(folder: Path) -> Iterator[Callable[[str | None], str]]:
     args = ["--serve-web", "--web-viewer-port", str(web_port), "--port", str(_free_port())]
     # What the viewer says goes to a file, not a pipe: a full pipe would stop it.
     with tempfile.TemporaryFile(mode="w+") as said:
+        # A session of its own: ``python -m rerun`` runs the viewer as its child, which ends
+        # with it only when the whole group is ended.
         viewer = subprocess.Popen(
-            [sys.executable, "-m", "rerun", *args], stdout=subprocess.DEVNULL, stderr=said
+            [sys.executable, "-m", "rerun", *args],
+            stdout=subprocess.DEVNULL,
+            stderr=said,
+            start_new_session=True,
         )
         try:
             deadline = time.monotonic() + VIEWER_START_S
@@ -149,10 +157,20 @@ def web_viewer(folder: Path) -> Iterator[Callable[[str | None], str]]:
 
             yield url
         finally:
-            viewer.terminate()
-            viewer.wait(timeout=30)
+            _end_group(viewer)
             files.shutdown()
             files.server_close()
+
+
+def _end_group(process: subprocess.Popen) -> None:
+    """End ``process`` and the processes it started (its session's group)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGTERM)
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=30)
 
 
 def _why(viewer: subprocess.Popen, said: IO[str]) -> str:
