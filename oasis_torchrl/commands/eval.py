@@ -68,7 +68,9 @@ def run(cfg: DictConfig) -> int:
             compared = {spec: other.summary() for spec, other in reports.items()}
         else:
             driver = load_driver(cfg.policy)
-            with Evaluator.for_driver(cfg.env, cfg, driver, progress=cfg.progress) as evaluator:
+            with Evaluator.for_driver(
+                cfg.env, cfg, driver, progress=cfg.progress, name=str(cfg.policy)
+            ) as evaluator:
                 report = evaluator.evaluate(driver)
     except (ValueError, FileNotFoundError, ImportError, KeyError, RemotePolicyError) as error:
         logger.error("cannot evaluate: %s", error)

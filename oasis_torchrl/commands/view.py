@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig
@@ -45,8 +46,9 @@ def _replay_rollout(cfg: ViewConfig) -> None:
 
     options = LogOptions(**_given(cfg, "rows", "jpeg_quality"))
     scenes = SceneSource(cfg.scenes) if cfg.scenes else None
+    name = Path(cfg.path).resolve().name  # the saved rollout's: it names no policy
     with RolloutLogger(
-        cfg.target, options, scenes=scenes, **_given(cfg, "memory_limit")
+        cfg.target, options, scenes=scenes, name=name, **_given(cfg, "memory_limit")
     ) as rollout_logger:
         replay_rollout(cfg.path, rollout_logger)
 

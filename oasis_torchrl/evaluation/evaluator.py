@@ -49,6 +49,8 @@ class Evaluator:
         progress: show a progress bar per evaluation.
         rerun_logger: record the episodes with this logger instead of ``eval.rerun``'s (a
             policy's logger of a side-by-side recording).
+        name: the evaluated policy's name, which titles every panel of ``eval.rerun``'s
+            recording.
 
     Example:
         >>> from oasis_torchrl.drivers import ScriptedDriver
@@ -71,6 +73,7 @@ class Evaluator:
         front_crop: float | None = None,
         progress: bool = True,
         rerun_logger: RolloutLogger | None = None,
+        name: str = "",
     ) -> None:
         if eval_cfg.episodes < 1 or not eval_cfg.seeds or not eval_cfg.prompts:
             raise ValueError("eval needs episodes >= 1 and at least one prompt and one seed")
@@ -97,6 +100,7 @@ class Evaluator:
             rerun_logger or eval_cfg.get("rerun"),
             eval_cfg.get("lerobot"),
             scenes=self.env.scene_source(),
+            name=name,
         )
         if rerun_logger is not None and self.frames_only:
             logger.warning(
@@ -113,9 +117,11 @@ class Evaluator:
         *,
         progress: bool = True,
         rerun_logger: RolloutLogger | None = None,
+        name: str = "",
     ) -> Evaluator:
         """An evaluator whose env serves what ``driver`` reads: its image size, its frame
-        stack, its front crop and, if it drives with it, the embedded server's expert.
+        stack, its front crop and, if it drives with it, the embedded server's expert
+        (``name``: the driver's, for the recording's panels).
 
         Example:
             >>> from oasis_torchrl.drivers import load_driver
@@ -135,6 +141,7 @@ class Evaluator:
             front_crop=driver.front_crop,
             progress=progress,
             rerun_logger=rerun_logger,
+            name=name,
         )
 
     def evaluate(self, policy: Policy, seeds: Sequence[int] | None = None) -> EvalReport:

@@ -25,6 +25,7 @@ class EpisodeRecorders:
             logger of a side-by-side recording (:mod:`oasis_torchrl.viz.side_by_side`).
         lerobot: a dataset folder; episodes are appended (one row per frame at 20 fps).
         scenes: the top-down view's scene source (``env.scene_source()``; None: car and path).
+        name: the evaluated policy's name, which titles the panels of a recording made here.
 
     Example:
         >>> recorders = EpisodeRecorders()
@@ -36,13 +37,14 @@ class EpisodeRecorders:
         rerun: str | RolloutLogger | None = None,
         lerobot: str | Path | None = None,
         scenes: SceneLookup | None = None,
+        name: str = "",
     ) -> None:
         self.rerun = None
         self.lerobot = None
         if isinstance(rerun, str) and rerun:
             from oasis_torchrl.viz import RolloutLogger
 
-            self.rerun = RolloutLogger(rerun, scenes=scenes)
+            self.rerun = RolloutLogger(rerun, scenes=scenes, name=name)
         elif rerun:
             self.rerun = rerun
             if rerun.scenes is None:

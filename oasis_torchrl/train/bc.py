@@ -312,6 +312,7 @@ class BCTrainer:
             frame_stack=net.config.frames,
             front_crop=net.config.front_crop,
             progress=self.cfg.progress,
+            name=self.cfg.logger.exp_name,
         ) as evaluator:
             report = evaluator.evaluate(make_actor_critic(net).policy)
         for name, value in report.summary().items():

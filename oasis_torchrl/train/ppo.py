@@ -486,6 +486,7 @@ class PPOTrainer:
                 frame_stack=self.net.config.frames,
                 front_crop=self.net.config.front_crop,
                 progress=self.cfg.progress,
+                name=self.cfg.logger.exp_name,
             )
         policy = self.modules.policy if net is self.net else make_actor_critic(net).policy
         seeds = tuple(int(seed) for seed in (seeds or self.cfg.eval.seeds))

@@ -226,6 +226,7 @@ def evaluate_all(
                 driver,
                 progress=plan.progress,
                 rerun_logger=rerun_logger,
+                name=name,
             ) as run:
                 reports[spec] = run.evaluate(driver)
         results[name] = reports[spec].to_dict()

@@ -3,8 +3,9 @@
 each, :data:`~oasis_torchrl.viz.palette.PLOTS`), the top-down view, depth maps and the event log
 beside them. The time panel opens at the start of the ``frame`` timeline.
 
-Camera and top-down views take a ``label`` (``"autopilot: "``) that a side-by-side layout puts
-before their names, so every panel says whose it is."""
+Every panel's title starts with its ``owner`` (:func:`~oasis_torchrl.viz.titles.panel_title`):
+the policy whose episodes it shows, or the dataset or robot where there is no policy, alone or
+side by side, so every panel says whose it is."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import rerun.blueprint as rrb
 from oasis_torchrl.viz.palette import PLOTS
 from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, chart_path
-from oasis_torchrl.viz.titles import RowEpisodes, tab_title
+from oasis_torchrl.viz.titles import RowEpisodes, panel_title, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW, Window
 
 BACKGROUND = (30, 34, 30)
@@ -25,18 +26,23 @@ BACKGROUND = (30, 34, 30)
 PLOTS_PER_LINE = 3
 
 
-def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.Vertical | None:
+def plot_views(
+    paths: RowPaths, signals: Collection[str] | None = None, owner: str = ""
+) -> rrb.Vertical | None:
     """The row's plots that show at least one of ``signals`` (palette keys such as
-    ``truth/speed``; None: every plot), three to a line; None if there is none.
+    ``truth/speed``; None: every plot), three to a line, titled with their ``owner``; None if
+    there is none.
 
     Example:
-        >>> views = plot_views(RowPaths("env", 0), {"action/throttle", "truth/speed"})
+        >>> views = plot_views(RowPaths("env", 0), {"action/throttle", "truth/speed"}, "bc")
         >>> [view.name for line in views.contents for view in line.contents]
-        ['actions (-1 to 1)', 'speed (m/s)']
+        ['bc: actions (-1 to 1)', 'bc: speed (m/s)']
     """
     chosen = [plot for plot in PLOTS if signals is None or any(plot.shows(key) for key in signals)]
     views = [
-        rrb.TimeSeriesView(origin=paths.base, contents=plot.contents(), name=plot.title)
+        rrb.TimeSeriesView(
+            origin=paths.base, contents=plot.contents(), name=panel_title(owner, plot.title)
+        )
         for plot in chosen
     ]
     if not views:
@@ -46,7 +52,7 @@ def plot_views(paths: RowPaths, signals: Collection[str] | None = None) -> rrb.V
 
 
 def topdown_view(
-    paths: RowPaths, window: Window = DEFAULT_WINDOW, label: str = ""
+    paths: RowPaths, window: Window = DEFAULT_WINDOW, owner: str = ""
 ) -> rrb.Spatial2DView:
     """The top-down view: its bounds are the window around the car (the map is logged in the
     car's frame, so the window follows the car).
@@ -57,37 +63,48 @@ def topdown_view(
     """
     return rrb.Spatial2DView(
         origin=paths.topdown(),
-        name=f"{label}top-down",
+        name=panel_title(owner, "top-down"),
         visual_bounds=rrb.VisualBounds2D(x_range=window.x_range, y_range=window.y_range),
         background=BACKGROUND,
     )
 
 
-def camera_views(paths: RowPaths, cameras: Sequence[str], label: str = "") -> rrb.Horizontal:
-    """The row's cameras, left to right (each image scaled to its panel by the viewer).
+def camera_views(paths: RowPaths, cameras: Sequence[str], owner: str = "") -> rrb.Horizontal:
+    """The row's cameras, left to right (each image scaled to its panel by the viewer), titled
+    with their ``owner``.
 
     Example:
-        >>> views = camera_views(RowPaths("env", 0), ["left_forward", "front"], "autopilot: ")
+        >>> views = camera_views(RowPaths("env", 0), ["left_forward", "front"], "autopilot")
         >>> [view.name for view in views.contents]
         ['autopilot: left_forward', 'autopilot: front']
     """
     return rrb.Horizontal(
         *(
-            rrb.Spatial2DView(origin=paths.camera(camera), name=f"{label}{camera}")
+            rrb.Spatial2DView(origin=paths.camera(camera), name=panel_title(owner, camera))
             for camera in cameras
         )
     )
 
 
+def events_view(paths: RowPaths, owner: str = "") -> rrb.TextLogView:
+    """The row's event log (episode starts and ends, collisions), titled with its ``owner``.
+
+    Example:
+        >>> events_view(RowPaths("env", 0), "autopilot").name
+        'autopilot: events'
+    """
+    return rrb.TextLogView(origin=paths.events, name=panel_title(owner, "events"))
+
+
 def _side_panel(
-    paths: RowPaths, depth_cameras: Sequence[str], topdown: Window | None
+    paths: RowPaths, depth_cameras: Sequence[str], topdown: Window | None, owner: str
 ) -> rrb.Vertical:
-    views: list = [topdown_view(paths, topdown)] if topdown is not None else []
+    views: list = [topdown_view(paths, topdown, owner)] if topdown is not None else []
     views += [
-        rrb.Spatial2DView(origin=paths.depth(camera), name=f"depth {camera}")
+        rrb.Spatial2DView(origin=paths.depth(camera), name=panel_title(owner, f"depth {camera}"))
         for camera in depth_cameras
     ]
-    views.append(rrb.TextLogView(origin=paths.events, name="events"))
+    views.append(events_view(paths, owner))
     # The top-down view gets the most room: the map has to be read at a glance.
     shares = [3 if topdown is not None and i == 0 else 1 for i in range(len(views))]
     return rrb.Vertical(*views, row_shares=shares)
@@ -100,42 +117,48 @@ def row_layout(
     topdown: Window | None = DEFAULT_WINDOW,
     signals: Collection[str] | None = None,
     title: str | None = None,
+    owner: str = "",
 ) -> rrb.Horizontal:
     """The layout of one row, titled ``title`` (default ``row <row>``): cameras over plots (those
-    with signals), side panel on the right.
+    with signals), side panel on the right, every panel titled with its ``owner``.
 
     Example:
         >>> layout = row_layout(RowPaths("env", 0), ["left_forward", "front", "right_forward"])
         >>> type(layout).__name__
         'Horizontal'
     """
-    plots = plot_views(paths, signals)
-    cameras_row = camera_views(paths, cameras)
+    plots = plot_views(paths, signals, owner)
+    cameras_row = camera_views(paths, cameras, owner)
     # 2 to 3: three 3:2 cameras across fill their panels on a wide screen, without black bars.
     main = cameras_row if plots is None else rrb.Vertical(cameras_row, plots, row_shares=[2, 3])
     return rrb.Horizontal(
         main,
-        _side_panel(paths, depth_cameras, topdown),
+        _side_panel(paths, depth_cameras, topdown, owner),
         column_shares=[3, 1],
         name=title or tab_title(paths.row, {}),
     )
 
 
-def summary_layout(roots: Sequence[str]) -> rrb.Vertical:
-    """The summary tab: the table of episodes over one bar chart per policy (root).
+def summary_layout(roots: Sequence[str], owners: Sequence[str] | None = None) -> rrb.Vertical:
+    """The summary tab: the table of episodes over one bar chart per policy (root), each titled
+    with its owner (where unnamed: its root); a single owner's table too (several policies'
+    table names them in its columns).
 
     Example:
-        >>> summary_layout(["env"]).name
-        'summary'
+        >>> tab = summary_layout(["env"], ["autopilot"])
+        >>> tab.name, [view.name for view in tab.contents[:1]]
+        ('summary', ['autopilot: episodes'])
     """
+    owners = owners or [""] * len(roots)
     charts = [
         rrb.BarChartView(
             origin=chart_path(root),
-            name=f"{root}: distance driven in m (or return) by episode number",
+            name=panel_title(owner or root, "distance driven in m (or return) by episode number"),
         )
-        for root in roots
+        for root, owner in zip(roots, owners, strict=True)
     ]
-    table = rrb.TextDocumentView(origin=TABLE, name="episodes")
+    table_owner = owners[0] if len(owners) == 1 else ""
+    table = rrb.TextDocumentView(origin=TABLE, name=panel_title(table_owner, "episodes"))
     return rrb.Vertical(table, rrb.Horizontal(*charts), row_shares=[2, 1], name=SUMMARY_ROOT)
 
 
@@ -168,6 +191,7 @@ def default_blueprint(
     summary: bool = False,
     fps: float | None = None,
     titles: Sequence[str] | None = None,
+    owner: str = "",
 ) -> rrb.Blueprint:
     """A summary tab (when ``summary``) and one tab per logged row (a single row and no summary
     get no tabs).
@@ -182,6 +206,8 @@ def default_blueprint(
         summary: add the summary tab (ended episodes exist).
         fps: the frame timeline's playback rate (frames per second).
         titles: each row's tab title (default ``row <row>``).
+        owner: whose episodes these are (the policy's, dataset's or robot's name), which every
+            panel's title starts with (none: the panels' own names alone).
 
     Example:
         >>> blueprint = default_blueprint([0, 5], ["front"])
@@ -192,11 +218,11 @@ def default_blueprint(
         raise ValueError("default_blueprint needs at least one row")
     titles = titles or [None] * len(rows)
     layouts = [
-        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals, title)
+        row_layout(RowPaths(root, row), cameras, depth_cameras, topdown, signals, title, owner)
         for row, title in zip(rows, titles, strict=True)
     ]
     if summary:
-        layouts.insert(0, summary_layout([root]))
+        layouts.insert(0, summary_layout([root], [owner]))
     container = layouts[0] if len(layouts) == 1 else rrb.Tabs(*layouts, active_tab=0)
     return rrb.Blueprint(container, time_panel(fps))
 
@@ -204,7 +230,7 @@ def default_blueprint(
 @dataclass(frozen=True)
 class RowsLayout:
     """What a writer has logged so far, all its layout depends on (``episodes``: each row's,
-    for its tab's title).
+    for its tab's title; ``owner``: whose episodes they are, for every panel's title).
 
     Example:
         >>> layout = RowsLayout("env", (0,), ("front",), (), None, frozenset(), False)
@@ -220,6 +246,7 @@ class RowsLayout:
     signals: frozenset[str]
     summary: bool
     episodes: tuple[RowEpisodes, ...] = ()
+    owner: str = ""
 
     def row_episodes(self, row: int) -> RowEpisodes:
         """The episodes row ``row`` has shown (none if unknown)."""
@@ -239,4 +266,5 @@ class RowsLayout:
             summary=self.summary,
             fps=fps,
             titles=[tab_title(row, {self.root: self.row_episodes(row)}) for row in self.rows],
+            owner=self.owner,
         )

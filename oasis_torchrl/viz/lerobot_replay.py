@@ -6,7 +6,8 @@ sequentially with PyAV (:func:`~oasis_torchrl.data.video_frames.frames_at`) and 
 frame, so memory stays flat however long an episode is.
 Timelines: ``frame`` = the dataset's ``frame_index``, ``step`` = the env step it belongs to (4
 frames a step in a dataset of one row per frame, 1 in one of a row per step), ``sim_time`` =
-``frame_index / fps``. Each episode's tab is named after it (``episode 3``).
+``frame_index / fps``. Each episode's tab is named after it (``episode 3``), every panel after the
+dataset (its folder's name, or the repo id given).
 Needs the ``lerobot`` extra.
 """
 
@@ -59,6 +60,8 @@ class DatasetReplay:
         jpeg_quality: JPEG quality of logged frames (None: raw images).
         repo_id: LeRobot repo id (default ``local/<folder name>``).
 
+    :attr:`name` (the repo id given, else the folder's name) titles every panel.
+
     Example:
         >>> replay = DatasetReplay("drives", rr.RecordingStream("doc"))  # doctest: +SKIP
         >>> replay.log([0, 3])  # doctest: +SKIP
@@ -77,6 +80,7 @@ class DatasetReplay:
         self.root = Path(root)
         if not is_dataset_root(self.root):
             raise ValueError(f"{self.root} is not a LeRobot dataset (no meta/info.json)")
+        self.name = repo_id or self.root.resolve().name
         self.repo_id = repo_id or default_repo_id(self.root)
         self.meta = LeRobotDatasetMetadata(self.repo_id, root=self.root)
         self.recording = recording
@@ -112,6 +116,7 @@ class DatasetReplay:
                 topdown=None,
                 signals=self._signals(),
                 titles=[f"episode {episode}" for episode in chosen],
+                owner=self.name,
             )
         )
         dataset = LeRobotDataset(

@@ -77,6 +77,9 @@ class RolloutLogger:
             True for a file whose process may end by a signal, with no :meth:`close`: what was
             logged reaches it within a second.
         policy: the policy whose episodes these are, in a side-by-side recording.
+        name: whose episodes these are (the policy's name, or the dataset's or robot's where
+            there is no policy): every panel's title starts with it (empty: the panels' own
+            names alone).
 
     Example:
         >>> import tempfile, os
@@ -105,6 +108,7 @@ class RolloutLogger:
         send_layout: Callable[[RowsLayout], None] | None = None,
         live: bool | None = None,
         policy: Policy | None = None,
+        name: str = "",
     ) -> None:
         self.options = options if options is not None else LogOptions()
         self._owns_recording = not isinstance(target, rr.RecordingStream)
@@ -131,6 +135,7 @@ class RolloutLogger:
             send_layout=send_layout,
             live=live,
             policy=policy,
+            name=name,
         )
         self._worker = BoundedWorker(self.options.max_pending) if self.options.background else None
         self._tick = 0

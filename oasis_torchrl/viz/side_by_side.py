@@ -32,6 +32,7 @@ from oasis_torchrl.protocol import CHUNK
 from oasis_torchrl.viz.blueprint import (
     RowsLayout,
     camera_views,
+    events_view,
     summary_layout,
     time_panel,
     topdown_view,
@@ -43,7 +44,7 @@ from oasis_torchrl.viz.paths import ENV_ROOT, FRAME_TIMELINE, RowPaths
 from oasis_torchrl.viz.recording import LayoutSender, is_live, layout_first, open_recording
 from oasis_torchrl.viz.summary import SUMMARY_ROOT, TABLE, EpisodeSummary, chart_path
 from oasis_torchrl.viz.timelines import set_frame
-from oasis_torchrl.viz.titles import episodes_of, tab_title
+from oasis_torchrl.viz.titles import episodes_of, panel_title, tab_title
 from oasis_torchrl.viz.topdown import DEFAULT_WINDOW
 from oasis_torchrl.viz.writer import ACTION_NAMES
 
@@ -103,14 +104,15 @@ def side_by_side_blueprint(
     """The summary tab and a tab per env row, a line per policy (``layouts``, one per root).
 
     Example:
-        >>> layouts = [RowsLayout(root, (0,), ("front",), (), None, frozenset(), True)
+        >>> layouts = [RowsLayout(root, (0,), ("front",), (), None, frozenset(), True, owner=root)
         ...            for root in ("autopilot", "bc")]
         >>> type(side_by_side_blueprint(layouts)).__name__
         'Blueprint'
     """
     rows = sorted({row for layout in layouts for row in layout.rows})
     cameras = aligned_cameras(layouts)
-    tabs = [summary_layout([layout.root for layout in layouts])]
+    roots, owners = [layout.root for layout in layouts], [layout.owner for layout in layouts]
+    tabs = [summary_layout(roots, owners)]
     tabs += [_row_tab(layouts, row, cameras) for row in rows]
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), time_panel(fps))
 
@@ -132,11 +134,11 @@ def aligned_cameras(layouts: Sequence[RowsLayout]) -> list[str]:
 
 
 def _policy_line(layout: RowsLayout, row: int, cameras: Sequence[str]) -> rrb.Horizontal:
-    paths, label = RowPaths(layout.root, row), f"{layout.root}: "
-    views = [camera_views(paths, cameras, label)]
+    paths, owner = RowPaths(layout.root, row), layout.owner
+    views = [camera_views(paths, cameras, owner)]
     if layout.topdown is not None:
-        views.append(topdown_view(paths, layout.topdown, label))
-    views.append(rrb.TextLogView(origin=paths.events, name=f"{label}events"))
+        views.append(topdown_view(paths, layout.topdown, owner))
+    views.append(events_view(paths, owner))
     shares = [3, 1, 1] if layout.topdown is not None else [3, 1]
     return rrb.Horizontal(*views, column_shares=shares, name=layout.root)
 
@@ -161,7 +163,7 @@ def _row_tab(layouts: Sequence[RowsLayout], row: int, cameras: Sequence[str]) ->
         rrb.TimeSeriesView(
             origin=RowPaths(layout.root, row).base,
             contents=["+ $origin/action/**"],
-            name=f"{layout.root}: actions (-1 to 1)",
+            name=panel_title(layout.owner, "actions (-1 to 1)"),
         )
         for layout in layouts
     ]
@@ -221,6 +223,7 @@ class SideBySide:
             send_layout=self._send_layout,
             live=self.live,
             policy=Policy.at(root, list(self.roots.values()).index(root)),
+            name=root,
         )
 
     def close(self) -> None:
@@ -359,7 +362,9 @@ def _layout_of(root: str, chunks: Sequence[object]) -> RowsLayout:
     window = DEFAULT_WINDOW if topdown else None
     ordered = tuple(sorted(rows))
     episodes = tuple(episodes_of(_events_of(chunks, row)) for row in ordered)
-    return RowsLayout(root, ordered, tuple(cameras), (), window, frozenset(signals), True, episodes)
+    return RowsLayout(
+        root, ordered, tuple(cameras), (), window, frozenset(signals), True, episodes, root
+    )
 
 
 def _events_of(chunks: Sequence[object], row: int) -> list[str]:

@@ -2,7 +2,8 @@
 
 A row's tab is named after the episodes it shows (:class:`RowEpisodes`): each episode's number
 (the same in its events and the summary) and, once it has ended, how and at which step. Side by
-side, each policy's outcome is named after it.
+side, each policy's outcome is named after it. Every panel is titled with whose episodes it shows
+(:func:`panel_title`): the policy's name, or the dataset's or robot's where there is no policy.
 """
 
 from __future__ import annotations
@@ -57,6 +58,17 @@ class RowEpisodes:
     def ended(self, mark: EpisodeMark) -> RowEpisodes:
         """These episodes with the latest one's end."""
         return RowEpisodes(self.first, self.count, (*self.latest[:-1], mark))
+
+
+def panel_title(owner: str, panel: str) -> str:
+    """The title of a panel (a view) that shows ``owner``'s episodes: a policy's, a dataset's or
+    a robot's name before the panel's own (the panel's alone where the owner is unnamed).
+
+    Example:
+        >>> panel_title("autopilot", "front"), panel_title("", "front")
+        ('autopilot: front', 'front')
+    """
+    return f"{owner}: {panel}" if owner else panel
 
 
 def tab_title(row: int, episodes: Mapping[str, RowEpisodes]) -> str:

@@ -112,7 +112,8 @@ class RecordWriter:
     ``summary`` (the summary tab); ``send_layout`` replaces the default blueprint (a side-by-side
     recording lays several writers out together), which goes to a ``live`` viewer as it
     changes, else at :meth:`flush`. ``policy`` names and colours the signals that policies side
-    by side share a plot for.
+    by side share a plot for; ``name`` (whose episodes these are: the policy's, dataset's or
+    robot's) titles every panel of the layout.
 
     Example:
         >>> writer = RecordWriter(rr.RecordingStream("doc"), LogOptions(background=False))
@@ -131,8 +132,10 @@ class RecordWriter:
         send_layout: Callable[[RowsLayout], None] | None = None,
         live: bool = True,
         policy: Policy | None = None,
+        name: str = "",
     ) -> None:
         self.recording = recording
+        self.name = name
         self.options = options
         self.scenes = scenes
         self.root = root
@@ -211,6 +214,7 @@ class RecordWriter:
             frozenset(self._signals),
             self._ended,
             tuple(self._rows[row].episodes for row in sorted(self._rows)),
+            self.name,
         )
         if layout != self._layout:
             self._layout = layout

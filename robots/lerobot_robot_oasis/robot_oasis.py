@@ -142,7 +142,8 @@ class OasisRobot(Robot):
 
                 # LeRobot's tools end a session by a signal as often as by disconnect(): the
                 # recording takes what is logged as it comes, as a viewer would.
-                self._rerun = RolloutLogger(self.config.rerun, live=True)
+                name = self.config.id or self.name  # the robot's: it names no policy
+                self._rerun = RolloutLogger(self.config.rerun, live=True, name=name)
             self._begin(0)
         except Exception:
             self.disconnect()

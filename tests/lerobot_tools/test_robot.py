@@ -132,7 +132,7 @@ def test_a_robots_steps_run_no_reward(
 def test_the_robots_rerun_recording_is_the_shared_one(tmp_path: Path) -> None:
     """``--robot.rerun``: the same recording as an evaluation's (frames as served, a tab named
     after its episode, the step timeline)."""
-    from viz._readback import Readback, printed
+    from viz._readback import Readback, blueprint_views, printed
 
     path = tmp_path / "robot.rrd"
     robot = make_robot_from_config(OasisRobotConfig(seed=5, rerun=str(path)))
@@ -153,3 +153,4 @@ def test_the_robots_rerun_recording_is_the_shared_one(tmp_path: Path) -> None:
     starts = [text.split(":")[0] for text in readback.texts("env/0/events")[1]]
     assert starts == ["episode 0 starts", "episode 3 starts"]
     assert "[episode 0: running; episode 3: running]" in printed(path)
+    assert ("2D", "oasis: front", "env/0/camera/front") in blueprint_views(path)  # the robot's

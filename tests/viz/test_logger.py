@@ -14,6 +14,7 @@ import pytest
 import torch
 from torchrl.collectors import Collector
 
+from oasis_torchrl.cli import main
 from oasis_torchrl.client import A2VClient
 from oasis_torchrl.envs import OasisEnv
 from oasis_torchrl.sim.config import ServerConfig
@@ -133,6 +134,23 @@ def test_default_blueprint_has_a_layout_per_logged_row(tmp_path: Path) -> None:
     assert order[0].startswith(("/view/", "/container/", "/viewport"))
     summary = next(i for i, p in enumerate(order) if p.startswith("/summary/"))
     assert summary < next(i for i, p in enumerate(order) if p.startswith("/env/"))
+
+
+def test_an_evaluation_of_one_policy_titles_every_panel_with_it(tmp_path: Path) -> None:
+    """``oasis-torchrl eval ... rerun=FILE`` without ``compare``: every panel of the layout read
+    back from the file names the policy, as side by side."""
+    path = tmp_path / "alone.rrd"
+    policy = "constant:throttle=1.0,steering=0.0"
+    settings = ["episodes=1", "max_steps=3", "env.image_size=[64,96]", "progress=false"]
+    assert main(["eval", f"policy={policy}", *settings, f"rerun={path}"]) == 0
+    views = blueprint_views(path)
+    kinds = {kind for kind, _, _ in views}
+    assert kinds == {"2D", "TimeSeries", "TextLog", "BarChart", "TextDocument"}
+    unnamed = sorted(name for _, name, _ in views if not name.startswith(f"{policy}: "))
+    assert not unnamed, f"panels without the policy's name: {unnamed}"
+    assert ("2D", f"{policy}: front", "env/0/camera/front") in views
+    assert ("2D", f"{policy}: top-down", "env/0/topdown") in views
+    assert ("TimeSeries", f"{policy}: speed (m/s)", "env/0") in views
 
 
 def test_all_frames_raw_images_and_depth(tmp_path: Path) -> None:

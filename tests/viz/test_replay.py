@@ -99,7 +99,9 @@ def test_dataset_episode_to_rrd(dataset_root: Path, tmp_path: Path) -> None:
     )
     steps, _ = readback.column("episode/1/reward/total", "Scalars:scalars", index="step")
     assert steps == [0, 1]  # a 20 fps dataset: a row per frame, frames 0-3 are step 0
-    assert ("2D", "front", "episode/1/camera/front") in blueprint_views(out)
+    # Every panel is titled with the dataset's name (there is no policy)
+    front = (f"{dataset_root.name}: front", "episode/1/camera/front")
+    assert ("2D", *front) in blueprint_views(out)
     assert "[episode 1]" in printed(out)  # the tab, named after its episode
     seconds, _ = readback.column("episode/1/reward/total", "Scalars:scalars", index="sim_time")
     assert [s.total_seconds() for s in seconds] == pytest.approx([f / 20 for f in range(6)])
@@ -124,6 +126,7 @@ def test_saved_rollout_rows_to_rrd(tmp_path: Path) -> None:
     for image, t, reset in zip(images, steps, resets, strict=True):
         assert np.abs(image.astype(int) - color(2, t, CAMERAS.index("front"), reset)).max() <= 4
     assert readback.texts("env/2/events")[1][-1] == "episode 1 starts: 'road 2-1', seed 201"
+    assert ("TextLog", "run: events", "env/2/events") in blueprint_views(out)  # the rollout's name
     with pytest.raises(FileExistsError):
         save_rollout(rollout(1, 1), folder)
 
