@@ -31,7 +31,7 @@ or point at one: make PYTHON=/path/to/python$(PYTHON_VERSION) ...
 endef
 export NO_PYTHON
 
-.PHONY: demo test docs lint protos lock bench bench-learning bench-crop-rule bench-ray-nodes \
+.PHONY: demo test docs lint protos lock bench bench-learning bench-crop-rule bench-ray-nodes bench-viewer \
 	ffmpeg-libs clean-venv venv-python
 
 venv-python:
@@ -84,11 +84,13 @@ lock: venv-python $(STAMP)
 
 # The quick benchmarks (each a few minutes at most; benchmarks/_*.py are their helpers). The
 # long ones have a target each: the learning benchmark and the narrow crop's rule train policies
-# for hours, and Ray across nodes builds network namespaces (root).
+# for hours, Ray across nodes builds network namespaces (root), and the viewer's load time needs
+# Chromium (the browser tests' own).
 LEARNING_BENCH := benchmarks/learning.py
 CROP_RULE_BENCH := benchmarks/front_crop_rule.py
 RAY_NODES_BENCH := benchmarks/ray_nodes.py
-LONG_BENCHES := $(LEARNING_BENCH) $(CROP_RULE_BENCH) $(RAY_NODES_BENCH)
+VIEWER_BENCH := benchmarks/viewer_load.py
+LONG_BENCHES := $(LEARNING_BENCH) $(CROP_RULE_BENCH) $(RAY_NODES_BENCH) $(VIEWER_BENCH)
 bench: venv-python $(STAMP)
 	set -e; for script in $(filter-out $(LONG_BENCHES),$(wildcard benchmarks/[!_]*.py)); do \
 		$(PY) $$script; done
@@ -101,6 +103,9 @@ bench-crop-rule: venv-python $(STAMP)
 
 bench-ray-nodes: venv-python $(STAMP)
 	$(PY) $(RAY_NODES_BENCH)
+
+bench-viewer: venv-python $(STAMP)
+	$(PY) $(VIEWER_BENCH)
 
 # LeRobot's fast video path (torchcodec) needs FFmpeg's shared libraries, which no wheel ships under
 # the names torchcodec loads; Debian's and Ubuntu's packages do (root needed: `sudo make ffmpeg-libs`).
