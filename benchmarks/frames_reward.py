@@ -349,13 +349,6 @@ def parse_arguments(argv: list[str] | None = None) -> argparse.Namespace:
         default="small",
         help="the motion network checked: small (the shipped one) or a weights file",
     )
-    parser.add_argument(
-        "--clearance-weight",
-        type=float,
-        default=0.0,
-        help="env.reward.clearance_weight: the motion reward's cost of a collision ahead (the "
-        "learning benchmark's PPO env sets 0.2)",
-    )
     parser.add_argument("--output", type=Path, help="write <output>.json and <output>.png")
     return parser.parse_args(argv)
 
@@ -367,14 +360,11 @@ def main() -> None:
     # chunk's reward took 26 times as long in this script beside other jobs).
     torch.set_num_threads(1)
     started = time.monotonic()
-    reward_cfg = RewardConfig(
-        motion_model=args.motion_model, clearance_weight=args.clearance_weight
-    )
+    reward_cfg = RewardConfig(motion_model=args.motion_model)
     report: dict[str, object] = {
         "prompts": list(HELD_OUT_SCENES),
         "seeds": list(REWARD_CHECK_SEEDS),
         "motion_model": args.motion_model,
-        "clearance_weight": args.clearance_weight,
     }
     runs = {
         spec: drive_policy(spec, HELD_OUT_SCENES, args.episodes, args.steps, (64, 96), reward_cfg)

@@ -58,11 +58,7 @@ class RewardConfig:
     )
     lane_penalty: float = option(0.01, help="penalty per metre off the lane centre")
     clearance_weight: float = option(
-        0.0,
-        help="cost of an obstacle ahead (0: off): with ground truth, by its clearance "
-        "(ClearanceShaping); on frames alone, the motion reward's chance of a collision within "
-        "its horizon",
-        ge=0.0,
+        0.0, help="cost of an obstacle ahead (ClearanceShaping; 0: off)"
     )
     clearance_horizon: float = option(25.0, help="metres ahead from which an obstacle costs")
 

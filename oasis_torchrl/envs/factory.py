@@ -81,24 +81,16 @@ def make_frames_reward(cfg: RewardConfig | DictConfig, kind: str = "motion") -> 
     settings of ``env.reward``: what an endpoint without ground truth is scored with, and what
     an evaluation scores beside the ground truth.
 
-    ``env.reward.clearance_weight``, the cost of an obstacle ahead, is the motion reward's
-    ``ahead_weight``: frames alone measure that cost by the chance of a collision within the
-    motion network's horizon, as ground truth measures it by the clearance.
-
     Example:
         >>> type(make_frames_reward(RewardConfig(), "depth")).__name__
         'DepthCollisionReward'
-        >>> make_frames_reward(RewardConfig(clearance_weight=0.2)).config.ahead_weight
-        0.2
     """
     if kind == "depth":
         return DepthCollisionReward(NamedDepth(cfg.depth_model))
     if kind != "motion":
         raise ValueError(f"{kind!r} is not a frames-only reward: motion or depth")
     constants = MotionRewardConfig(
-        progress_scale=cfg.progress_scale,
-        collision_penalty=cfg.collision_penalty,
-        ahead_weight=cfg.clearance_weight,
+        progress_scale=cfg.progress_scale, collision_penalty=cfg.collision_penalty
     )
     return MotionReward(load_motion_net(cfg.motion_model), constants)
 
