@@ -103,8 +103,10 @@ class DemoConfig:
     bc: BCSettings = option(default_factory=_demo_bc, help="behaviour cloning")
     dagger: DaggerConfig = option(
         # 32 episodes a round: the states the clone reaches, labelled, are what teach it to avoid
-        # obstacles (docs/experiments/2026-11-28-main-job.md).
-        default_factory=lambda: DaggerConfig(rounds=2, episodes=32),
+        # obstacles (docs/experiments/2026-11-28-main-job.md). One round, not two: the main
+        # job's ten minutes on 2 cores (a round cost about 2 minutes), and further rounds added
+        # nothing measurable to the larger clone (docs/experiments/2026-11-28-bc-with-dagger.md).
+        default_factory=lambda: DaggerConfig(rounds=1, episodes=32),
         help="DAgger rounds",
     )
     ppo: PPOSettings = option(
