@@ -186,7 +186,7 @@ class CloneRound:
     Example:
         >>> rounds = plan_run(load_config("demo", ["output_dir=/tmp/d"])).clone
         >>> [str(round_.policy) for round_ in rounds]
-        ['/tmp/d/bc/round_0/policy', '/tmp/d/bc/round_1/policy', '/tmp/d/bc/round_2/policy']
+        ['/tmp/d/bc/round_0/policy', '/tmp/d/bc/round_1/policy']
         >>> config = rounds[1].config
         >>> config.init_from, config.dataset.root, config.train.steps
         ('/tmp/d/bc/round_0/policy', '/tmp/d/bc/round_1/dataset', 500)
@@ -363,7 +363,7 @@ def plan_run(cfg: DictConfig) -> RunPlan:
     Example:
         >>> plan = plan_run(load_config("demo", ["output_dir=/tmp/d"]))
         >>> plan.demonstrators.source, len(plan.clone), plan.ppo.init_from, plan.ppo.eval.final
-        ('autopilot', 3, '/tmp/d/bc/round_2/policy', False)
+        ('autopilot', 2, '/tmp/d/bc/round_1/policy', False)
         >>> plan.references
         ('autopilot', 'constant:throttle=1.0,steering=0.0')
     """

@@ -118,7 +118,7 @@ def train_clone(rounds: tuple[CloneRound, ...]) -> Path:
         >>> from oasis_torchrl.config import load_config
         >>> from oasis_torchrl.train.plan import plan_run
         >>> train_clone(plan_run(load_config("demo")).clone)  # doctest: +SKIP
-        PosixPath('outputs/demo/bc/round_2/policy')
+        PosixPath('outputs/demo/bc/round_1/policy')
     """
     from oasis_torchrl.train.bc import PARTIAL_POLICY, TRAINING_STATE
 
