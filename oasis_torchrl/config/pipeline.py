@@ -104,8 +104,9 @@ class DemoConfig:
     dagger: DaggerConfig = option(
         # 32 episodes a round: the states the clone reaches, labelled, are what teach it to avoid
         # obstacles (docs/experiments/2026-11-28-main-job.md). One round, not two: the main
-        # job's ten minutes on 2 cores (a round cost about 2 minutes), and further rounds added
-        # nothing measurable to the larger clone (docs/experiments/2026-11-28-bc-with-dagger.md).
+        # job's ten minutes on 2 cores (docs/experiments/2026-12-07-main-job-ten-minutes.md),
+        # and further rounds added nothing measurable to the larger clone
+        # (docs/experiments/2026-11-28-bc-with-dagger.md).
         default_factory=lambda: DaggerConfig(rounds=1, episodes=32),
         help="DAgger rounds",
     )
@@ -113,9 +114,9 @@ class DemoConfig:
         default_factory=_demo_ppo,
         help="PPO fine-tuning from the clone (the env is the shared one)",
     )
-    # 8 episodes, not 16: the main job's ten minutes on 2 cores. The evaluation drove each
-    # policy and the recorded pair again for a third of the job's wall time; the table gives
-    # each mean's standard error, and the learning benchmark judges on 32 episodes.
+    # 8 episodes, not 16: the main job's ten minutes on 2 cores (the evaluation drives every
+    # policy, then the recorded pair again; docs/experiments/2026-12-07-main-job-ten-minutes.md).
+    # The table gives each mean's standard error; the learning benchmark judges on 32 episodes.
     eval: PipelineEvaluationConfig = option(
         default_factory=lambda: PipelineEvaluationConfig(
             episodes=8, max_steps=150, rerun="${output_dir}/eval.rrd", compare=["autopilot"]
