@@ -245,8 +245,9 @@ def evaluate_and_record_best(
 
     Which policy is best is known only once all are evaluated, so the others are evaluated
     unrecorded first; the compared ones and the best then drive the recorded pass (the best's
-    figures repeat its first evaluation's: evaluations are deterministic). Recording costs
-    several times an unrecorded evaluation, so this records each episode once.
+    figures repeat its first evaluation's: evaluations are deterministic). Recording every
+    policy in its first pass would put every policy's frames in the file; this keeps the file to
+    the best and the compared ones.
 
     Example:
         >>> from oasis_torchrl.config import load_config
