@@ -8,13 +8,14 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
-from types import TracebackType
 
 import av
 import numpy as np
 
+from oasis_torchrl.closing import Closing
 
-class StripVideoWriter:
+
+class StripVideoWriter(Closing):
     """Append per-camera frames side by side to an MP4 file.
 
     Args:
@@ -76,14 +77,3 @@ class StripVideoWriter:
         finally:
             self._container.close()
             self._container = None
-
-    def __enter__(self) -> StripVideoWriter:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -88,11 +88,17 @@ def test_importing_evaluation_loads_no_pipeline() -> None:
 
 def test_the_server_side_imports_nothing_above_the_protocol() -> None:
     # The embedded server is a peer of the client: it stands on the protocol (and the ground
-    # floor every layer shares: the settings fields, whole-file writes and the one-line video
-    # fallback of the package's import) alone; not even the config package.
+    # floor every layer shares: the settings fields, whole-file writes, the closing mixin and the
+    # one-line video fallback of the package's import) alone; not even the config package.
     imported = loaded_by(
         "oasis_torchrl.sim.__main__", "oasis_torchrl.sim.launcher", "oasis_torchrl.sim.server"
     )
     allowed = ("oasis_torchrl.sim", "oasis_torchrl.proto", "oasis_torchrl.protocol")
-    allowed += ("oasis_torchrl.options", "oasis_torchrl.atomic", "oasis_torchrl.video_fallback")
+    allowed += ("oasis_torchrl.options", "oasis_torchrl.atomic", "oasis_torchrl.closing")
+    allowed += ("oasis_torchrl.video_fallback",)
     assert imported and not [name for name in imported if not name.startswith(allowed)]
+
+
+def test_the_closing_mixin_imports_nothing_of_the_project() -> None:
+    # A foundation: every layer, the embedded server included, may inherit it.
+    assert imported_packages(PACKAGE / "closing.py") == set()

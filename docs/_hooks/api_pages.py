@@ -171,6 +171,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.train.driven_rounds",
             "oasis_torchrl.allocator",
             "oasis_torchrl.atomic",
+            "oasis_torchrl.closing",
         ),
     ),
     "evaluation": ApiPage(

@@ -31,7 +31,6 @@ import os
 import weakref
 from collections.abc import Awaitable, Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from types import TracebackType
 from typing import Any
 
 import grpc
@@ -48,6 +47,7 @@ from oasis_torchrl.client.session import SessionState
 from oasis_torchrl.client.sync_client import DEFAULT_SDK_VERSION
 from oasis_torchrl.client.transport import Transport, open_channel
 from oasis_torchrl.client.types import PoolStep, ServerHandle, SessionStatus, StreamInfo
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.protocol import API_KEY_ENV_VAR, CAMERAS, CHUNK, FRONT, with_front_crop
 
 logger = logging.getLogger(__name__)
@@ -82,7 +82,7 @@ class _Runtime:
         self.executor.shutdown(wait=True)
 
 
-class SessionPool:
+class SessionPool(Closing):
     """N concurrent A2V sessions, prompted and stepped as one batch.
 
     Constructing a pool opens nothing (it pickles, so a worker process can open it);
@@ -222,14 +222,6 @@ class SessionPool:
             self.close()
             raise
         return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ lifecycle
 

@@ -11,11 +11,11 @@ import logging
 import shutil
 import tempfile
 from pathlib import Path
-from types import TracebackType
 from typing import TYPE_CHECKING
 
 from tensordict import TensorDictBase
 
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.config.recording import DEFAULT_CRF, DEFAULT_VCODEC
 from oasis_torchrl.data.chunk_rows import (
     RowBatch,
@@ -42,7 +42,7 @@ logger = logging.getLogger(__name__)
 DEFAULT_BUFFER_BYTES = 1 << 30
 
 
-class LeRobotRecorder:
+class LeRobotRecorder(Closing):
     """Writes batches of env steps as LeRobot episodes; also a TorchRL collector hook.
 
     The dataset is created (or, with ``append=True``, reopened) at the first batch, whose layout
@@ -264,13 +264,5 @@ class LeRobotRecorder:
                 self.rows_written,
             )
 
-    def __enter__(self) -> LeRobotRecorder:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *exc_info: object) -> None:
         self.close(keep_unfinished=None if exc_type is None else False)

@@ -26,8 +26,9 @@ import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import TracebackType
 from typing import IO
+
+from oasis_torchrl.closing import Closing
 
 logger = logging.getLogger(__name__)
 
@@ -81,7 +82,7 @@ def unavailable_reason() -> str | None:
     return None
 
 
-class NamespaceCluster:
+class NamespaceCluster(Closing):
     """A one- or two-node Ray cluster in network namespaces named after ``tag``.
 
     Args:
@@ -260,14 +261,6 @@ class NamespaceCluster:
 
     def __enter__(self) -> NamespaceCluster:
         return self.start()
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _signal(pid: int, number: signal.Signals) -> None:

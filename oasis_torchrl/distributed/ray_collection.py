@@ -24,7 +24,6 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -39,6 +38,7 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import RayCollector
 from torchrl.envs import EnvBase
 
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.compat import drop_ray_collectors, ray_weight_sync_scheme
 from oasis_torchrl.config.env import EnvConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
@@ -128,7 +128,7 @@ class SeededEnvFactory:
         return env
 
 
-class RayCollection:
+class RayCollection(Closing):
     """A TorchRL Ray collector over OasisEnvs, with sharded recording and failure handling.
 
     Iterate it like a collector: in ``sync`` mode each batch stacks one ``[N, T]`` batch per
@@ -413,14 +413,3 @@ class RayCollection:
         finally:
             if self._owns_ray:
                 ray.shutdown()
-
-    def __enter__(self) -> RayCollection:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -16,6 +16,7 @@ from omegaconf import DictConfig
 from tensordict import TensorDictBase
 from tqdm import tqdm
 
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.drivers.base import Driver
 from oasis_torchrl.envs.capabilities import env_capabilities, resolve_reward_kind
 from oasis_torchrl.envs.factory import make_env
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
-class Evaluator:
+class Evaluator(Closing):
     """Evaluates policies on fixed prompts and seeds, reusing one env (and server).
 
     Args:
@@ -197,9 +198,3 @@ class Evaluator:
             self.recorders.close()
         finally:
             self.env.close()
-
-    def __enter__(self) -> Evaluator:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()

@@ -27,6 +27,7 @@ from tensordict.nn import TensorDictModuleBase
 from oasis_torchrl.client.channel import TlsSetting, create_channel
 from oasis_torchrl.client.errors import TransportError
 from oasis_torchrl.client.retry import RetryPolicy, call_with_retry
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.proto import policy_pb2, policy_pb2_grpc
 from oasis_torchrl.protocol import (
     API_KEY_METADATA,
@@ -115,7 +116,7 @@ class PolicyDescription:
         )
 
 
-class RemotePolicy(TensorDictModuleBase):
+class RemotePolicy(TensorDictModuleBase, Closing):
     """A policy on a policy server, as a TorchRL policy module and a LeRobot-style policy.
 
     Construction waits for the server's policy to be ready and reads its description
@@ -331,12 +332,6 @@ class RemotePolicy(TensorDictModuleBase):
     def close(self) -> None:
         """Close the channel."""
         self._channel.close()
-
-    def __enter__(self) -> RemotePolicy:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     # -- calls -----------------------------------------------------------------------------
 

@@ -24,7 +24,6 @@ import functools
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -33,6 +32,7 @@ import torch
 from tensordict import TensorDictBase
 
 from oasis_torchrl.client.scenes import SceneLookup
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.viz.blueprint import RowsLayout
 from oasis_torchrl.viz.options import LogOptions
 from oasis_torchrl.viz.palette import Policy
@@ -51,7 +51,7 @@ from oasis_torchrl.viz.worker import BoundedWorker
 from oasis_torchrl.viz.writer import RecordWriter
 
 
-class RolloutLogger:
+class RolloutLogger(Closing):
     """Logs OasisEnv rollouts to rerun: cameras, actions, rewards and terms, collision risk,
     ground truth, depth, episode events and a top-down map, one tab per env row.
 
@@ -290,17 +290,6 @@ class RolloutLogger:
                 writer.recording.disconnect()
             if self._file is not None:
                 layout_first(self._file, writer.latest_layout(), [SUMMARY_ROOT])
-
-    def __enter__(self) -> RolloutLogger:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __getstate__(self) -> dict[str, Any]:
         raise TypeError(

@@ -9,10 +9,10 @@ import logging
 import os
 import secrets
 import threading
-from types import TracebackType
 
 from torchrl.envs import TransformedEnv
 
+from oasis_torchrl.closing import Closing
 from oasis_torchrl.config.web import PlayConfig, is_loopback
 from oasis_torchrl.drivers import Driver
 from oasis_torchrl.protocol import CHUNK
@@ -71,7 +71,7 @@ def _world(cfg: PlayConfig, driver: Driver | None) -> TransformedEnv:
     return env
 
 
-class RunningPage:
+class RunningPage(Closing):
     """The page served for ``cfg`` while the context is open (the world opens on entry).
 
     Attributes:
@@ -136,11 +136,3 @@ class RunningPage:
                 self._loop.call_soon_threadsafe(self._loop.stop)
                 self._thread.join(30)
         self.session.close()
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()

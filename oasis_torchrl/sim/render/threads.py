@@ -17,6 +17,8 @@ from typing import TypeVar
 
 import numpy as np
 
+from oasis_torchrl.closing import Closing
+
 T = TypeVar("T")
 
 #: Part of a drawing step's per-pixel work: the views and the image rows it covers.
@@ -26,7 +28,7 @@ Part = tuple[slice, slice]
 MAX_WORKERS = 4
 
 
-class RenderThreads:
+class RenderThreads(Closing):
     """Runs the parts of one drawing step, on a thread pool this object owns, or in the
     calling thread when ``parallel`` is false or there is a single core.
 
@@ -65,12 +67,6 @@ class RenderThreads:
         pool, self._pool = self._pool, None
         if pool is not None:
             pool.shutdown(wait=True)
-
-    def __enter__(self) -> RenderThreads:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
 
 _scratch = threading.local()
