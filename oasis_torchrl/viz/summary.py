@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import math
 import threading
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
 
-from oasis_torchrl.viz.palette import Policy
+from oasis_torchrl.viz.palette import Color, Policy
 
 SUMMARY_ROOT = "summary"
 """Root of the summary entities."""
@@ -141,8 +142,23 @@ class EpisodeSummary:
             outcomes = [cells.get((root, scene)) for scene in scenes]
             values = np.array([_bar(outcome) for outcome in outcomes], dtype=np.float64)
             color = Policy.at(root, index).color
-            chart = rr.BarChart(values, color=color, abscissa=episodes)
-            self.recording.log(chart_path(root), chart, static=True)
+            self.recording.log(chart_path(root), bar_chart(values, color, episodes), static=True)
+
+
+def bar_chart(values: np.ndarray, color: Color, episodes: np.ndarray) -> rr.BarChart:
+    """One root's bar chart: a bar per episode, at its episode number.
+
+    rerun's check that bar chart data is 1-D counts the dimensions longer than 1, so the chart
+    of a single episode (every recording's first) would warn: that warning is ignored here.
+
+    Example:
+        >>> chart = bar_chart(np.array([118.2]), (255, 0, 0), np.array([0]))
+        >>> type(chart).__name__
+        'BarChart'
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Bar chart data should only be 1D")
+        return rr.BarChart(values, color=color, abscissa=episodes)
 
 
 def chart_path(root: str) -> str:

@@ -173,3 +173,19 @@ def test_periodic_evaluations_number_their_episodes_on(tmp_path: Path) -> None:
     ]
     assert frames == [0, 11, 12, 23]  # the second evaluation from tick max_steps + 1
     assert "[episode 1: time limit at step 2; episode 3: time limit at step 2]" in printed(path)
+
+
+def test_the_first_episode_of_a_summary_logs_without_a_warning() -> None:
+    """Every recording's summary starts with a chart of one bar, which rerun's 1-D check (it
+    counts the dimensions longer than 1) would warn about."""
+    import warnings
+
+    import rerun as rr
+
+    from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
+
+    summary = EpisodeSummary(rr.RecordingStream("one-episode"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        summary.add(EpisodeOutcome("env", 0, 0, "urban", 7, 0, 239, 59, "collision", "", 1.0, 0.1))
+    assert [str(warning.message) for warning in caught] == []
