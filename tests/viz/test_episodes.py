@@ -3,14 +3,17 @@ evaluation-like drive (finished rows keep being stepped until every row is done)
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import pytest
+import rerun as rr
 import torch
 from tensordict import TensorDict
 
 from oasis_torchrl.viz import LogOptions, RolloutLogger
 from oasis_torchrl.viz.palette import SIGNALS
+from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
 
 from ._readback import Readback, printed
 from ._rollouts import observation
@@ -178,12 +181,6 @@ def test_periodic_evaluations_number_their_episodes_on(tmp_path: Path) -> None:
 def test_the_first_episode_of_a_summary_logs_without_a_warning() -> None:
     """Every recording's summary starts with a chart of one bar, which rerun's 1-D check (it
     counts the dimensions longer than 1) would warn about."""
-    import warnings
-
-    import rerun as rr
-
-    from oasis_torchrl.viz.summary import EpisodeOutcome, EpisodeSummary
-
     summary = EpisodeSummary(rr.RecordingStream("one-episode"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
