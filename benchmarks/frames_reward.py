@@ -13,6 +13,9 @@ Ground truth judges them:
   keeps false alarms at 5% of the autopilot's episodes, and the chunk-level ROC AUC;
 - the policies ranked by return as ground truth ranks them by distance before a collision
   (Kendall tau), and the per-episode return against that distance (Pearson);
+- each policy's distance seen over true (before its collisions) and how much its steering
+  changes from one action to the next within a chunk: a learned policy that games the reward
+  (``--policies`` takes its folder beside the references) is seen farther than it drives;
 - CPU per row per chunk of the motion reward at 96x64 and at the hosted 768x512.
 
 Prints JSON and writes it (and a plot) with ``--output``::
@@ -68,6 +71,7 @@ class Episodes:
 
     true_progress: list[np.ndarray] = field(default_factory=list)
     collided: list[np.ndarray] = field(default_factory=list)
+    steering_change: list[np.ndarray] = field(default_factory=list)
     reward: dict[str, list[np.ndarray]] = field(default_factory=dict)
     ended: dict[str, list[np.ndarray]] = field(default_factory=dict)
     progress: dict[str, list[np.ndarray]] = field(default_factory=dict)
@@ -87,6 +91,7 @@ class Episodes:
         return {
             "true_progress": stack(self.true_progress),
             "collided": stack(self.collided),
+            "steering_change": stack(self.steering_change),
             **{
                 key: {name: stack(v) for name, v in getattr(self, key).items()}
                 for key in ("reward", "ended", "progress", "ahead")
@@ -106,6 +111,8 @@ def scorer(rewards: dict[str, object], episodes: Episodes) -> Callable[[TensorDi
         episodes.true_progress.append((last - previous.get("progress", 0.0)).numpy())
         previous["progress"] = last
         episodes.collided.append(truth.get("collided").gt(0.5).any(-1).numpy())
+        steering = td.get("action").reshape(len(last), -1, 2)[..., 1]
+        episodes.steering_change.append(steering.diff(dim=-1).abs().mean(-1).numpy())
         scored_input = step.clone(False).set("action", td.get("action"))
         for name, reward in rewards.items():
             out = reward(scored_input)
@@ -222,6 +229,10 @@ def checks(runs: dict[str, dict[str, object]], reward: str) -> dict[str, object]
         "false_ends_autopilot": false_ends,
         "ahead": ahead_checks(runs, reward),
         "ranking": ranking(per_policy),
+        "seen_over_true": {
+            spec: float(values["seen"].sum() / max(values["distance"].sum(), 1e-6))
+            for spec, values in per_policy.items()
+        },
         "return_vs_distance_pearson": pearson(
             np.concatenate([v["return"] for v in per_policy.values()]),
             np.concatenate([v["distance"] for v in per_policy.values()]),
@@ -371,6 +382,9 @@ def main() -> None:
         for spec in args.policies
     }
     report["checks"] = {name: checks(runs, name) for name in REWARDS}
+    report["steering_change_per_action"] = {
+        spec: float(run["steering_change"].mean()) for spec, run in runs.items()
+    }
     if args.hosted_episodes:
         hosted = {
             spec: drive_policy(
