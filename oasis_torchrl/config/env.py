@@ -56,6 +56,13 @@ class RewardConfig:
         help="penalty of a collision, on top of the progress it forgoes (a large one makes PPO "
         "drive slowly instead of steering around obstacles)",
     )
+    swing_weight: float = option(
+        0.1,
+        help="motion reward: cost per unit of the mean squared change of the action from one "
+        "action to the next (a policy swinging the steering is seen moving farther than it "
+        "drives; 0: off)",
+        ge=0.0,
+    )
     lane_penalty: float = option(0.01, help="penalty per metre off the lane centre")
     clearance_weight: float = option(
         0.0, help="cost of an obstacle ahead (ClearanceShaping; 0: off)"

@@ -90,7 +90,9 @@ def make_frames_reward(cfg: RewardConfig | DictConfig, kind: str = "motion") -> 
     if kind != "motion":
         raise ValueError(f"{kind!r} is not a frames-only reward: motion or depth")
     constants = MotionRewardConfig(
-        progress_scale=cfg.progress_scale, collision_penalty=cfg.collision_penalty
+        progress_scale=cfg.progress_scale,
+        collision_penalty=cfg.collision_penalty,
+        swing_weight=cfg.swing_weight,
     )
     return MotionReward(load_motion_net(cfg.motion_model), constants)
 

@@ -91,6 +91,20 @@ def test_the_collided_head_ends_the_episode_at_once() -> None:
     assert out["terminated"].item() and out["reward_terms", "crash"].item() == 1.0
 
 
+def test_swinging_the_actions_costs_their_mean_squared_change_across_chunks() -> None:
+    reward = MotionReward(fixed_net(0.0), MotionRewardConfig(swing_weight=0.5))
+    steady = step_td(2, throttle=1.0)
+    assert reward(steady)["reward_terms", "swing"].flatten().tolist() == [0.0, 0.0]
+    swinging = step_td(2, throttle=1.0)
+    swinging["action"][:, :, 1] = torch.tensor([1.0, -1.0, 1.0, -1.0])
+    out = reward(swinging)  # from the last steady action: 1, then three changes of 2
+    assert out["reward_terms", "swing"].flatten().tolist() == pytest.approx([13 / 4] * 2)
+    assert out["reward"].flatten().tolist() == pytest.approx([-13 / 8] * 2)
+    reward.reset(torch.tensor([True, False]))  # a new episode has no previous action
+    again = reward(swinging)["reward_terms", "swing"].flatten().tolist()
+    assert again == pytest.approx([12 / 3, 16 / 4])
+
+
 def test_the_last_frame_alone_is_refused_with_the_fix() -> None:
     td = TensorDict(
         {
