@@ -65,7 +65,12 @@ class MotionRewardConfig:
     collided_threshold: float = 0.5
 
     def __post_init__(self) -> None:
-        weights = (self.progress_scale, self.collision_penalty, self.ahead_weight, self.swing_weight)
+        weights = (
+            self.progress_scale,
+            self.collision_penalty,
+            self.ahead_weight,
+            self.swing_weight,
+        )
         if min(weights) < 0:
             raise ValueError(
                 "progress_scale, collision_penalty, ahead_weight and swing_weight must be >= 0, "
