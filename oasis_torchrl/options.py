@@ -33,6 +33,12 @@ ALIASES = "ALIASES"
 settings for the command line."""
 
 
+RENAMED = "RENAMED"
+"""Name of a config section's optional class attribute mapping the dotted keys of settings that
+moved to their keys now, e.g. ``RENAMED: ClassVar = {"policy.optimizer_lr": "optim.lr"}``:
+configs saved before the move still load (:func:`renamed_keys`)."""
+
+
 @dataclass(frozen=True)
 class CommandLine:
     """How a field's flag reads its value (every field gets ``--dotted-key``).
@@ -231,8 +237,9 @@ def is_config(value: Any) -> bool:
     return isinstance(value, type) and dataclasses.is_dataclass(value)
 
 
-def walk(schema: type, prefix: str = "") -> Iterator[Leaf | Section]:
-    """Every section and setting of ``schema``, depth first, in field order.
+def walk(schema: type, prefix: str = "", defaults: Any = None) -> Iterator[Leaf | Section]:
+    """Every section and setting of ``schema``, depth first, in field order; a setting's default
+    is its section's (``defaults``, the section's default value, where a section sets its own).
 
     Example:
         >>> from oasis_torchrl.config.env import EnvConfig
@@ -243,13 +250,11 @@ def walk(schema: type, prefix: str = "") -> Iterator[Leaf | Section]:
     for field in dataclasses.fields(schema):
         key = f"{prefix}{field.name}"
         kind = hints[field.name]
+        default = _default(field) if defaults is None else getattr(defaults, field.name)
         if is_config(kind):
             yield Section(key, field.metadata.get(HELP) or _first_line(kind.__doc__))
-            yield from walk(kind, f"{key}.")
+            yield from walk(kind, f"{key}.", None if default is MISSING else default)
             continue
-        default = field.default
-        if default is MISSING and field.default_factory is not MISSING:
-            default = field.default_factory()
         yield Leaf(
             key,
             kind,
@@ -258,6 +263,31 @@ def walk(schema: type, prefix: str = "") -> Iterator[Leaf | Section]:
             field.metadata.get(CLI, CommandLine()),
             field.metadata.get(BOUNDS),
         )
+
+
+def _default(field: dataclasses.Field) -> Any:
+    if field.default is MISSING and field.default_factory is not MISSING:
+        return field.default_factory()
+    return field.default
+
+
+def renamed_keys(schema: type, prefix: str = "") -> dict[str, str]:
+    """The dotted keys that configs saved before a rename spell otherwise, and their keys now:
+    each section's ``RENAMED`` class attribute (:data:`RENAMED`), nested sections too.
+
+    Example:
+        >>> from oasis_torchrl.config.pipeline import DemoConfig
+        >>> renamed_keys(DemoConfig)["bc.policy.optimizer_lr"]
+        'bc.optim.lr'
+    """
+    hints = get_type_hints(schema)
+    renamed = {
+        f"{prefix}{old}": f"{prefix}{new}" for old, new in getattr(schema, RENAMED, {}).items()
+    }
+    for field in dataclasses.fields(schema):
+        if is_config(hints[field.name]):
+            renamed |= renamed_keys(hints[field.name], f"{prefix}{field.name}.")
+    return renamed
 
 
 def check_bounds(schema: type, value_of: Callable[[str], Any]) -> None:

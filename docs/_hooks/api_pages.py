@@ -196,6 +196,7 @@ API_PAGES: dict[str, ApiPage] = {
             "oasis_torchrl.config.presets",
             "oasis_torchrl.config.arguments",
             "oasis_torchrl.config.env",
+            "oasis_torchrl.config.run",
             "oasis_torchrl.config.training",
             "oasis_torchrl.config.reward_networks",
             "oasis_torchrl.config.evaluation",

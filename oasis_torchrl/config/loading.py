@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import logging
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,9 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
 from oasis_torchrl.config.presets import preset_file
-from oasis_torchrl.options import check_bounds
+from oasis_torchrl.options import check_bounds, renamed_keys
+
+logger = logging.getLogger(__name__)
 
 
 def _named() -> dict[str, type]:
@@ -110,6 +113,7 @@ def load_config(
         ValueError: env.num_envs must be an integer >= 1, got 0
     """
     schema = schema_of(config)
+    renamed = renamed_keys(schema)
     cfg = OmegaConf.structured(schema)
     _make_writable(cfg)
     OmegaConf.set_struct(cfg, True)
@@ -117,13 +121,13 @@ def load_config(
         path = preset_file(file)
         if not path.is_file():
             raise FileNotFoundError(f"config file {str(path)!r} not found")
-        cfg = _merged(cfg, OmegaConf.load(path), path.name)
+        cfg = _merged(cfg, _moved(OmegaConf.load(path), renamed), path.name)
     for key, value in values:
         cfg = _merged(cfg, None, f"--{key}", key, value)
     for override in overrides:
         if "=" not in override:
             raise ValueError(f"override {override!r} must look like key=value")
-        cfg = _merged(cfg, OmegaConf.from_dotlist([override]), override)
+        cfg = _merged(cfg, _moved(OmegaConf.from_dotlist([override]), renamed), override)
     try:
         OmegaConf.resolve(cfg)
         check_bounds(schema, lambda key: OmegaConf.select(cfg, key))
@@ -131,6 +135,26 @@ def load_config(
     except OmegaConfBaseException as error:
         raise ValueError(_describe(error)) from error
     return cfg
+
+
+def _moved(update: DictConfig, renamed: dict[str, str]) -> DictConfig:
+    """``update`` (settings read from a file or an override) with the settings it spells as
+    before a rename (``renamed``: old dotted key -> key now) at their keys now.
+
+    Example:
+        >>> update = OmegaConf.create({"policy": {"optimizer_lr": 0.01, "loss": "nll"}})
+        >>> OmegaConf.to_container(_moved(update, {"policy.optimizer_lr": "optim.lr"}))
+        {'policy': {'loss': 'nll'}, 'optim': {'lr': 0.01}}
+    """
+    for old, new in renamed.items():
+        parent, _, name = old.rpartition(".")
+        holder = OmegaConf.select(update, parent) if parent else update
+        if isinstance(holder, DictConfig) and name in holder:
+            logger.info("%s is now %s; configs should spell it so", old, new)
+            value = OmegaConf.to_container(holder)[name]  # an interpolation moves unresolved
+            del holder[name]
+            OmegaConf.update(update, new, value, merge=False)
+    return update
 
 
 def _merged(

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from oasis_torchrl.config.demonstrations import DemonstrationsConfig, NoiseConfig
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
+from oasis_torchrl.config.run import RunSettings, output_dir_option
 from oasis_torchrl.config.scenes import TRAINING_PROMPTS
 from oasis_torchrl.config.training import (
     BCPolicyConfig,
@@ -15,7 +16,6 @@ from oasis_torchrl.config.training import (
     BCTrainConfig,
     CollectorConfig,
     LossConfig,
-    OptimConfig,
     PPOEvaluationConfig,
     PPOSettings,
 )
@@ -72,7 +72,6 @@ def _demo_ppo() -> PPOSettings:
     return PPOSettings(
         collector=CollectorConfig(frames_per_batch=512, total_frames=4096),
         loss=LossConfig(critic_warmup_iters=4),
-        optim=OptimConfig(lr=3.0e-4, mini_batch_size=128),
         # The fine-tuned policy replaces the clone only if it drives farther on seeds that
         # neither training nor the final comparison uses, by more than 2 standard errors of the
         # paired difference: gains within that noise replaced the clone with a worse policy
@@ -84,11 +83,10 @@ def _demo_ppo() -> PPOSettings:
 
 
 @dataclass
-class DemoConfig:
+class DemoConfig(RunSettings):
     """``oasis-torchrl demo``: the main job, on the embedded server by default."""
 
-    seed: int = option(0, help="seed of the run")
-    output_dir: str = option("outputs/demo", help="where every stage writes")
+    output_dir: str = output_dir_option("outputs/demo")
     env: EnvConfig = option(
         default_factory=lambda: EnvConfig(
             prompts=list(TRAINING_PROMPTS),
@@ -124,7 +122,6 @@ class DemoConfig:
         help="the final comparison (the final policy's episodes are recorded, side by side with "
         "the autopilot's)",
     )
-    progress: bool = option(True, help="tqdm progress bars")
     # Two OpenMP threads on a 2-core machine shared with the embedded server's processes wait
     # on each other: a behaviour-cloning step took about 5x the CPU time of one thread's
     # (docs/experiments/2026-11-28-depth-network.md measured the same for the depth network).

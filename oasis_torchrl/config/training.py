@@ -2,7 +2,9 @@
 
 Each recipe's settings split in two: what a training stage needs (``PPOSettings``,
 ``BCSettings``: network, optimiser, loss, schedule) and what a stand-alone run adds (the env,
-the evaluation, seed and output folder: ``PPOConfig``, ``BCConfig``). The main job
+the evaluation and the run section, :class:`~oasis_torchrl.config.run.TrainingRun`:
+``PPOConfig``, ``BCConfig``). Both recipes' optimiser sections are one description,
+:class:`OptimiserConfig` (PPO's adds its own rates and schedule). The main job
 (:class:`~oasis_torchrl.config.pipeline.DemoConfig`) nests the stage settings and shares one
 env and one evaluation between its stages.
 """
@@ -10,10 +12,12 @@ env and one evaluation between its stages.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from oasis_torchrl.config.env import EnvConfig, RewardConfig
 from oasis_torchrl.config.evaluation import EvaluationConfig
 from oasis_torchrl.config.ray import RayCollectionConfig
+from oasis_torchrl.config.run import TrainingRun, output_dir_option
 from oasis_torchrl.options import option
 
 LOGGER_BACKENDS = ("csv", "tensorboard")
@@ -178,10 +182,24 @@ class PerceptionWarmupConfig:
 
 
 @dataclass
-class OptimConfig:
-    """Adam over the actor, encoder and critic."""
+class OptimiserConfig:
+    """The optimiser's settings both trainers have (BC: AdamW, PPO: Adam); the defaults are
+    behaviour cloning's, PPO's section sets its own (:func:`ppo_optimiser`)."""
 
-    lr: float = option(3.0e-4, help="learning rate of the actor and encoder")
+    lr: float = option(
+        1.0e-3, help="learning rate (PPO: of the actor and encoder; critic_lr, scale_lr: the rest)"
+    )
+    weight_decay: float = option(
+        1.0e-4, help="weight decay (BC: AdamW's, decoupled; PPO: Adam's, an L2 penalty)"
+    )
+    max_grad_norm: float = option(10.0, help="gradient clipping: the gradient's largest norm")
+
+
+@dataclass
+class OptimConfig(OptimiserConfig):
+    """Adam over the actor, encoder and critic: the shared optimiser settings at PPO's values
+    (:func:`ppo_optimiser`), its own rates and its schedule."""
+
     critic_lr: float | None = option(
         1.0e-3, help="learning rate of the critic head (null: lr); a fresh critic needs the pace"
     )
@@ -194,7 +212,6 @@ class OptimConfig:
         help="learn one action scale per action number (its gradient pooled over the chunk and "
         "the components) instead of one per chunk entry",
     )
-    max_grad_norm: float = option(0.5, help="gradient clipping")
     epochs: int = option(4, help="passes over each batch")
     mini_batch_size: int = option(128, help="env steps per minibatch")
     anneal_lr: bool = option(True, help="decay the learning rates linearly over the run")
@@ -207,6 +224,18 @@ class OptimConfig:
         "the run stops part-way through the schedule)",
         gt=0,
     )
+
+
+def ppo_optimiser() -> OptimConfig:
+    """PPO's optimiser section: a tenth of behaviour cloning's learning rate for the actor and
+    encoder, no weight decay, tight clipping.
+
+    Example:
+        >>> optim = ppo_optimiser()
+        >>> optim.lr, optim.weight_decay, optim.max_grad_norm
+        (0.0003, 0.0, 0.5)
+    """
+    return OptimConfig(lr=3.0e-4, weight_decay=0.0, max_grad_norm=0.5)
 
 
 @dataclass
@@ -269,7 +298,7 @@ class PPOSettings:
         default_factory=PerceptionWarmupConfig,
         help="the encoder fitted to the privileged state of the first env steps",
     )
-    optim: OptimConfig = option(default_factory=OptimConfig, help="the optimiser")
+    optim: OptimConfig = option(default_factory=ppo_optimiser, help="the optimiser")
     eval: PPOEvaluationConfig = option(
         default_factory=PPOEvaluationConfig, help="evaluations during and after training"
     )
@@ -294,25 +323,15 @@ class PPOSettings:
 
 
 @dataclass
-class PPOConfig(PPOSettings):
+class PPOConfig(TrainingRun, PPOSettings):
     """``oasis-torchrl train ppo``: TorchRL PPO in the world model (Collector -> GAE ->
     ClipPPOLoss, a TanhNormal actor over a 4-action chunk, a value head on the same encoder)."""
 
-    seed: int = option(0, help="seed of the run")
-    output_dir: str = option(
-        "outputs/ppo", help="logs, checkpoints, evaluation records, final policy"
-    )
+    output_dir: str = output_dir_option("outputs/ppo")
     env: EnvConfig = option(
         default_factory=lambda: EnvConfig(reward=RewardConfig(clearance_weight=0.2)),
         help="the training env",
     )
-    init_from: str | None = option(
-        None, help="warm start: a BC/LeRobot policy folder or a PPO checkpoint"
-    )
-    resume: str | None = option(
-        None, help="a checkpoint to resume, or 'latest' (output_dir/checkpoints)"
-    )
-    progress: bool = option(True, help="tqdm progress bars")
 
 
 # -- behaviour cloning -------------------------------------------------------------------------
@@ -344,9 +363,6 @@ class BCPolicyConfig(NetworkArchitectureConfig):
         help="weight of the auxiliary loss: predict each frame's privileged state (obstacle "
         "distances, lane offset, speed) from the cameras; needs a dataset that stores it",
     )
-    optimizer_lr: float = option(1.0e-3, help="learning rate")
-    optimizer_weight_decay: float = option(1.0e-4, help="weight decay")
-    optimizer_grad_clip_norm: float = option(10.0, help="gradient clipping")
 
 
 @dataclass
@@ -369,9 +385,19 @@ class BCTrainConfig:
 
 @dataclass
 class BCSettings:
-    """A behaviour-cloning stage: the policy, its schedule, its logger."""
+    """A behaviour-cloning stage: the policy, its optimiser, its schedule, its logger."""
+
+    RENAMED: ClassVar[dict[str, str]] = {
+        "policy.optimizer_lr": "optim.lr",
+        "policy.optimizer_weight_decay": "optim.weight_decay",
+        "policy.optimizer_grad_clip_norm": "optim.max_grad_norm",
+    }
+    """The optimiser's settings as configs saved before its own section spelled them."""
 
     policy: BCPolicyConfig = option(default_factory=BCPolicyConfig, help="the policy")
+    optim: OptimiserConfig = option(
+        default_factory=OptimiserConfig, help="the optimiser (AdamW, a constant learning rate)"
+    )
     train: BCTrainConfig = option(default_factory=BCTrainConfig, help="the schedule")
     logger: LoggerConfig = option(
         default_factory=lambda: LoggerConfig(exp_name="bc"), help="training curves"
@@ -393,20 +419,11 @@ class DatasetConfig:
 
 
 @dataclass
-class BCConfig(BCSettings):
+class BCConfig(TrainingRun, BCSettings):
     """``oasis-torchrl train bc``: behaviour cloning of the oasis policy on a LeRobot dataset;
     ``<output_dir>/policy`` is a LeRobot policy folder."""
 
-    seed: int = option(0, help="seed of the run")
-    output_dir: str = option("outputs/bc", help="logs and the policy folder")
-    init_from: str | None = option(
-        None, help="start from this policy (LeRobot folder or PPO checkpoint)"
-    )
-    resume: str | None = option(
-        None,
-        help="'latest': continue from output_dir/checkpoints/last (its weights, optimizer and "
-        "step), left by a run stopped half way; null: start afresh",
-    )
+    output_dir: str = output_dir_option("outputs/bc")
     dataset: DatasetConfig = option(default_factory=DatasetConfig, help="the demonstrations")
     eval: EvaluationConfig = option(
         default_factory=EvaluationConfig, help="evaluation after training (episodes 0: none)"
@@ -414,4 +431,3 @@ class BCConfig(BCSettings):
     env: EnvConfig = option(
         default_factory=EnvConfig, help="the evaluation env (the policy's image size is used)"
     )
-    progress: bool = option(True, help="tqdm progress bars")

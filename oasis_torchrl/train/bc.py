@@ -29,6 +29,7 @@ from tqdm import tqdm
 
 from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config import save_config
+from oasis_torchrl.config.run import resume_point
 from oasis_torchrl.data.features import IMAGE_PREFIX
 from oasis_torchrl.drivers.folders import lerobot_plugin, load_net
 from oasis_torchrl.evaluation import EvalReport, Evaluator
@@ -133,7 +134,7 @@ PARTIAL_POLICY = "checkpoints/last"
 exists finished (the main job reuses such folders)."""
 
 TRAINING_STATE = "training_state.pt"
-"""What ``resume=latest`` continues from, beside the partial policy: the step, the weights, the
+"""What ``resume`` continues from, beside the partial policy: the step, the weights, the
 optimizer's state, the smoothed loss and the torch generator's state."""
 
 
@@ -156,11 +157,9 @@ class BCTrainer:
         self.cfg = cfg
         self.output_dir = Path(cfg.output_dir)
         torch.manual_seed(cfg.seed)
-        policy_values = {  # the settings' lists as the policy config's tuples
-            key: tuple(value) if isinstance(value, list) else value
-            for key, value in OmegaConf.to_container(cfg.policy).items()
-        }
-        self.policy_config = plugin.OasisConfig(device="cpu", **policy_values)
+        self.policy_config = plugin.OasisConfig.from_settings(
+            OmegaConf.to_container(cfg.policy), cfg.optim
+        )
         dataset = open_dataset(cfg.dataset, self.policy_config)
         self.policy_config.input_features = policy_inputs(
             dataset.meta.features, cfg.dataset.cameras, cfg.policy.front_crop
@@ -206,16 +205,15 @@ class BCTrainer:
         self.done_steps, self.average = self._resume() if cfg.resume else (0, float("nan"))
 
     def _resume(self) -> tuple[int, float]:
-        """Load ``checkpoints/last``'s training state (``resume=latest``); the steps it had
+        """Load the training state ``resume`` names: ``latest``, this run's
+        ``checkpoints/last``, or another such folder (:func:`resume_point`); the steps it had
         taken and its smoothed loss.
 
         Raises:
-            ValueError: ``resume`` is not ``latest``.
-            FileNotFoundError: the run left no training state to resume.
+            FileNotFoundError: the folder holds no training state to resume.
         """
-        if self.cfg.resume != "latest":
-            raise ValueError(f"resume must be 'latest' or null, got {self.cfg.resume!r}")
-        path = self.output_dir / PARTIAL_POLICY / TRAINING_STATE
+        folder = resume_point(self.cfg.resume, self.output_dir / PARTIAL_POLICY)
+        path = Path(folder) / TRAINING_STATE
         if not path.exists():
             raise FileNotFoundError(f"nothing to resume: {path} does not exist")
         state = torch.load(path, weights_only=False)

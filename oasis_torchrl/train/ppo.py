@@ -33,6 +33,7 @@ from torchrl.record.loggers import Logger, get_logger
 from tqdm import tqdm
 
 from oasis_torchrl.config import save_config, section
+from oasis_torchrl.config.run import resume_point
 from oasis_torchrl.config.training import AUX_COEFF
 from oasis_torchrl.drivers import DriverSpec
 from oasis_torchrl.drivers.folders import export_lerobot, load_net
@@ -230,10 +231,9 @@ class PPOTrainer:
         )
 
     def _resume_state(self) -> dict[str, Any]:
-        resume = self.cfg.resume
-        if not resume:
+        path = resume_point(self.cfg.resume, self.checkpoint_dir / LATEST)
+        if path is None:
             return {}
-        path = self.checkpoint_dir / LATEST if resume == "latest" else Path(resume)
         state = load_checkpoint(path)
         logger.info("resuming from %s at iteration %d", path, state["iteration"])
         return state

@@ -81,7 +81,9 @@ class PPOUpdate:
             value_network=modules.value,
             deactivate_vmap=True,
         )
-        self.optimizer = torch.optim.Adam(self._param_groups(), lr=cfg.optim.lr)
+        self.optimizer = torch.optim.Adam(
+            self._param_groups(), lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay
+        )
         self._anneal(0)
         replay = cfg.aux_replay
         self.aux_replay = (

@@ -26,13 +26,14 @@ from __future__ import annotations
 import dataclasses
 import typing
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamWConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
-from oasis_torchrl.config.training import BCPolicyConfig
+from oasis_torchrl.config.training import BCPolicyConfig, OptimiserConfig
 from oasis_torchrl.models import DrivingNetConfig
 from oasis_torchrl.models.privileged import PRIVILEGED_FIELDS
 from oasis_torchrl.protocol import ACTION_DIM, CHUNK, POLICY_CAMERAS
@@ -65,23 +66,48 @@ training-only critic (``critic_inputs``)."""
 TRAINING_FIELDS = tuple(
     item.name for item in fields(BCPolicyConfig) if item.name not in NETWORK_FIELDS
 )
-"""Behaviour cloning's own settings (loss, auxiliary weight, optimiser): those of
+"""Behaviour cloning's own settings (loss, auxiliary weight): those of
 :class:`~oasis_torchrl.config.training.BCPolicyConfig` that are no network field."""
+OPTIMIZER_FIELDS = {
+    "optimizer_lr": "lr",
+    "optimizer_weight_decay": "weight_decay",
+    "optimizer_grad_clip_norm": "max_grad_norm",
+}
+"""The project's one optimiser section
+(:class:`~oasis_torchrl.config.training.OptimiserConfig`) under LeRobot's names: its policy
+configs keep their optimiser preset's settings as ``optimizer_<name>`` fields, where
+``lerobot-train`` reads them (:meth:`OasisConfig.get_optimizer_preset`), and the shipped
+policies' ``config.json`` holds them so. This mapping is the one place the two spellings meet."""
+
+
+def lerobot_optimizer(optim: Any) -> dict[str, float]:
+    """An optimiser section's settings (:class:`OptimiserConfig`, or a config of its keys) as
+    the LeRobot config's fields.
+
+    Example:
+        >>> lerobot_optimizer(OptimiserConfig())["optimizer_grad_clip_norm"]
+        10.0
+    """
+    return {lerobot: getattr(optim, own) for lerobot, own in OPTIMIZER_FIELDS.items()}
 
 
 def _policy_fields() -> type:
-    """A dataclass of :data:`NETWORK_FIELDS` (:class:`DrivingNetConfig`'s types) and
-    :data:`TRAINING_FIELDS`, each field's default behaviour cloning's
-    (:class:`~oasis_torchrl.config.training.BCPolicyConfig`, what ``oasis-torchrl train bc``
+    """A dataclass of :data:`NETWORK_FIELDS` (:class:`DrivingNetConfig`'s types),
+    :data:`TRAINING_FIELDS` and :data:`OPTIMIZER_FIELDS`, each field's default behaviour
+    cloning's (:class:`~oasis_torchrl.config.training.BCPolicyConfig` and
+    :class:`~oasis_torchrl.config.training.OptimiserConfig`, what ``oasis-torchrl train bc``
     uses) where it has one, else the network's: one definition, so ``lerobot-train
     --policy.type=oasis`` and ``oasis-torchrl train bc`` train the same policy."""
     types = {**typing.get_type_hints(BCPolicyConfig), **typing.get_type_hints(DrivingNetConfig)}
     cloning, network = BCPolicyConfig(), DrivingNetConfig()
+    optimiser_types = typing.get_type_hints(OptimiserConfig)
     specs = []
     for name in (*NETWORK_FIELDS, *TRAINING_FIELDS):
         default = getattr(cloning, name, getattr(network, name, None))
         default = tuple(default) if isinstance(default, list) else default
         specs.append((name, types[name], field(default=default)))
+    for name, default in lerobot_optimizer(OptimiserConfig()).items():
+        specs.append((name, optimiser_types[OPTIMIZER_FIELDS[name]], field(default=default)))
     return dataclasses.make_dataclass("OasisPolicyFields", specs)
 
 
@@ -132,7 +158,9 @@ class OasisConfig(PreTrainedConfig, OasisPolicyFields):
             the rare lane changes of the action labels alone do not; at deployment the head is
             unused.
         optimizer_lr, optimizer_weight_decay, optimizer_grad_clip_norm: AdamW preset (a
-            constant learning rate: no scheduler preset).
+            constant learning rate: no scheduler preset); ``oasis-torchrl train bc``'s ``optim``
+            section (:class:`oasis_torchrl.config.training.OptimiserConfig`) under LeRobot's
+            names (:data:`OPTIMIZER_FIELDS`).
 
     Example:
         >>> config = OasisConfig(device="cpu")
@@ -186,6 +214,19 @@ class OasisConfig(PreTrainedConfig, OasisPolicyFields):
                 "aux_outputs": len(PRIVILEGED_FIELDS) if self.aux_weight else 0,
             }
         )
+
+    @classmethod
+    def from_settings(cls, policy: dict[str, Any], optim: Any, device: str = "cpu") -> OasisConfig:
+        """The policy config of ``oasis-torchrl train bc``'s ``policy`` settings (plain values)
+        and ``optim`` section (:func:`lerobot_optimizer`).
+
+        Example:
+            >>> config = OasisConfig.from_settings({"pool_grid": [2, 3]}, OptimiserConfig(lr=0.01))
+            >>> config.pool_grid, config.optimizer_lr
+            ((2, 3), 0.01)
+        """
+        values = {key: tuple(v) if isinstance(v, list) else v for key, v in policy.items()}
+        return cls(device=device, **values, **lerobot_optimizer(optim))
 
     @classmethod
     def from_net_config(cls, net: DrivingNetConfig, device: str = "cpu") -> OasisConfig:

@@ -138,6 +138,37 @@ def test_version_is_the_distributions(capsys: pytest.CaptureFixture[str]) -> Non
     assert capsys.readouterr().out.split() == ["oasis-torchrl", version]
 
 
+def test_a_section_s_help_gives_its_own_defaults(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["train", "bc", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--optim.lr LR" in text and "(default: 0.001)" in text
+    assert "experiment name (the logger's folder) (default: bc)" in text
+
+
+def test_both_trainers_share_the_run_and_optimiser_sections() -> None:
+    ppo, bc = load_config("ppo", ["seed=3", "resume=latest"]), load_config("bc", ["seed=3"])
+    run = ["seed", "output_dir", "progress", "init_from", "resume"]
+    assert [ppo[key] for key in run[:3]] == [3, "outputs/ppo", True]
+    assert [bc[key] for key in run[:3]] == [3, "outputs/bc", True]
+    assert ppo.resume == "latest" and bc.init_from is None
+    assert set(bc.optim) < set(ppo.optim)  # PPO's adds its own rates and schedule
+
+
+def test_a_config_saved_before_the_optimiser_section_loads(tmp_path: Path) -> None:
+    """Configs saved by the previous release spell BC's optimiser on its policy."""
+    saved = tmp_path / "config.yaml"
+    old = {"bc": {"policy": {"optimizer_lr": 0.002, "optimizer_grad_clip_norm": 5.0}}}
+    OmegaConf.save(OmegaConf.create(old), saved)
+    cfg = load_config("demo", file=saved)
+    assert (cfg.bc.optim.lr, cfg.bc.optim.max_grad_norm, cfg.bc.optim.weight_decay) == (
+        0.002,
+        5.0,
+        1.0e-4,
+    )
+    assert load_config("bc", ["policy.optimizer_weight_decay=0"]).optim.weight_decay == 0
+
+
 def test_saved_config_loads_back(tmp_path: Path) -> None:
     cfg = load_config("demo", [f"output_dir={tmp_path}", "ppo.optim.lr=0.001"])
     saved = tmp_path / "config.yaml"

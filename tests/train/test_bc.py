@@ -223,3 +223,7 @@ def test_a_run_stopped_half_way_resumes_where_it_stopped(
     fresh = _bc_config(tiny_dataset, tmp_path / "fresh", "resume=latest")
     with pytest.raises(FileNotFoundError, match=r"nothing to resume: .*training_state\.pt"):
         BCTrainer(fresh)
+    elsewhere = _bc_config(
+        tiny_dataset, tmp_path / "elsewhere", f"resume={tmp_path}/{PARTIAL_POLICY}"
+    )
+    assert BCTrainer(elsewhere).done_steps == 2  # a saved state named by its folder
