@@ -404,10 +404,11 @@ class OasisEnv(OasisWrapper):
     :class:`~oasis_torchrl.rewards.GroundTruthReward`, per row and step:
     ``0.1 * progress_gained - 2 * collision - 0.01 * lane_offset`` (metres gained along the road,
     1 on the first collided step, mean metres from the lane's centre). On frames alone it is
-    :class:`~oasis_torchrl.rewards.MotionReward`: ``0.1 * seen_progress - 2 * crash``, the metres
-    a network sees the car move in the chunk's front frames, and a crash when the frames show
-    one (which ends the episode). The reference's reward,
-    :class:`~oasis_torchrl.rewards.DepthCollisionReward`, is there by name for comparison.
+    :class:`~oasis_torchrl.rewards.MotionReward`: ``0.1 * seen_progress - 2 * crash - 0.1 *
+    swing``, the metres a network sees the car move in the chunk's front frames, a crash when
+    the frames show one (which ends the episode), and the mean squared change of the actions.
+    The reference's reward, :class:`~oasis_torchrl.rewards.DepthCollisionReward`, is there by
+    name for comparison.
     ``reward=NoReward()`` scores nothing (0, never terminates).
 
     ## Starting state
