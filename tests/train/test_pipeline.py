@@ -14,10 +14,10 @@ from viz._readback import Readback
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
-from oasis_torchrl.train import pipeline, stages
+from oasis_torchrl.train import stages
 from oasis_torchrl.train.cards import TrainingRun
 from oasis_torchrl.train.plan import EvaluationPlan, plan_run
-from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds, timed_stage
 
 from .conftest import TINY_ENV
 
@@ -116,7 +116,7 @@ def test_a_stage_stopped_half_way_still_adds_its_time(tmp_path: Path) -> None:
     totals = tmp_path / STAGE_SECONDS
     add_stage_seconds(totals, "bc", 100.0)  # an earlier run's
     seconds: dict[str, float] = {}
-    with pytest.raises(KeyboardInterrupt), pipeline.timed_stage(seconds, "bc", totals):
+    with pytest.raises(KeyboardInterrupt), timed_stage(seconds, "bc", totals):
         raise KeyboardInterrupt
     assert json.loads(totals.read_text()) == {"bc": 100.0 + seconds["bc"]}
 
