@@ -139,10 +139,10 @@ def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_aga
     steps: list[int] = []
     train_bc, forward = bc.train_bc, OasisPolicy.forward
 
-    def tracked(bc_cfg):
-        runs.append((Path(bc_cfg.output_dir).name, bc_cfg.resume))
+    def tracked(bc_cfg, *, resume=None):
+        runs.append((Path(bc_cfg.output_dir).name, resume or bc_cfg.resume))
         steps.clear()
-        return train_bc(bc_cfg)
+        return train_bc(bc_cfg, resume=resume)
 
     def counted(self, batch, reduction="mean"):
         steps.append(len(steps) + 1)
