@@ -53,11 +53,16 @@ from omegaconf import DictConfig
 from oasis_torchrl.config import save_config
 from oasis_torchrl.drivers import pretrained_path
 from oasis_torchrl.train.cards import hours, load_card
-from oasis_torchrl.train.comparison import PolicyRow, best_learned, format_table, plot_comparison
+from oasis_torchrl.train.comparison import (
+    PolicyRow,
+    best_learned,
+    comparison_rows,
+    format_table,
+    plot_comparison,
+)
 from oasis_torchrl.train.plan import plan_run
 from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, timed_stage
 from oasis_torchrl.train.stages import (
-    comparison_rows,
     evaluate_and_record_best,
     gather_demonstrations,
     run_ppo,

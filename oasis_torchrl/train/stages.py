@@ -24,10 +24,10 @@ from omegaconf import DictConfig
 
 from oasis_torchrl.atomic import written_whole
 from oasis_torchrl.config.run import LATEST as RESUME_LATEST
-from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
+from oasis_torchrl.drivers import AUTOPILOT, load_driver
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.evaluation import EvalReport, Evaluator, side_by_side_for
-from oasis_torchrl.train.comparison import PolicyRow, best_learned, comparison
+from oasis_torchrl.train.comparison import best_learned, comparison_rows
 from oasis_torchrl.train.demonstrations import record_demonstrations
 from oasis_torchrl.train.plan import CloneRound, DaggerRound, EvaluationPlan, Recording, RecordPlan
 
@@ -250,16 +250,3 @@ def evaluate_and_record_best(
             recorded[best.name] = policies[best.name]
         results |= evaluate_all(plan, recorded, record=True)
     return {name: results[name] for name in policies}
-
-
-def comparison_rows(evaluations: dict[str, dict[str, Any]], shipped: list[str]) -> list[PolicyRow]:
-    """The main job's evaluations as comparison rows: the autopilot, the scripted constants
-    (``constant:...``) and the ``shipped`` policies named as such, the rest learned.
-
-    Example:
-        >>> evaluations = {"bc": {"mean_distance": 240.0, "collision_rate": 0.25, "episodes": 4}}
-        >>> [(row.name, row.kind) for row in comparison_rows(evaluations, [])]
-        [('bc', 'learned')]
-    """
-    constants = [name for name in evaluations if name.startswith(SCRIPTED)]
-    return comparison(evaluations, autopilot=AUTOPILOT, constants=constants, shipped=shipped)
