@@ -143,6 +143,8 @@ class BCTrainer:
 
     Args:
         cfg: the resolved :class:`~oasis_torchrl.config.BCConfig` (with overrides).
+        resume: a saved training state to continue from (``latest``: this run's own), whatever
+            ``cfg.resume`` says; None: as ``cfg.resume`` says.
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -150,11 +152,12 @@ class BCTrainer:
         >>> BCTrainer(cfg).run().policy_dir  # doctest: +SKIP
     """
 
-    def __init__(self, cfg: DictConfig) -> None:
+    def __init__(self, cfg: DictConfig, *, resume: str | None = None) -> None:
         from lerobot.policies.factory import make_policy, make_pre_post_processors
 
         plugin = lerobot_plugin()
         self.cfg = cfg
+        self.resume = resume or cfg.resume
         self.output_dir = Path(cfg.output_dir)
         torch.manual_seed(cfg.seed)
         self.policy_config = plugin.OasisConfig.from_settings(
@@ -202,7 +205,7 @@ class BCTrainer:
             experiment_name=cfg.logger.exp_name,
         )
         self.image_keys = [key for key in self.policy_config.image_features]
-        self.done_steps, self.average = self._resume() if cfg.resume else (0, float("nan"))
+        self.done_steps, self.average = self._resume() if self.resume else (0, float("nan"))
 
     def _resume(self) -> tuple[int, float]:
         """Load the training state ``resume`` names: ``latest``, this run's
@@ -212,7 +215,7 @@ class BCTrainer:
         Raises:
             FileNotFoundError: the folder holds no training state to resume.
         """
-        folder = resume_point(self.cfg.resume, self.output_dir / PARTIAL_POLICY)
+        folder = resume_point(self.resume, self.output_dir / PARTIAL_POLICY)
         path = Path(folder) / TRAINING_STATE
         if not path.exists():
             raise FileNotFoundError(f"nothing to resume: {path} does not exist")
@@ -319,12 +322,12 @@ class BCTrainer:
         return report
 
 
-def train_bc(cfg: DictConfig) -> BCResult:
-    """Run behaviour cloning as configured (:class:`~oasis_torchrl.config.BCConfig`); see
-    :class:`BCTrainer`.
+def train_bc(cfg: DictConfig, *, resume: str | None = None) -> BCResult:
+    """Run behaviour cloning as configured (:class:`~oasis_torchrl.config.BCConfig`), resuming
+    ``resume`` if given; see :class:`BCTrainer`.
 
     Example:
         >>> from oasis_torchrl.config import load_config
         >>> train_bc(load_config("bc", ["dataset.root=drives"]))  # doctest: +SKIP
     """
-    return BCTrainer(cfg).run()
+    return BCTrainer(cfg, resume=resume).run()

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from oasis_torchrl.drivers.loading import AUTOPILOT, SCRIPTED
 from oasis_torchrl.evaluation.selection import selection_figure
 
 AUTOPILOT_COLOR = "0.25"
@@ -138,6 +139,19 @@ def comparison(
             )
         )
     return rows
+
+
+def comparison_rows(evaluations: dict[str, dict[str, Any]], shipped: list[str]) -> list[PolicyRow]:
+    """The main job's evaluations as comparison rows: the autopilot, the scripted constants
+    (``constant:...``) and the ``shipped`` policies named as such, the rest learned.
+
+    Example:
+        >>> evaluations = {"bc": {"mean_distance": 240.0, "collision_rate": 0.25, "episodes": 4}}
+        >>> [(row.name, row.kind) for row in comparison_rows(evaluations, [])]
+        [('bc', 'learned')]
+    """
+    constants = [name for name in evaluations if name.startswith(SCRIPTED)]
+    return comparison(evaluations, autopilot=AUTOPILOT, constants=constants, shipped=shipped)
 
 
 def best_learned(rows: Sequence[PolicyRow]) -> PolicyRow | None:

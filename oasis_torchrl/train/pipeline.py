@@ -44,9 +44,6 @@ from __future__ import annotations
 
 import json
 import logging
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,11 +53,16 @@ from omegaconf import DictConfig
 from oasis_torchrl.config import save_config
 from oasis_torchrl.drivers import pretrained_path
 from oasis_torchrl.train.cards import hours, load_card
-from oasis_torchrl.train.comparison import PolicyRow, best_learned, format_table, plot_comparison
-from oasis_torchrl.train.plan import plan_run
-from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
-from oasis_torchrl.train.stages import (
+from oasis_torchrl.train.comparison import (
+    PolicyRow,
+    best_learned,
     comparison_rows,
+    format_table,
+    plot_comparison,
+)
+from oasis_torchrl.train.plan import plan_run
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, timed_stage
+from oasis_torchrl.train.stages import (
     evaluate_and_record_best,
     gather_demonstrations,
     run_ppo,
@@ -171,32 +173,6 @@ took: pretrained:ppo-scratch 204,800 env steps, 5.0 h on 2 cores.
             "fine_tune_kept": self.fine_tune_kept,
             "seconds": self.seconds,
         }
-
-
-@contextmanager
-def timed_stage(
-    seconds: dict[str, float], stage: str, totals: Path | None = None
-) -> Iterator[None]:
-    """Log the start of ``stage`` and put its wall time (seconds, 0.1 s) in ``seconds``; with
-    ``totals`` (a JSON file), also add it to the stage's total there, even if the stage stops
-    half way.
-
-    Example:
-        >>> seconds = {}
-        >>> with timed_stage(seconds, "record"):
-        ...     pass
-        >>> list(seconds)
-        ['record']
-    """
-    logger.info("pipeline stage %s", stage)
-    started = time.perf_counter()
-    try:
-        yield
-    finally:
-        elapsed = round(time.perf_counter() - started, 1)
-        seconds[stage] = elapsed
-        if totals is not None:
-            add_stage_seconds(totals, stage, elapsed)
 
 
 def run_pipeline(cfg: DictConfig) -> PipelineResult:

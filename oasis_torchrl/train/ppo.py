@@ -170,6 +170,8 @@ class PPOTrainer:
 
     Args:
         cfg: the resolved :class:`~oasis_torchrl.config.PPOConfig` (with overrides).
+        resume: a checkpoint to continue from (``latest``: this run's own), whatever
+            ``cfg.resume`` says; None: as ``cfg.resume`` says.
 
     Example:
         >>> from oasis_torchrl.config import load_config
@@ -177,8 +179,9 @@ class PPOTrainer:
         >>> PPOTrainer(cfg).run()  # doctest: +SKIP
     """
 
-    def __init__(self, cfg: DictConfig) -> None:
+    def __init__(self, cfg: DictConfig, *, resume: str | None = None) -> None:
         self.cfg = cfg = with_capabilities(cfg)
+        self.resume = resume or cfg.resume
         self.output_dir = Path(cfg.output_dir)
         self.checkpoint_dir = self.output_dir / "checkpoints"
         torch.manual_seed(cfg.seed)
@@ -221,7 +224,7 @@ class PPOTrainer:
                 self.update.optimizer.load_state_dict(resumed["optimizer"])
             except ValueError as error:  # e.g. one parameter group, before optim.critic_lr
                 raise ValueError(
-                    f"cannot resume the optimizer of {cfg.resume}: {error}; start a new run "
+                    f"cannot resume the optimizer of {self.resume}: {error}; start a new run "
                     "(init_from=<the checkpoint> keeps its weights)"
                 ) from error
         self.logger: Logger = get_logger(
@@ -231,7 +234,7 @@ class PPOTrainer:
         )
 
     def _resume_state(self) -> dict[str, Any]:
-        path = resume_point(self.cfg.resume, self.checkpoint_dir / LATEST)
+        path = resume_point(self.resume, self.checkpoint_dir / LATEST)
         if path is None:
             return {}
         state = load_checkpoint(path)
@@ -586,11 +589,12 @@ def _postfix(metrics: dict[str, float]) -> dict[str, str]:
     }
 
 
-def train_ppo(cfg: DictConfig) -> PPOResult:
-    """Run PPO as configured (:class:`~oasis_torchrl.config.PPOConfig`); see :class:`PPOTrainer`.
+def train_ppo(cfg: DictConfig, *, resume: str | None = None) -> PPOResult:
+    """Run PPO as configured (:class:`~oasis_torchrl.config.PPOConfig`), resuming ``resume`` if
+    given; see :class:`PPOTrainer`.
 
     Example:
         >>> from oasis_torchrl.config import load_config
         >>> result = train_ppo(load_config("ppo", ["env.num_envs=2"]))  # doctest: +SKIP
     """
-    return PPOTrainer(cfg).run()
+    return PPOTrainer(cfg, resume=resume).run()

@@ -20,13 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from oasis_torchrl.atomic import written_whole
-from oasis_torchrl.drivers import AUTOPILOT, SCRIPTED, load_driver
+from oasis_torchrl.config.run import LATEST as RESUME_LATEST
+from oasis_torchrl.drivers import AUTOPILOT, load_driver
 from oasis_torchrl.drivers.late_reaction import LateReactionAutopilot
 from oasis_torchrl.evaluation import EvalReport, Evaluator, side_by_side_for
-from oasis_torchrl.train.comparison import PolicyRow, best_learned, comparison
+from oasis_torchrl.train.comparison import best_learned, comparison_rows
 from oasis_torchrl.train.demonstrations import record_demonstrations
 from oasis_torchrl.train.plan import CloneRound, DaggerRound, EvaluationPlan, Recording, RecordPlan
 
@@ -120,7 +121,7 @@ def train_clone(rounds: tuple[CloneRound, ...]) -> Path:
         >>> train_clone(plan_run(load_config("demo")).clone)  # doctest: +SKIP
         PosixPath('outputs/demo/bc/round_1/policy')
     """
-    from oasis_torchrl.train.bc import PARTIAL_POLICY, TRAINING_STATE
+    from oasis_torchrl.train.bc import PARTIAL_POLICY, TRAINING_STATE, train_bc
 
     for round_ in rounds:
         if (round_.policy / "model.safetensors").exists():
@@ -129,26 +130,8 @@ def train_clone(rounds: tuple[CloneRound, ...]) -> Path:
         if round_.dagger is not None:
             record_dagger_round(round_.dagger)
         stopped = (round_.folder / PARTIAL_POLICY / TRAINING_STATE).exists()
-        train_clone_round(round_, resume=stopped)
+        train_bc(round_.config, resume=RESUME_LATEST if stopped else None)
     return rounds[-1].policy
-
-
-def train_clone_round(round_: CloneRound, *, resume: bool) -> None:
-    """Train one clone round on its data; ``resume``: from the training state its stopped run
-    saved."""
-    from oasis_torchrl.train.bc import train_bc
-
-    train_bc(resumed(round_.config, resume))
-
-
-def resumed(cfg: DictConfig, resume: bool) -> DictConfig:
-    """``cfg``, resuming its run's latest training state if ``resume``.
-
-    Example:
-        >>> resumed(OmegaConf.create({"resume": None}), True).resume
-        'latest'
-    """
-    return OmegaConf.merge(cfg, {"resume": "latest"}) if resume else cfg
 
 
 @dataclass
@@ -185,7 +168,8 @@ def run_ppo(config: DictConfig) -> PPOStage:
         logger.info("reusing %s", policy)
         history = load_checkpoint(checkpoints / LATEST)["history"]
     else:
-        result = train_ppo(resumed(config, (checkpoints / LATEST).exists()))
+        stopped = (checkpoints / LATEST).exists()
+        result = train_ppo(config, resume=RESUME_LATEST if stopped else None)
         policy, history = result.policy_dir or policy, result.history
     # The policy a stage leaves: the selection's choice (best.pt) if it made one, else the last.
     checkpoint = checkpoints / BEST if (checkpoints / BEST).exists() else checkpoints / LATEST
@@ -266,16 +250,3 @@ def evaluate_and_record_best(
             recorded[best.name] = policies[best.name]
         results |= evaluate_all(plan, recorded, record=True)
     return {name: results[name] for name in policies}
-
-
-def comparison_rows(evaluations: dict[str, dict[str, Any]], shipped: list[str]) -> list[PolicyRow]:
-    """The main job's evaluations as comparison rows: the autopilot, the scripted constants
-    (``constant:...``) and the ``shipped`` policies named as such, the rest learned.
-
-    Example:
-        >>> evaluations = {"bc": {"mean_distance": 240.0, "collision_rate": 0.25, "episodes": 4}}
-        >>> [(row.name, row.kind) for row in comparison_rows(evaluations, [])]
-        [('bc', 'learned')]
-    """
-    constants = [name for name in evaluations if name.startswith(SCRIPTED)]
-    return comparison(evaluations, autopilot=AUTOPILOT, constants=constants, shipped=shipped)

@@ -14,10 +14,10 @@ from viz._readback import Readback
 from oasis_torchrl.cli import main
 from oasis_torchrl.config import load_config
 from oasis_torchrl.models.checkpoint import load_checkpoint
-from oasis_torchrl.train import pipeline, stages
+from oasis_torchrl.train import stages
 from oasis_torchrl.train.cards import TrainingRun
 from oasis_torchrl.train.plan import EvaluationPlan, plan_run
-from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds
+from oasis_torchrl.train.stage_seconds import STAGE_SECONDS, add_stage_seconds, timed_stage
 
 from .conftest import TINY_ENV
 
@@ -116,7 +116,7 @@ def test_a_stage_stopped_half_way_still_adds_its_time(tmp_path: Path) -> None:
     totals = tmp_path / STAGE_SECONDS
     add_stage_seconds(totals, "bc", 100.0)  # an earlier run's
     seconds: dict[str, float] = {}
-    with pytest.raises(KeyboardInterrupt), pipeline.timed_stage(seconds, "bc", totals):
+    with pytest.raises(KeyboardInterrupt), timed_stage(seconds, "bc", totals):
         raise KeyboardInterrupt
     assert json.loads(totals.read_text()) == {"bc": 100.0 + seconds["bc"]}
 
@@ -139,10 +139,10 @@ def test_a_clone_stopped_in_a_rounds_cloning_resumes_it_without_recording_it_aga
     steps: list[int] = []
     train_bc, forward = bc.train_bc, OasisPolicy.forward
 
-    def tracked(bc_cfg):
-        runs.append((Path(bc_cfg.output_dir).name, bc_cfg.resume))
+    def tracked(bc_cfg, *, resume=None):
+        runs.append((Path(bc_cfg.output_dir).name, resume or bc_cfg.resume))
         steps.clear()
-        return train_bc(bc_cfg)
+        return train_bc(bc_cfg, resume=resume)
 
     def counted(self, batch, reduction="mean"):
         steps.append(len(steps) + 1)
