@@ -148,24 +148,34 @@ def reward_output(
 
 
 class RowState:
-    """One value per row of a batched reward, created on first use and reset per row.
+    """One value per row of a batched reward (a scalar, or a tensor of ``shape``), created on
+    first use and reset per row.
 
     >>> heading = RowState("heading")
     >>> heading.write(heading.read(3, torch.device("cpu")) + torch.tensor([1.0, 2.0, 3.0]))
     >>> heading.reset(torch.tensor([True, False, True]))
     >>> heading.read(3, torch.device("cpu")).tolist()
     [0.0, 2.0, 0.0]
+    >>> action = RowState("action", shape=(2,))
+    >>> action.write(torch.ones(2, 2))
+    >>> action.reset(torch.tensor([False, True]))
+    >>> action.read(2, torch.device("cpu")).tolist()
+    [[1.0, 1.0], [0.0, 0.0]]
     """
 
-    def __init__(self, name: str, dtype: torch.dtype = torch.float32) -> None:
+    def __init__(
+        self, name: str, dtype: torch.dtype = torch.float32, shape: tuple[int, ...] = ()
+    ) -> None:
         self.name = name
         self.dtype = dtype
+        self.shape = shape
         self._value: torch.Tensor | None = None
 
     def read(self, batch: int, device: torch.device) -> torch.Tensor:
-        """The current values ``[batch]`` on ``device`` (zeros before the first write)."""
+        """The current values ``[batch, *shape]`` on ``device`` (zeros before the first
+        write)."""
         if self._value is None:
-            return torch.zeros(batch, dtype=self.dtype, device=device)
+            return torch.zeros(batch, *self.shape, dtype=self.dtype, device=device)
         if self._value.shape[0] != batch:
             raise ValueError(
                 f"{self.name} state holds {self._value.shape[0]} rows but td has {batch}; "
@@ -174,7 +184,7 @@ class RowState:
         return self._value.to(device)
 
     def write(self, value: torch.Tensor) -> None:
-        """Store ``value`` ``[N]`` as the new per-row state."""
+        """Store ``value`` ``[N, *shape]`` as the new per-row state."""
         self._value = value.detach().to(self.dtype)
 
     def reset(self, mask: torch.Tensor | None = None) -> None:
@@ -188,4 +198,5 @@ class RowState:
                 f"reset mask must be a bool tensor of shape [{rows}] or [{rows}, 1], "
                 f"got dtype {mask.dtype} and shape {list(mask.shape)}"
             )
-        self._value = self._value.masked_fill(mask.reshape(rows).to(self._value.device), 0)
+        rows_mask = mask.reshape(rows, *(1 for _ in self.shape)).to(self._value.device)
+        self._value = self._value.masked_fill(rows_mask, 0)

@@ -40,7 +40,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 
 from oasis_torchrl.models.motion import MotionNet, collision_within
-from oasis_torchrl.protocol import CHUNK, FRONT
+from oasis_torchrl.protocol import ACTION_DIM, CHUNK, FRONT
 from oasis_torchrl.rewards.base import RowState, batch_rows, get_entry, reward_output
 from oasis_torchrl.rewards.motion_net import SMALL_MOTION_MODEL, load_motion_net
 
@@ -123,7 +123,7 @@ class MotionReward:
         self._still = RowState("chunks seen still under throttle")
         self._armed = RowState("seen moving", dtype=torch.bool)
         self._crashed = RowState("crashed", dtype=torch.bool)
-        self._last_action = RowState("last action of the previous chunk")
+        self._last_action = RowState("last action of the previous chunk", shape=(ACTION_DIM,))
         self._started = RowState("chunks driven", dtype=torch.bool)
 
     def __call__(self, td: TensorDictBase) -> TensorDict:
@@ -172,9 +172,9 @@ class MotionReward:
         action = action.cpu()
         steps = action.diff(dim=1).square().sum(-1)
         started = self._started.read(batch, action.device)
-        last = self._last_action.read(batch * action.shape[-1], action.device)
-        across = (action[:, 0] - last.reshape(batch, -1)).square().sum(-1) * started
-        self._last_action.write(action[:, -1].reshape(-1))
+        last = self._last_action.read(batch, action.device)
+        across = (action[:, 0] - last).square().sum(-1) * started
+        self._last_action.write(action[:, -1])
         self._started.write(torch.ones(batch, dtype=torch.bool))
         return (steps.sum(-1) + across) / (steps.shape[1] + started.float())
 
@@ -185,8 +185,7 @@ class MotionReward:
         self._armed.reset(mask)
         self._crashed.reset(mask)
         self._started.reset(mask)
-        if mask is None:  # a row's own last action is never read before it is written again
-            self._last_action.reset()
+        self._last_action.reset(mask)
 
     def _chunk_frames(self, td: TensorDictBase, batch: int) -> torch.Tensor:
         frames = get_entry(td, ("pixels", self.camera), type(self).__name__)
