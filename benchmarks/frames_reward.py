@@ -44,7 +44,7 @@ from oasis_torchrl.config.scenes import HELD_OUT_SCENES, REWARD_CHECK_SEEDS
 from oasis_torchrl.drivers import load_driver
 from oasis_torchrl.envs.driving import drive
 from oasis_torchrl.envs.factory import make_env, make_frames_reward
-from oasis_torchrl.protocol import FRONT, HOSTED_FRAME_SIZE
+from oasis_torchrl.protocol import ACTION_DIM, ACTION_NAMES, FRONT, HOSTED_FRAME_SIZE
 from oasis_torchrl.rewards import NoReward
 from oasis_torchrl.train.motion_checks import pearson, roc_auc
 
@@ -111,7 +111,8 @@ def scorer(rewards: dict[str, object], episodes: Episodes) -> Callable[[TensorDi
         episodes.true_progress.append((last - previous.get("progress", 0.0)).numpy())
         previous["progress"] = last
         episodes.collided.append(truth.get("collided").gt(0.5).any(-1).numpy())
-        steering = td.get("action").reshape(len(last), -1, 2)[..., 1]
+        actions = td.get("action").reshape(len(last), -1, ACTION_DIM)
+        steering = actions[..., ACTION_NAMES.index("steering")]
         episodes.steering_change.append(steering.diff(dim=-1).abs().mean(-1).numpy())
         scored_input = step.clone(False).set("action", td.get("action"))
         for name, reward in rewards.items():
